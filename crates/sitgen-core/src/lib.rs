@@ -1,0 +1,19 @@
+//! sitgen-core: the pure-Rust core of sitgen.
+//!
+//! Everything that runs per cell, per ray or per step lives here. The crate has no Python
+//! bindings, prints nothing, reads no clock and owns no global random state: every random
+//! choice comes from a [`rng::ChoiceSource`] handed in by the caller, so a result is a pure
+//! function of its inputs (spec, seed) and byte-identical on any machine and thread count.
+//!
+//! Pipeline stages, one module each: [`spec`] (situation spec, TOML, presets, validation),
+//! [`rng`] (named seed streams, recordable choices), [`grid`] (scalar fields and occupancy
+//! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out).
+
+pub mod grid;
+pub mod interchange;
+pub mod rng;
+pub mod spec;
+pub mod terrain;
+
+/// The version of sitgen that produced a result, recorded in provenance.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");

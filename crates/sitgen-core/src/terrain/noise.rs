@@ -1,0 +1,132 @@
+//! Ken Perlin's improved noise (2002), bit for bit.
+//!
+//! K. Perlin, "Improving Noise", SIGGRAPH 2002, and its reference implementation: a fixed
+//! permutation of 0..255, the quintic fade 6t⁵ − 15t⁴ + 10t³, and twelve gradient directions
+//! (the edges of a cube) picked by the low four bits of the hash, four of them repeated.
+//! The arithmetic is written in the reference's order so that every `f64` result is identical
+//! to it (checked against values from the reference in the tests). Lattice points give 0;
+//! the lattice repeats every 256 units; output lies roughly in [−1, 1].
+
+/// Perlin's published permutation of 0..255.
+const PERMUTATION: [u8; 256] = [
+    151, 160, 137, 91, 90, 15, 131, 13, 201, 95, 96, 53, 194, 233, 7, 225, 140, 36, 103, 30, 69,
+    142, 8, 99, 37, 240, 21, 10, 23, 190, 6, 148, 247, 120, 234, 75, 0, 26, 197, 62, 94, 252, 219,
+    203, 117, 35, 11, 32, 57, 177, 33, 88, 237, 149, 56, 87, 174, 20, 125, 136, 171, 168, 68, 175,
+    74, 165, 71, 134, 139, 48, 27, 166, 77, 146, 158, 231, 83, 111, 229, 122, 60, 211, 133, 230,
+    220, 105, 92, 41, 55, 46, 245, 40, 244, 102, 143, 54, 65, 25, 63, 161, 1, 216, 80, 73, 209, 76,
+    132, 187, 208, 89, 18, 169, 200, 196, 135, 130, 116, 188, 159, 86, 164, 100, 109, 198, 173,
+    186, 3, 64, 52, 217, 226, 250, 124, 123, 5, 202, 38, 147, 118, 126, 255, 82, 85, 212, 207, 206,
+    59, 227, 47, 16, 58, 17, 182, 189, 28, 42, 223, 183, 170, 213, 119, 248, 152, 2, 44, 154, 163,
+    70, 221, 153, 101, 155, 167, 43, 172, 9, 129, 22, 39, 253, 19, 98, 108, 110, 79, 113, 224, 232,
+    178, 185, 112, 104, 218, 246, 97, 228, 251, 34, 242, 193, 238, 210, 144, 12, 191, 179, 162,
+    241, 81, 51, 145, 235, 249, 14, 239, 107, 49, 192, 214, 31, 181, 199, 106, 157, 184, 84, 204,
+    176, 115, 121, 50, 45, 127, 4, 150, 254, 138, 236, 205, 93, 222, 114, 67, 29, 24, 72, 243, 141,
+    128, 195, 78, 66, 215, 61, 156, 180,
+];
+
+/// The permutation doubled, so that `P[i + 1]` needs no wrap for i ≤ 255 + 255.
+const P: [usize; 512] = {
+    let mut p = [0usize; 512];
+    let mut i = 0;
+    while i < 512 {
+        p[i] = PERMUTATION[i % 256] as usize;
+        i += 1;
+    }
+    p
+};
+
+/// The quintic fade curve 6t⁵ − 15t⁴ + 10t³.
+#[inline]
+pub fn fade(t: f64) -> f64 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+#[inline]
+fn lerp(t: f64, a: f64, b: f64) -> f64 {
+    a + t * (b - a)
+}
+
+/// Dot product of (x, y, z) with the gradient the hash's low four bits select.
+#[inline]
+fn grad(hash: usize, x: f64, y: f64, z: f64) -> f64 {
+    let h = hash & 15;
+    let u = if h < 8 { x } else { y };
+    let v = if h < 4 {
+        y
+    } else if h == 12 || h == 14 {
+        x
+    } else {
+        z
+    };
+    (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+}
+
+/// Improved noise at (x, y, z).
+pub fn perlin(x: f64, y: f64, z: f64) -> f64 {
+    // Unit cube that contains the point, wrapped to the 256-periodic lattice.
+    let (fx, fy, fz) = (x.floor(), y.floor(), z.floor());
+    let xi = (fx as i64 & 255) as usize;
+    let yi = (fy as i64 & 255) as usize;
+    let zi = (fz as i64 & 255) as usize;
+    // Relative position in the cube, and its fade curves.
+    let (x, y, z) = (x - fx, y - fy, z - fz);
+    let (u, v, w) = (fade(x), fade(y), fade(z));
+    // Hash the eight corners.
+    let a = P[xi] + yi;
+    let aa = P[a] + zi;
+    let ab = P[a + 1] + zi;
+    let b = P[xi + 1] + yi;
+    let ba = P[b] + zi;
+    let bb = P[b + 1] + zi;
+    // Blend the eight corner contributions.
+    lerp(
+        w,
+        lerp(
+            v,
+            lerp(u, grad(P[aa], x, y, z), grad(P[ba], x - 1.0, y, z)),
+            lerp(
+                u,
+                grad(P[ab], x, y - 1.0, z),
+                grad(P[bb], x - 1.0, y - 1.0, z),
+            ),
+        ),
+        lerp(
+            v,
+            lerp(
+                u,
+                grad(P[aa + 1], x, y, z - 1.0),
+                grad(P[ba + 1], x - 1.0, y, z - 1.0),
+            ),
+            lerp(
+                u,
+                grad(P[ab + 1], x, y - 1.0, z - 1.0),
+                grad(P[bb + 1], x - 1.0, y - 1.0, z - 1.0),
+            ),
+        ),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn published_anchor_values() {
+        assert_eq!(perlin(3.14, 42.0, 7.0), 0.13691995878400012);
+        assert_eq!(perlin(-4.2, 10.0, 6.0), 0.14208000000000043);
+        assert_eq!(perlin(-4.2, 10.0, 0.0), -0.14208000000000043);
+        assert_eq!(perlin(0.5, 0.5, 0.5), -0.25);
+        assert_eq!(perlin(0.1, 0.1, 0.1), 0.1861607143544832);
+        assert_eq!(fade(0.75), 0.896484375);
+        for i in -3..3 {
+            assert_eq!(perlin(f64::from(i), 7.0, f64::from(-i)), 0.0);
+        }
+    }
+
+    #[test]
+    fn the_permutation_is_a_permutation() {
+        let mut seen = [false; 256];
+        PERMUTATION.iter().for_each(|&p| seen[p as usize] = true);
+        assert!(seen.iter().all(|&s| s));
+    }
+}

@@ -1,0 +1,32 @@
+//! Python bindings of sitgen-core: thin wrappers, no logic. File names mirror the core's
+//! modules; long calls release the GIL.
+
+mod interchange;
+mod spec;
+mod terrain;
+
+use pyo3::prelude::*;
+
+pyo3::create_exception!(
+    _core,
+    SpecError,
+    pyo3::exceptions::PyValueError,
+    "A spec that cannot be used; the message names the field path and what is allowed."
+);
+pyo3::create_exception!(
+    _core,
+    GenerationFailed,
+    pyo3::exceptions::PyRuntimeError,
+    "A valid spec that produced no situation; the message names the stage and the reason."
+);
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", sitgen_core::VERSION)?;
+    m.add("SpecError", m.py().get_type::<SpecError>())?;
+    m.add("GenerationFailed", m.py().get_type::<GenerationFailed>())?;
+    spec::register(m)?;
+    terrain::register(m)?;
+    interchange::register(m)?;
+    Ok(())
+}
