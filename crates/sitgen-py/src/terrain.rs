@@ -16,7 +16,8 @@ fn perlin(x: f64, y: f64, z: f64) -> f64 {
 }
 
 /// Generate the terrain of a spec (see `spec.parse` for `kind`) with master seed `seed`.
-/// Returns a dict: occupied (bool array, row 0 = top), resolution_m, stages, spec (JSON).
+/// Returns a dict: occupied (bool array, row 0 = top), resolution_m, attempts, stages (JSON),
+/// spec (JSON).
 #[pyfunction]
 fn generate_terrain<'py>(
     py: Python<'py>,
@@ -36,6 +37,7 @@ fn generate_terrain<'py>(
     let out = PyDict::new(py);
     out.set_item("occupied", occupied)?;
     out.set_item("resolution_m", generated.map.resolution_m)?;
+    out.set_item("attempts", generated.attempts)?;
     out.set_item(
         "stages",
         serde_json::to_string(&generated.stages).expect("reports serialise"),

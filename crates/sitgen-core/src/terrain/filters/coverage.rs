@@ -285,7 +285,11 @@ fn next_rank(probes: &[(usize, f64)], n: usize) -> Option<usize> {
             let guess = secant(b, a).round() as usize;
             let mid = lo + (hi - lo) / 2;
             // Alternate secant and bisection so that a flat side cannot stall the bracket.
-            let k = if probes.len().is_multiple_of(2) { mid } else { guess };
+            let k = if probes.len().is_multiple_of(2) {
+                mid
+            } else {
+                guess
+            };
             Some(k.clamp(lo + 1, hi - 1))
         }
         _ => {

@@ -1,0 +1,170 @@
+"""The ``sitgen`` command.
+
+Errors a user can fix (a bad spec, an unwritable file) print one line, ``error: …``, naming
+the field or file, and exit 2 (bad input) or 1 (generation or I/O failed); never a traceback.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from sitgen import _core
+from sitgen.config import preset_names, preset_spec
+from sitgen.terrain import Grid, generate_terrain
+
+app = typer.Typer(
+    name="sitgen",
+    help="Procedurally generated situations for testing robot navigation software.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 1
+
+SeedOption = Annotated[
+    int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")
+]
+
+
+class UsageProblem(Exception):
+    """Bad command-line input that is not a spec field (exit 2)."""
+
+
+def _coverage_target(grid: Grid) -> str:
+    for f in grid.spec.get("terrain", {}).get("filters", []):
+        if f.get("kind") == "coverage":
+            return f" (target {f['target']} ± {f.get('tolerance', 0.01)})"
+    return ""
+
+
+def _describe(grid: Grid) -> str:
+    rows, cols = grid.occupied.shape
+    width, height = grid.size_m
+    return (
+        f"{cols} × {rows} cells, {width:g} m × {height:g} m at {grid.resolution:g} m/cell, "
+        f"coverage {grid.coverage:.4f}{_coverage_target(grid)}"
+    )
+
+
+def _summary(grid: Grid, image: Path, yaml: Path | None) -> dict[str, Any]:
+    rows, cols = grid.occupied.shape
+    return {
+        "image": str(image),
+        "yaml": str(yaml) if yaml else None,
+        "seed": grid.seed,
+        "rows": rows,
+        "cols": cols,
+        "resolution_m": grid.resolution,
+        "size_m": list(grid.size_m),
+        "coverage": grid.coverage,
+        "stages": [s.__dict__ for s in grid.stages],
+        "spec": grid.spec,
+    }
+
+
+@app.command()
+def terrain(
+    spec: Annotated[
+        Path | None, typer.Argument(help="Situation spec (TOML). Omit to use --preset.")
+    ] = None,
+    preset: Annotated[
+        str | None, typer.Option("--preset", "-p", help="Built-in preset to generate.")
+    ] = None,
+    seed: SeedOption = 0,
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Map image to write (.png or .pgm).")
+    ] = Path("map.png"),
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
+) -> None:
+    """Generate a terrain map: write the image and a ROS map_server YAML beside it."""
+    if spec is not None and preset is not None:
+        raise UsageProblem(
+            "give a SPEC file or --preset, not both (a spec names its preset in terrain.preset)"
+        )
+    if output.suffix.lower() not in (".png", ".pgm"):
+        raise UsageProblem(f"--output: {output} must end in .png or .pgm")
+    source: Path | dict[str, Any] = (
+        spec if spec is not None else preset_spec(preset or "rocky_desert")
+    )
+    grid = generate_terrain(source, seed=seed)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    yaml = grid.save(output)
+    if as_json:
+        typer.echo(json.dumps(_summary(grid, output, yaml)))
+    else:
+        typer.echo(f"{output}: {_describe(grid)}")
+        typer.echo(f"wrote {output} and {yaml}")
+
+
+@app.command()
+def demo(
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Folder for the maps.")
+    ] = Path("demo"),
+    seed: SeedOption = 0,
+) -> None:
+    """Generate one map of every built-in preset (the main job on built-in defaults)."""
+    output.mkdir(parents=True, exist_ok=True)
+    table = Table(title=f"sitgen terrain presets, seed {seed}")
+    for column in ("preset", "size", "cells", "coverage", "target", "draws"):
+        table.add_column(column)
+    for name in preset_names():
+        grid = generate_terrain(preset_spec(name), seed=seed)
+        image = output / f"{name}.png"
+        grid.save(image)
+        rows, cols = grid.occupied.shape
+        width, height = grid.size_m
+        table.add_row(
+            name,
+            f"{width:g} × {height:g} m",
+            f"{cols} × {rows}",
+            f"{grid.coverage:.4f}",
+            _coverage_target(grid).strip(" ()").removeprefix("target "),
+            str(grid.attempts),
+        )
+    Console().print(table)
+    typer.echo(f"wrote {len(preset_names())} maps (PNG + ROS YAML) to {output}/")
+
+
+@app.command()
+def presets(
+    name: Annotated[str | None, typer.Argument(help="Print this preset's TOML.")] = None,
+) -> None:
+    """List the built-in terrain presets, or print one."""
+    if name is None:
+        for preset in preset_names():
+            first = _core.preset_text(preset).splitlines()[0].lstrip("# ")
+            typer.echo(f"{preset:14} {first}")
+    else:
+        typer.echo(_core.preset_text(name), nl=False)
+
+
+@app.command()
+def schema() -> None:
+    """Print the JSON Schema of the situation spec."""
+    typer.echo(_core.spec_json_schema(), nl=False)
+
+
+def main() -> None:
+    """Entry point: run the command, turning expected errors into one line and an exit code."""
+    try:
+        app()
+    except (_core.SpecError, UsageProblem) as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except (_core.GenerationFailed, OSError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
+
+
+if __name__ == "__main__":
+    main()
