@@ -30,12 +30,10 @@ app = typer.Typer(
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
 
-SeedOption = Annotated[
-    int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")
-]
+SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")]
 
 
-class UsageProblem(Exception):
+class UsageError(Exception):
     """Bad command-line input that is not a spec field (exit 2)."""
 
 
@@ -87,11 +85,11 @@ def terrain(
 ) -> None:
     """Generate a terrain map: write the image and a ROS map_server YAML beside it."""
     if spec is not None and preset is not None:
-        raise UsageProblem(
+        raise UsageError(
             "give a SPEC file or --preset, not both (a spec names its preset in terrain.preset)"
         )
     if output.suffix.lower() not in (".png", ".pgm"):
-        raise UsageProblem(f"--output: {output} must end in .png or .pgm")
+        raise UsageError(f"--output: {output} must end in .png or .pgm")
     source: Path | dict[str, Any] = (
         spec if spec is not None else preset_spec(preset or "rocky_desert")
     )
@@ -107,9 +105,9 @@ def terrain(
 
 @app.command()
 def demo(
-    output: Annotated[
-        Path, typer.Option("--output", "-o", help="Folder for the maps.")
-    ] = Path("demo"),
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the maps.")] = Path(
+        "demo"
+    ),
     seed: SeedOption = 0,
 ) -> None:
     """Generate one map of every built-in preset (the main job on built-in defaults)."""
@@ -158,7 +156,7 @@ def main() -> None:
     """Entry point: run the command, turning expected errors into one line and an exit code."""
     try:
         app()
-    except (_core.SpecError, UsageProblem) as e:
+    except (_core.SpecError, UsageError) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
     except (_core.GenerationFailed, OSError) as e:

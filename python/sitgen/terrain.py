@@ -63,9 +63,7 @@ class Grid:
         map_server YAML with the same stem. Returns the YAML path, if written."""
         image_path = Path(image_path)
         yaml_path = image_path.with_suffix(".yaml") if yaml else None
-        _core.write_map(
-            np.ascontiguousarray(self.occupied), self.resolution, image_path, yaml_path
-        )
+        _core.write_map(np.ascontiguousarray(self.occupied), self.resolution, image_path, yaml_path)
         return yaml_path
 
 

@@ -2,7 +2,8 @@
 
 use std::path::Path;
 
-use image::{GrayImage, ImageFormat, Luma};
+use image::codecs::pnm::{PnmEncoder, PnmSubtype, SampleEncoding};
+use image::{ExtendedColorType, GrayImage, ImageEncoder, ImageFormat, Luma};
 
 use crate::grid::{OccupancyGrid, ScalarField};
 
@@ -44,13 +45,30 @@ pub fn encode_png(grid: &OccupancyGrid) -> Result<Vec<u8>, String> {
     Ok(out.into_inner())
 }
 
-/// Write the grid as a PNG or PGM file, chosen by the extension (`.png`, `.pgm`).
+/// Write the grid as a PNG or a binary PGM (P5, what ROS map_server and Stage read) file,
+/// chosen by the extension (`.png`, `.pgm`).
 pub fn write_image(grid: &OccupancyGrid, path: &Path) -> Result<(), String> {
-    let format = ImageFormat::from_path(path)
-        .ok()
-        .filter(|f| matches!(f, ImageFormat::Png | ImageFormat::Pnm))
-        .ok_or_else(|| format!("{}: expected a .png or .pgm file name", path.display()))?;
-    to_gray_image(grid)
-        .save_with_format(path, format)
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    let cannot = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", path.display());
+    let image = to_gray_image(grid);
+    match ImageFormat::from_path(path) {
+        Ok(ImageFormat::Png) => image
+            .save_with_format(path, ImageFormat::Png)
+            .map_err(|e| cannot(&e)),
+        Ok(ImageFormat::Pnm) => {
+            let file = std::fs::File::create(path).map_err(|e| cannot(&e))?;
+            PnmEncoder::new(std::io::BufWriter::new(file))
+                .with_subtype(PnmSubtype::Graymap(SampleEncoding::Binary))
+                .write_image(
+                    image.as_raw(),
+                    image.width(),
+                    image.height(),
+                    ExtendedColorType::L8,
+                )
+                .map_err(|e| cannot(&e))
+        }
+        _ => Err(format!(
+            "{}: expected a .png or .pgm file name",
+            path.display()
+        )),
+    }
 }

@@ -208,6 +208,12 @@ fn an_image_source_reads_back_what_was_written() {
     for ext in ["png", "pgm"] {
         let path = dir.join(format!("maze.{ext}"));
         crate::interchange::image::write_image(&t.map.grid, &path).unwrap();
+        if ext == "pgm" {
+            assert!(
+                std::fs::read(&path).unwrap().starts_with(b"P5\n"),
+                "binary PGM"
+            );
+        }
         let spec = from_toml_str(&format!(
             "[terrain]\nresolution_m = 0.1\n[terrain.source]\nkind = \"image\"\npath = {:?}\n[[terrain.filters]]\nkind = \"threshold\"\nvalue = 0.5\n",
             path.display().to_string()

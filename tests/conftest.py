@@ -1,0 +1,48 @@
+"""Shared fixtures: the reference data beside the repository and a CLI runner."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """``../shared/data`` (or ``$SITGEN_SHARED_DATA``); skips the test when it is absent."""
+    path = Path(os.environ.get("SITGEN_SHARED_DATA", ROOT.parent / "shared" / "data"))
+    if not path.is_dir():
+        pytest.skip(f"reference data not found at {path} (set SITGEN_SHARED_DATA)")
+    return path
+
+
+@dataclass
+class Result:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def sitgen_command() -> list[str]:
+    exe = shutil.which("sitgen", path=str(Path(sys.executable).parent))
+    return [exe] if exe else [sys.executable, "-m", "sitgen.cli"]
+
+
+def run_cli(*args: str, cwd: Path | None = None) -> Result:
+    """Run the installed ``sitgen`` command, as a user would."""
+    done = subprocess.run(
+        [*sitgen_command(), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+        check=False,
+    )
+    return Result(done.returncode, done.stdout, done.stderr)
