@@ -24,6 +24,8 @@ class Stage:
     """Occupied fraction after this stage, if it produced an occupancy grid."""
     threshold: float | None
     """The level a ``coverage`` filter chose (a signed distance in metres on a grid)."""
+    evaluations: int | None = None
+    """How many thresholds a ``coverage`` filter tried (each runs the rest of the chain)."""
 
 
 @dataclass(frozen=True)

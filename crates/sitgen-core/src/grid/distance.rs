@@ -9,30 +9,43 @@
 //! itself (no conversion of million-cell maps to image buffers and back), returns exact
 //! `f64` squared distances, and is used by dilate/erode and by robot placement.
 
+use rayon::prelude::*;
+
 /// Squared distance, in cells², from every cell to the nearest cell where `feature` is true;
 /// `f64::INFINITY` everywhere when there is no feature cell.
+///
+/// Lines are independent within a pass, so each pass runs them in parallel; every line's
+/// result is the same whichever thread computes it.
 pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f64> {
-    let mut d: Vec<f64> = feature
-        .iter()
-        .map(|&f| if f { 0.0 } else { f64::INFINITY })
-        .collect();
-    let n = rows.max(cols);
-    let mut scratch = Envelope::new(n);
-    let mut line = vec![0.0; n];
-    // Pass 1: along each column.
-    for c in 0..cols {
-        for r in 0..rows {
-            line[r] = d[r * cols + c];
-        }
-        scratch.transform(&mut line[..rows]);
-        for r in 0..rows {
-            d[r * cols + c] = line[r];
-        }
-    }
-    // Pass 2: along each row, on the column result.
-    for r in 0..rows {
-        scratch.transform(&mut d[r * cols..(r + 1) * cols]);
-    }
+    // Pass 1, along each column, on the transpose so that a column is a contiguous line.
+    let mut by_column = vec![0.0; rows * cols];
+    by_column
+        .par_chunks_mut(rows.max(1))
+        .enumerate()
+        .for_each_init(
+            || Envelope::new(rows),
+            |envelope, (c, line)| {
+                for (r, out) in line.iter_mut().enumerate() {
+                    *out = if feature[r * cols + c] {
+                        0.0
+                    } else {
+                        f64::INFINITY
+                    };
+                }
+                envelope.transform(line);
+            },
+        );
+    // Pass 2, along each row, on the column result.
+    let mut d = vec![0.0; rows * cols];
+    d.par_chunks_mut(cols.max(1)).enumerate().for_each_init(
+        || Envelope::new(cols),
+        |envelope, (r, line)| {
+            for (c, out) in line.iter_mut().enumerate() {
+                *out = by_column[c * rows + r];
+            }
+            envelope.transform(line);
+        },
+    );
     d
 }
 

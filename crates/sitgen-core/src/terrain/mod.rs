@@ -325,6 +325,8 @@ pub struct StageReport {
     pub coverage: Option<f64>,
     /// The threshold a `coverage` filter chose.
     pub threshold: Option<f64>,
+    /// How many thresholds a `coverage` filter tried.
+    pub evaluations: Option<usize>,
 }
 
 /// A generated terrain map and how it came about.
@@ -434,7 +436,9 @@ fn run_chain(
             let rest = &filters[i + 1..];
             let field = filters::coverage::level_field(layer, resolution_m);
             let found = coverage
-                .search(&field, |grid| finish_chain(rest, grid, resolution_m))
+                .search(&field, !rest.is_empty(), |grid| {
+                    finish_chain(rest, grid, resolution_m)
+                })
                 .map_err(|reason| GenerationFailed {
                     path: format!("terrain.filters[{i}]"),
                     reason,
@@ -443,6 +447,7 @@ fn run_chain(
                 stage: "coverage".into(),
                 coverage: Some(found.threshold_coverage),
                 threshold: Some(found.threshold),
+                evaluations: Some(found.evaluations),
             });
             stages.extend(found.rest);
             return Ok(found.finished);
@@ -482,6 +487,7 @@ fn stage_report(stage: &str, layer: &Layer) -> StageReport {
             Layer::Field(_) => None,
         },
         threshold: None,
+        evaluations: None,
     }
 }
 

@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use proptest::prelude::*;
 
 use super::*;
-use crate::grid::regions::{label_regions, Connectivity};
+use crate::grid::regions::{label_regions, Connectivity, Regions};
 use crate::rng::{stream, ChoiceSource};
 use crate::spec::from_toml_str;
 
@@ -163,7 +163,7 @@ proptest! {
         let out = apply(FilterSpec::RemoveIslands(filters::RemoveIslands { min_area_m2: area - 1e-9 }), &g, 0.1);
         let regions = label_regions(&g.cells, rows, cols, Connectivity::Eight);
         for (i, label) in regions.label.iter().enumerate() {
-            let kept = label.map(|id| regions.sizes[id as usize] >= min_cells).unwrap_or(false);
+            let kept = *label != Regions::NONE && regions.sizes[*label as usize] >= min_cells;
             prop_assert_eq!(out.cells[i], kept);
         }
     }

@@ -15,10 +15,10 @@
 //!    of runs of equal values are reachable);
 //! 2. *no filter after it*: the threshold is the ranked value at k = target × cells, or the
 //!    next distinct value, whichever count is closer: the closest coverage any threshold can
-//!    give;
+//!    give, found with at most two thresholdings;
 //! 3. *filters after it* (dilate, border, keep_largest_free_region… change coverage): a
 //!    bracketing secant search on k, running the rest of the chain at each step, stops when the
-//!    finished coverage is within a tenth of the tolerance of the target, or when the bracket
+//!    finished coverage is within a quarter of the tolerance of the target, or when the bracket
 //!    closes on two adjacent reachable thresholds; the closest result seen is kept.
 //!
 //! **Parameters.**
@@ -39,7 +39,7 @@ use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Most evaluations of the rest of the chain that the search makes.
-const MAX_EVALUATIONS: usize = 40;
+const MAX_EVALUATIONS: usize = 24;
 
 /// Parameters of the `coverage` filter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -68,6 +68,8 @@ pub struct Found<T> {
     pub finished: OccupancyGrid,
     /// What the rest of the chain reported.
     pub rest: T,
+    /// How many thresholds were tried (each runs the rest of the chain once).
+    pub evaluations: usize,
 }
 
 impl Filter for Coverage {
@@ -84,13 +86,17 @@ impl Filter for Coverage {
         SpecError::check_in(&join(path, "tolerance"), self.tolerance, 0.0, 1.0)
     }
 
-    /// Thresholding alone, with no later filters; the chain runner calls [`Coverage::search`]
-    /// instead so that later filters are accounted for.
+    /// The closest thresholding, tolerance aside; the chain runner calls [`Coverage::search`]
+    /// instead, so that later filters are accounted for and a missed tolerance is reported.
     fn apply(&self, layer: Layer, resolution_m: f64) -> Layer {
         let field = level_field(layer, resolution_m);
-        match self.search(&field, |g| (g, ())) {
+        let any = Coverage {
+            tolerance: 1.0,
+            ..self.clone()
+        };
+        match any.search(&field, false, |g| (g, ())) {
             Ok(found) => Layer::Occupancy(found.finished),
-            Err(_) => unreachable!("with no later filter the search always succeeds"),
+            Err(_) => unreachable!("every coverage is within 1 of the target"),
         }
     }
 }
@@ -184,6 +190,7 @@ impl Coverage {
     pub fn search<T>(
         &self,
         field: &ScalarField,
+        has_later_filters: bool,
         finish: impl Fn(OccupancyGrid) -> (OccupancyGrid, T),
     ) -> Result<Found<T>, String> {
         let ranking = Ranking::rank_field(field);
@@ -208,15 +215,7 @@ impl Coverage {
             }
         };
         let wanted = ((self.target * n as f64).round() as usize).min(n);
-        let first = evaluate(wanted);
-        // The run of equal values containing rank `wanted` splits into "all of it" (first.k)
-        // and "none of it": the other reachable count nearest the target.
-        let below = if wanted == 0 {
-            0
-        } else {
-            ranking.count_above(ranking.threshold_at(wanted))
-        };
-        let mut best = first;
+        let mut best = evaluate(wanted);
         let mut probes: Vec<(usize, f64)> = vec![(best.k, best.error)];
         let consider = |p: Probe<T>, best: &mut Probe<T>, probes: &mut Vec<(usize, f64)>| {
             probes.push((p.k, p.error));
@@ -224,12 +223,23 @@ impl Coverage {
                 *best = p;
             }
         };
-        if below != best.k {
-            let p = evaluate(below);
-            consider(p, &mut best, &mut probes);
+        // The run of equal values containing rank `wanted` splits into "all of it" (best.k)
+        // and "none of it": the other reachable count nearest the target. With no later
+        // filter the nearer of the two is the answer.
+        if !has_later_filters {
+            let below = if wanted == 0 {
+                0
+            } else {
+                ranking.count_above(ranking.threshold_at(wanted))
+            };
+            if below != best.k {
+                let p = evaluate(below);
+                consider(p, &mut best, &mut probes);
+            }
         }
-        let good_enough = self.tolerance / 10.0;
-        while best.error.abs() > good_enough && probes.len() < MAX_EVALUATIONS {
+        let good_enough = self.tolerance / 4.0;
+        while has_later_filters && best.error.abs() > good_enough && probes.len() < MAX_EVALUATIONS
+        {
             let Some(k) = next_rank(&probes, n) else {
                 break;
             };
@@ -253,6 +263,7 @@ impl Coverage {
             threshold_coverage: best.threshold_coverage,
             finished: best.finished,
             rest: best.rest,
+            evaluations: probes.len(),
         })
     }
 }
@@ -333,7 +344,7 @@ mod tests {
             target: 0.37,
             tolerance: 0.0,
         };
-        let found = c.search(&ramp(100), |g| (g, ())).unwrap();
+        let found = c.search(&ramp(100), false, |g| (g, ())).unwrap();
         assert_eq!(found.finished.occupied_count(), 37);
         assert_eq!(found.threshold, 0.63);
     }
@@ -350,7 +361,7 @@ mod tests {
             tolerance: 0.5,
         };
         // Reachable counts: 0, 1, 7, 10; 0.3 → 3 cells, nearest reachable is 1.
-        let found = c.search(&field, |g| (g, ())).unwrap();
+        let found = c.search(&field, false, |g| (g, ())).unwrap();
         assert_eq!(found.finished.occupied_count(), 1);
     }
 
@@ -371,7 +382,7 @@ mod tests {
             cols: 1000,
             values: (0..1000).map(|i| ((i * 7919) % 1000) as f64).collect(),
         };
-        let found = c.search(&field, add20).unwrap();
+        let found = c.search(&field, true, add20).unwrap();
         assert!((found.finished.coverage() - 0.5).abs() <= 0.001);
         assert!(found.threshold_coverage < 0.5);
     }
@@ -386,7 +397,7 @@ mod tests {
         };
         let field = level_field(Layer::Occupancy(g.clone()), 0.1);
         assert_eq!(binarize(&field, 0.0), g);
-        let found = c.search(&field, |g| (g, ())).unwrap();
+        let found = c.search(&field, false, |g| (g, ())).unwrap();
         assert!((found.finished.coverage() - 0.1).abs() <= 0.01);
         assert!(found.finished.get(20, 20) && found.threshold < 0.0);
     }
@@ -401,7 +412,7 @@ mod tests {
             g.cells.fill(true);
             (g, ())
         };
-        let err = c.search(&ramp(50), all).unwrap_err();
+        let err = c.search(&ramp(50), true, all).unwrap_err();
         assert!(err.contains("closest is 1.0000"), "{err}");
     }
 }

@@ -16,7 +16,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::expect_occupancy;
-use crate::grid::regions::{label_regions, Connectivity};
+use crate::grid::regions::{label_regions, Connectivity, Regions};
 use crate::spec::SpecError;
 use crate::terrain::{Filter, Layer, LayerKind};
 
@@ -45,8 +45,8 @@ impl Filter for KeepLargestFreeRegion {
         else {
             return Layer::Occupancy(g);
         };
-        for (cell, label) in g.cells.iter_mut().zip(&regions.label) {
-            if matches!(label, Some(id) if *id as usize != largest) {
+        for (cell, &id) in g.cells.iter_mut().zip(&regions.label) {
+            if id != Regions::NONE && id as usize != largest {
                 *cell = true;
             }
         }

@@ -10,13 +10,13 @@
 //! - `min_area_m2` (square metres, default 0.25, in [0, 10⁶]): obstacles smaller than this
 //!   are removed; area is cells × resolution².
 //!
-//! **Source.** Connected-component labelling (Rosenfeld & Pfaltz, 1966), by flood fill.
+//! **Source.** Connected-component labelling (Rosenfeld & Pfaltz, 1966).
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::expect_occupancy;
-use crate::grid::regions::{label_regions, Connectivity};
+use crate::grid::regions::{label_regions, Connectivity, Regions};
 use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
@@ -46,11 +46,9 @@ impl Filter for RemoveIslands {
         let mut g = expect_occupancy(layer, "remove_islands");
         let min_cells = self.min_area_m2 / (resolution_m * resolution_m);
         let regions = label_regions(&g.cells, g.rows, g.cols, Connectivity::Eight);
-        for (cell, label) in g.cells.iter_mut().zip(&regions.label) {
-            if let Some(id) = label {
-                if (regions.sizes[*id as usize] as f64) < min_cells {
-                    *cell = false;
-                }
+        for (cell, &id) in g.cells.iter_mut().zip(&regions.label) {
+            if id != Regions::NONE && (regions.sizes[id as usize] as f64) < min_cells {
+                *cell = false;
             }
         }
         Layer::Occupancy(g)

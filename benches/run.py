@@ -1,0 +1,103 @@
+"""sitgen benchmarks: prints a table of medians with their spread, and writes JSON.
+
+Run with ``make bench`` (or ``python benches/run.py``). Figures are wall-clock times on this
+machine; compare runs on the same machine only. Nothing here is asserted: speed is measured,
+not tested.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import sitgen
+from sitgen.config import preset_spec
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+# 100 m × 100 m at 0.1 m (10^6 cells), 6 octaves, and every filter that keeps the map's phase.
+FULL_CHAIN: dict[str, Any] = {
+    "terrain": {
+        "width_m": 100.0,
+        "height_m": 100.0,
+        "resolution_m": 0.1,
+        "source": {"kind": "perlin", "octaves": 6, "scale_m": 10.0},
+        "filters": [
+            {"kind": "pixelise", "block_m": 0.3},
+            {"kind": "coverage", "target": 0.3, "tolerance": 0.01},
+            {"kind": "dilate", "radius_m": 0.2},
+            {"kind": "erode", "radius_m": 0.2},
+            {"kind": "remove_islands", "min_area_m2": 0.5},
+            {"kind": "border", "width_m": 0.2},
+            {"kind": "keep_largest_free_region"},
+        ],
+    }
+}
+
+
+def measure(run: Callable[[int], object], repeats: int) -> dict[str, float]:
+    """Median, min and max seconds of ``run(i)`` over ``repeats`` calls after one warm-up."""
+    run(-1)
+    times = []
+    for i in range(repeats):
+        start = time.perf_counter()
+        run(i)
+        times.append(time.perf_counter() - start)
+    return {
+        "median_s": statistics.median(times),
+        "min_s": min(times),
+        "max_s": max(times),
+        "repeats": repeats,
+    }
+
+
+def machine() -> dict[str, Any]:
+    return {
+        "cpu": platform.processor() or platform.machine(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "sitgen": sitgen.__version__,
+        "system": platform.platform(),
+    }
+
+
+def main() -> None:
+    results: dict[str, Any] = {"machine": machine(), "terrain": {}}
+    rows: list[tuple[str, dict[str, float]]] = []
+
+    full = measure(lambda i: sitgen.generate_terrain(FULL_CHAIN, seed=i + 1), repeats=7)
+    rows.append(("terrain 100×100 m @0.1 m, 6 octaves, full chain", full))
+    results["terrain"]["full_chain_100m"] = full
+
+    for name in sitgen.preset_names():
+        spec = preset_spec(name)
+
+        def generate(i: int, spec: dict[str, Any] = spec) -> object:
+            return sitgen.generate_terrain(spec, seed=i + 1)
+
+        m = measure(generate, repeats=9)
+        size = sitgen.generate_terrain(spec).size_m
+        rows.append((f"preset {name} ({size[0]:g}×{size[1]:g} m)", m))
+        results["terrain"][f"preset_{name}"] = m
+
+    print(f"sitgen {sitgen.__version__} on {results['machine']['cpu']}, {os.cpu_count()} cores")
+    print(f"{'benchmark':52} {'median':>10} {'min':>10} {'max':>10}")
+    for label, m in rows:
+        print(
+            f"{label:52} {m['median_s'] * 1e3:8.1f}ms {m['min_s'] * 1e3:8.1f}ms "
+            f"{m['max_s'] * 1e3:8.1f}ms"
+        )
+    RESULTS.mkdir(exist_ok=True)
+    out = RESULTS / "latest.json"
+    out.write_text(json.dumps(results, indent=2) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
