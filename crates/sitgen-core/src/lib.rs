@@ -11,6 +11,7 @@
 
 pub mod grid;
 pub mod interchange;
+pub mod mission;
 pub mod rng;
 pub mod spec;
 pub mod terrain;

@@ -1,4 +1,5 @@
-//! Maps in and out of files: images (PNG/PGM) and ROS map_server YAML.
+//! Maps in and out of files: images (PNG/PGM), ROS map_server YAML, MovingAI `.map`.
 
 pub mod image;
+pub mod movingai;
 pub mod ros;
