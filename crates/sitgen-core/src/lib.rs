@@ -9,10 +9,12 @@
 //! [`rng`] (named seed streams, recordable choices), [`grid`] (scalar fields and occupancy
 //! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out).
 
+pub mod geometry;
 pub mod grid;
 pub mod interchange;
 pub mod mission;
 pub mod rng;
+pub mod situation;
 pub mod spec;
 pub mod terrain;
 

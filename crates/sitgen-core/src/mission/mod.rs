@@ -1,7 +1,235 @@
 //! Mission planning: the second stage of the pipeline, after Arnold & Alexander (2013) §3.
+//!
+//! 1. *Place robots*: from the exact distance transform of the map, every cell whose centre is
+//!    farther from every obstacle than the body's enclosing radius plus `clearance_m` (plus half
+//!    a cell diagonal, as an obstacle cell is a square, not a point) can hold a robot in any
+//!    heading without touching anything. Robots are drawn uniformly from those cells, the agent
+//!    first (from those in the largest region of the dilated map that A* can cross, so that
+//!    its goals are mostly reachable); cells too close to a placed robot are removed before
+//!    the next draw.
+//! 2. *Plan the agent's route*: the map is dilated by `plan_margin_m` (the paper's dilation, which
+//!    keeps routes off obstacle edges). Goals are drawn uniformly from free cells of the dilated
+//!    map and planned with A* from the previous goal; an unreachable goal is discarded and
+//!    another drawn, up to `goal_attempts` times. Goals are appended until the route is at least
+//!    `min_route_length_m` long. Each leg is simplified with Ramer–Douglas–Peucker at
+//!    `rdp_epsilon_m`, so the simplified route may cross obstacles: the agent must avoid them.
+//! 3. *Give peers routes*: legs are straight segments that are clear on the dilated map, so a
+//!    peer that drives straight at its waypoints never needs to plan. In `random` mode each leg
+//!    goes a random way to a random point of the second half of the clear stretch that way
+//!    (the longest of 8 such draws, so that peers in cluttered maps travel rather than
+//!    shuffle); in `crossing` mode each leg is aimed through a random point of the agent's
+//!    route and beyond it, so their paths cross (a random leg if 50 aims find no clear line).
 
 pub mod astar;
 pub mod rdp;
+mod routes;
+
+pub use routes::generate;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::Body;
+use crate::spec::{join, SpecError};
+
+/// How peers' legs are chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum PeerMode {
+    /// Each leg ends at a random free point (Arnold & Alexander's peers).
+    #[default]
+    Random,
+    /// Each leg crosses the agent's route.
+    Crossing,
+}
+
+/// What a robot does at the end of its route.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum AtEnd {
+    /// Stop at the last waypoint.
+    #[default]
+    Stop,
+    /// Drive the route back to the start, and again, back and forth.
+    Reverse,
+    /// Drive from the last waypoint to the first and round again.
+    Loop,
+}
+
+/// A controller and its parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerSpec {
+    /// Controller name (`snd_follow`, `straight`, `follow`, `vo`, `dwa`, `python:…`, `cmd:…`).
+    pub name: String,
+    /// Parameters by name, in the controller's documented units. Default: none.
+    #[serde(default)]
+    pub params: std::collections::BTreeMap<String, f64>,
+}
+
+impl ControllerSpec {
+    fn named(name: &str) -> Self {
+        Self {
+            name: name.into(),
+            params: Default::default(),
+        }
+    }
+}
+
+/// How to place robots and give them routes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MissionSpec {
+    /// Body of every robot. Default: Pioneer 3-AT.
+    #[serde(default)]
+    pub body: Body,
+    /// Fewest peer robots, in [0, 20]. Default 0.
+    #[serde(default)]
+    pub peers_min: u32,
+    /// Most peer robots, in [peers_min, 20]; the count is drawn uniformly. Default 5.
+    #[serde(default = "default_peers_max")]
+    pub peers_max: u32,
+    /// Free space kept around every robot's footprint at the start, metres, in [0, 10].
+    /// Default 0.1.
+    #[serde(default = "default_clearance_m")]
+    pub clearance_m: f64,
+    /// Dilation of the map for route planning, metres, in [0, enclosing radius + clearance_m].
+    /// Default 0.4.
+    #[serde(default = "default_plan_margin_m")]
+    pub plan_margin_m: f64,
+    /// Shortest acceptable agent route (planned length), metres, in [0, 100000]. Default 20.
+    #[serde(default = "default_min_route_length_m")]
+    pub min_route_length_m: f64,
+    /// Ramer–Douglas–Peucker tolerance for the agent's route, metres, in [0, 1000]. Default 0.5.
+    #[serde(default = "default_rdp_epsilon_m")]
+    pub rdp_epsilon_m: f64,
+    /// Goals drawn for one leg before generation fails, in [1, 100000]. Default 200.
+    #[serde(default = "default_goal_attempts")]
+    pub goal_attempts: u32,
+    /// `random` or `crossing`. Default `random`.
+    #[serde(default)]
+    pub peer_mode: PeerMode,
+    /// Legs of each peer's route, in [1, 100]. Default 3.
+    #[serde(default = "default_peer_legs")]
+    pub peer_legs: u32,
+    /// What peers do at the end of their route: `stop`, `reverse` or `loop`. Default `loop`.
+    #[serde(default = "default_peer_at_end")]
+    pub peer_at_end: AtEnd,
+    /// The agent's controller. Default `snd_follow`.
+    #[serde(default = "default_agent_controller")]
+    pub agent_controller: ControllerSpec,
+    /// The peers' controller. Default `straight`.
+    #[serde(default = "default_peer_controller")]
+    pub peer_controller: ControllerSpec,
+}
+
+fn default_peers_max() -> u32 {
+    5
+}
+fn default_clearance_m() -> f64 {
+    0.1
+}
+fn default_plan_margin_m() -> f64 {
+    0.4
+}
+fn default_min_route_length_m() -> f64 {
+    20.0
+}
+fn default_rdp_epsilon_m() -> f64 {
+    0.5
+}
+fn default_goal_attempts() -> u32 {
+    200
+}
+fn default_peer_legs() -> u32 {
+    3
+}
+fn default_peer_at_end() -> AtEnd {
+    AtEnd::Loop
+}
+fn default_agent_controller() -> ControllerSpec {
+    ControllerSpec::named("snd_follow")
+}
+fn default_peer_controller() -> ControllerSpec {
+    ControllerSpec::named("straight")
+}
+
+impl Default for MissionSpec {
+    fn default() -> Self {
+        Self {
+            body: Body::default(),
+            peers_min: 0,
+            peers_max: default_peers_max(),
+            clearance_m: default_clearance_m(),
+            plan_margin_m: default_plan_margin_m(),
+            min_route_length_m: default_min_route_length_m(),
+            rdp_epsilon_m: default_rdp_epsilon_m(),
+            goal_attempts: default_goal_attempts(),
+            peer_mode: PeerMode::default(),
+            peer_legs: default_peer_legs(),
+            peer_at_end: default_peer_at_end(),
+            agent_controller: default_agent_controller(),
+            peer_controller: default_peer_controller(),
+        }
+    }
+}
+
+fn check_count(path: &str, value: u32, lo: u32, hi: u32) -> Result<(), SpecError> {
+    if (lo..=hi).contains(&value) {
+        Ok(())
+    } else {
+        Err(SpecError::new(
+            path,
+            format!("{value} is not in [{lo}, {hi}]"),
+        ))
+    }
+}
+
+impl MissionSpec {
+    /// Check every range; `path` names the section in errors.
+    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
+        self.body.validate(&join(path, "body"))?;
+        check_count(&join(path, "peers_min"), self.peers_min, 0, 20)?;
+        check_count(&join(path, "peers_max"), self.peers_max, self.peers_min, 20)?;
+        SpecError::check_in(&join(path, "clearance_m"), self.clearance_m, 0.0, 10.0)?;
+        let most = self.body.enclosing_radius() + self.clearance_m;
+        if !(self.plan_margin_m >= 0.0 && self.plan_margin_m <= most) {
+            return Err(SpecError::new(
+                join(path, "plan_margin_m"),
+                format!(
+                    "{} is not in [0, {most:.4}] (the body's enclosing radius plus clearance_m, so that robots start on plannable ground)",
+                    self.plan_margin_m
+                ),
+            ));
+        }
+        SpecError::check_in(
+            &join(path, "min_route_length_m"),
+            self.min_route_length_m,
+            0.0,
+            1e5,
+        )?;
+        SpecError::check_in(
+            &join(path, "rdp_epsilon_m"),
+            self.rdp_epsilon_m,
+            0.0,
+            1000.0,
+        )?;
+        check_count(&join(path, "goal_attempts"), self.goal_attempts, 1, 100_000)?;
+        check_count(&join(path, "peer_legs"), self.peer_legs, 1, 100)?;
+        for (name, c) in [
+            ("agent_controller", &self.agent_controller),
+            ("peer_controller", &self.peer_controller),
+        ] {
+            if c.name.trim().is_empty() {
+                return Err(SpecError::new(
+                    join(&join(path, name), "name"),
+                    "must name a controller",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
 
 #[cfg(test)]
 mod tests;

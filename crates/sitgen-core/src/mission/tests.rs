@@ -112,3 +112,221 @@ fn rdp_matches_simplify_js_high_quality_on_every_reference_case() {
     }
     assert_eq!(checked, 40);
 }
+
+mod situations {
+    use crate::grid::distance::squared_distance_to;
+    use crate::mission::astar::PathSearch;
+    use crate::situation::{self, Role, Situation};
+    use crate::spec::from_toml_str;
+    use crate::terrain::presets;
+
+    fn generate(preset: &str, seed: u64, extra: &str) -> Situation {
+        let spec = from_toml_str(&format!("[terrain]\npreset = \"{preset}\"\n{extra}")).unwrap();
+        situation::generate(&spec, seed).unwrap().0
+    }
+
+    /// Points spread over the footprint of a robot, its outline included.
+    fn footprint_samples(r: &crate::situation::Robot) -> Vec<(f64, f64)> {
+        let b = &r.body;
+        let (s, c) = r.start.heading_rad.sin_cos();
+        let mut out = Vec::new();
+        for i in 0..=20 {
+            for j in 0..=20 {
+                let bx = b.origin_x_m + b.length_m * (i as f64 / 20.0 - 0.5);
+                let by = b.width_m * (j as f64 / 20.0 - 0.5);
+                out.push((r.start.x_m + c * bx - s * by, r.start.y_m + s * bx + c * by));
+            }
+        }
+        out
+    }
+
+    fn dilated(map: &crate::grid::Map, margin: f64) -> Vec<bool> {
+        let g = &map.grid;
+        squared_distance_to(&g.cells, g.rows, g.cols)
+            .into_iter()
+            .map(|d| d.sqrt() * map.resolution_m <= margin)
+            .collect()
+    }
+
+    fn cell(map: &crate::grid::Map, (x, y): (f64, f64)) -> (usize, usize) {
+        let res = map.resolution_m;
+        (
+            (x / res) as usize,
+            (map.grid.rows as f64 - y / res) as usize,
+        )
+    }
+
+    #[test]
+    fn situations_keep_their_invariants_over_seeds_and_presets() {
+        for name in presets::NAMES {
+            for seed in 0..25 {
+                let s = generate(name, seed, "");
+                let spec = &s.provenance.spec.mission;
+                let map = s.map.decode().unwrap();
+                let res = map.resolution_m;
+                let g = &map.grid;
+                // No robot starts touching an obstacle or another robot.
+                for r in &s.robots {
+                    for (x, y) in footprint_samples(r) {
+                        let (c, row) = cell(&map, (x, y));
+                        assert!(
+                            !g.get(row, c),
+                            "{name} {seed}: robot {} on an obstacle",
+                            r.id
+                        );
+                    }
+                    for other in s.robots.iter().filter(|o| o.id != r.id) {
+                        let d =
+                            (r.start.x_m - other.start.x_m).hypot(r.start.y_m - other.start.y_m);
+                        assert!(
+                            d > 2.0 * r.body.enclosing_radius(),
+                            "{name} {seed}: robots {} and {} touch",
+                            r.id,
+                            other.id
+                        );
+                    }
+                }
+                let blocked = dilated(&map, spec.plan_margin_m);
+                let agent = &s.robots[0];
+                assert_eq!(agent.role, Role::Agent);
+                // Every agent leg is plannable, and the planned length reaches the minimum.
+                let mut search = PathSearch::new(&blocked, g.rows, g.cols);
+                let mut at = (agent.start.x_m, agent.start.y_m);
+                let mut planned = 0.0;
+                for w in &agent.waypoints {
+                    let next = (w[0], w[1]);
+                    let path = search.shortest_path(cell(&map, at), cell(&map, next));
+                    let path =
+                        path.unwrap_or_else(|| panic!("{name} {seed}: agent leg not plannable"));
+                    planned += path.length * res;
+                    at = next;
+                }
+                assert!(
+                    planned >= spec.min_route_length_m - 1e-9,
+                    "{name} {seed}: {planned} m"
+                );
+                // Every peer leg is a straight line clear of the dilated map (dense sampling).
+                for p in &s.robots[1..] {
+                    assert_eq!(p.role, Role::Peer);
+                    let mut at = (p.start.x_m, p.start.y_m);
+                    for w in &p.waypoints {
+                        for k in 0..=400 {
+                            let t = k as f64 / 400.0;
+                            let q = (at.0 + t * (w[0] - at.0), at.1 + t * (w[1] - at.1));
+                            let (c, row) = cell(&map, q);
+                            assert!(
+                                !blocked[row * g.cols + c],
+                                "{name} {seed}: peer {} leg blocked",
+                                p.id
+                            );
+                        }
+                        at = (w[0], w[1]);
+                    }
+                }
+                assert!(s.robots.len() <= 1 + spec.peers_max as usize);
+            }
+        }
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_situation_and_hash() {
+        let a = generate("caves", 4, "");
+        let b = generate("caves", 4, "");
+        assert_eq!(a.to_json(), b.to_json());
+        assert_eq!(a.provenance.content_hash, a.content_hash());
+        assert_ne!(
+            a.provenance.content_hash,
+            generate("caves", 5, "").provenance.content_hash
+        );
+    }
+
+    #[test]
+    fn mission_settings_do_not_change_the_terrain() {
+        let a = generate("urban", 9, "");
+        let b = generate(
+            "urban",
+            9,
+            "[mission]\npeers_min = 5\npeer_mode = \"crossing\"\n",
+        );
+        assert_eq!(a.map, b.map);
+        assert_eq!(b.robots.len(), 6);
+    }
+
+    #[test]
+    fn crossing_peers_cross_the_agent_route() {
+        let s = generate(
+            "open_field",
+            2,
+            "[mission]\npeers_min = 3\npeers_max = 3\npeer_mode = \"crossing\"\n",
+        );
+        let agent: Vec<(f64, f64)> =
+            std::iter::once((s.robots[0].start.x_m, s.robots[0].start.y_m))
+                .chain(s.robots[0].waypoints.iter().map(|w| (w[0], w[1])))
+                .collect();
+        let crosses = |a: (f64, f64), b: (f64, f64), c: (f64, f64), d: (f64, f64)| {
+            let orient = |p: (f64, f64), q: (f64, f64), r: (f64, f64)| {
+                (q.0 - p.0) * (r.1 - p.1) - (q.1 - p.1) * (r.0 - p.0)
+            };
+            orient(a, b, c) * orient(a, b, d) < 0.0 && orient(c, d, a) * orient(c, d, b) < 0.0
+        };
+        for p in &s.robots[1..] {
+            let first = (p.waypoints[0][0], p.waypoints[0][1]);
+            let start = (p.start.x_m, p.start.y_m);
+            let crossed = agent.windows(2).any(|w| crosses(start, first, w[0], w[1]));
+            assert!(
+                crossed,
+                "peer {} first leg does not cross the agent's route",
+                p.id
+            );
+        }
+    }
+
+    #[test]
+    fn a_situation_round_trips_through_json_and_bad_fields_are_named() {
+        let s = generate("maze", 1, "");
+        let back = Situation::from_json(&s.to_json()).unwrap();
+        assert_eq!(back, s);
+        assert_eq!(
+            back.map.decode().unwrap().grid.cells.len(),
+            s.map.rows * s.map.cols
+        );
+        let broken = s
+            .to_json()
+            .replacen("\"x_m\": ", "\"x_m\": \"far\", \"was\": ", 1);
+        let e = Situation::from_json(&broken).unwrap_err().to_string();
+        assert!(
+            e.starts_with("robots[0].start.x_m: invalid type: string"),
+            "{e}"
+        );
+        let e = Situation::from_json(&s.to_json().replace("\"rows\": ", "\"rows\": 1").to_string())
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("map.data: holds"), "{e}");
+    }
+
+    #[test]
+    fn no_room_is_a_generation_failure_not_a_crash() {
+        let spec = from_toml_str(
+            "[terrain]\nwidth_m = 2\nheight_m = 2\n[terrain.source]\nkind = \"rocks\"\ndensity_per_100m2 = 0\n[[terrain.filters]]\nkind = \"border\"\nwidth_m = 0.2\n[mission]\npeers_min = 3\n",
+        )
+        .unwrap();
+        let e = situation::generate(&spec, 1).unwrap_err();
+        assert_eq!(e.path, "mission");
+        assert!(e.reason.starts_with("no room for robot 1 of"), "{e}");
+    }
+
+    #[test]
+    fn the_checked_in_situation_schema_matches_the_types() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../schema/situation.schema.json");
+        let generated = situation::json_schema();
+        if std::env::var_os("SITGEN_BLESS").is_some() {
+            std::fs::write(&path, &generated).unwrap();
+        }
+        let checked_in = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            checked_in == generated,
+            "schema/situation.schema.json is out of date; run `SITGEN_BLESS=1 cargo test -p sitgen-core schema` and commit it"
+        );
+    }
+}

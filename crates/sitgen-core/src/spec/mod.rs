@@ -20,6 +20,7 @@ use std::path::Path;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::mission::MissionSpec;
 use crate::terrain::{presets, TerrainSpec};
 
 /// A situation spec: how to generate one kind of situation. Later pipeline stages (mission,
@@ -30,12 +31,16 @@ pub struct SituationSpec {
     /// How to generate the terrain map.
     #[serde(default)]
     pub terrain: TerrainSpec,
+    /// How to place robots and give them routes.
+    #[serde(default)]
+    pub mission: MissionSpec,
 }
 
 impl SituationSpec {
     /// Check every range and the filter chain; the error names the first bad field.
     pub fn validate(&self) -> Result<(), SpecError> {
-        self.terrain.validate("terrain")
+        self.terrain.validate("terrain")?;
+        self.mission.validate("mission")
     }
 }
 

@@ -1,0 +1,313 @@
+//! Situations: a map with robots and routes, complete and storable.
+//!
+//! A situation is everything a run needs and nothing more: the map (embedded, so the file
+//! stays readable without the generator), each robot (body, start pose, waypoints, controller,
+//! behaviour at the end of its route) and provenance (the resolved spec and seed that
+//! regenerate it, the sitgen version, and a content hash). It is stored as JSON, with a JSON
+//! Schema generated from these types in `schema/situation.schema.json`.
+//!
+//! **Map encoding.** One bit per cell, row-major from the top-left, most significant bit
+//! first, zlib-compressed (level 9), then base64 (standard alphabet, padded).
+//!
+//! **Content hash.** `sha256:` and the hex SHA-256 of the compact JSON of `{map, robots}` (the
+//! serialisation of [`Content`]), so two situations that would run the same have the same hash
+//! whatever their provenance.
+
+use std::io::{Read, Write};
+
+use base64::Engine;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::geometry::Body;
+use crate::grid::{Map, OccupancyGrid};
+use crate::mission::{self, AtEnd, ControllerSpec};
+use crate::rng::{stream, ChoiceSource};
+use crate::spec::{SituationSpec, SpecError};
+use crate::terrain::{self, GenerationFailed};
+
+/// The format tag of situation files this version writes and reads.
+pub const FORMAT: &str = "sitgen.situation/1";
+
+/// The encoding tag of [`EmbeddedMap::data`].
+pub const MAP_ENCODING: &str = "bits-msb-zlib-base64";
+
+/// A complete situation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Situation {
+    /// Always `sitgen.situation/1`.
+    pub format: String,
+    /// The map.
+    pub map: EmbeddedMap,
+    /// The robots; the agent first.
+    pub robots: Vec<Robot>,
+    /// Where the situation came from.
+    pub provenance: Provenance,
+}
+
+/// The map, embedded and compressed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EmbeddedMap {
+    /// Rows (y, row 0 at the top).
+    pub rows: usize,
+    /// Columns (x).
+    pub cols: usize,
+    /// Cell edge length, metres.
+    pub resolution_m: f64,
+    /// Always `bits-msb-zlib-base64`.
+    pub encoding: String,
+    /// The occupancy bits, encoded as `encoding` says.
+    pub data: String,
+}
+
+/// A robot's part in the situation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    /// Driven by the controller under test.
+    Agent,
+    /// A moving obstacle that avoids nothing.
+    Peer,
+}
+
+/// A pose in the world frame (x east, y north, origin at the map's bottom-left corner).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Pose {
+    /// x, metres.
+    pub x_m: f64,
+    /// y, metres.
+    pub y_m: f64,
+    /// Heading, radians, counter-clockwise from east.
+    pub heading_rad: f64,
+}
+
+/// One robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Robot {
+    /// Index in `robots`.
+    pub id: u32,
+    /// `agent` or `peer`.
+    pub role: Role,
+    /// Footprint.
+    pub body: Body,
+    /// Pose of the rotation centre at the start.
+    pub start: Pose,
+    /// Route after the start, [x, y] in metres.
+    pub waypoints: Vec<[f64; 2]>,
+    /// Controller and parameters.
+    pub controller: ControllerSpec,
+    /// What the robot does after the last waypoint.
+    pub at_end: AtEnd,
+}
+
+/// Where a situation came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Provenance {
+    /// The resolved spec (presets applied, defaults filled).
+    pub spec: SituationSpec,
+    /// The master seed.
+    pub seed: u64,
+    /// Version of sitgen that generated it.
+    pub sitgen_version: String,
+    /// `sha256:` + hex digest of the map and robots.
+    pub content_hash: String,
+}
+
+/// What the content hash covers.
+#[derive(Serialize)]
+struct Content<'a> {
+    map: &'a EmbeddedMap,
+    robots: &'a [Robot],
+}
+
+impl EmbeddedMap {
+    /// Encode a map.
+    pub fn encode(map: &Map) -> Self {
+        let g = &map.grid;
+        let mut bits = vec![0u8; g.cells.len().div_ceil(8)];
+        for (i, _) in g.cells.iter().enumerate().filter(|(_, &c)| c) {
+            bits[i / 8] |= 0x80 >> (i % 8);
+        }
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        z.write_all(&bits).expect("writing to memory");
+        let packed = z.finish().expect("writing to memory");
+        Self {
+            rows: g.rows,
+            cols: g.cols,
+            resolution_m: map.resolution_m,
+            encoding: MAP_ENCODING.into(),
+            data: base64::engine::general_purpose::STANDARD.encode(packed),
+        }
+    }
+
+    /// Decode the map; the error names the field.
+    pub fn decode(&self) -> Result<Map, SpecError> {
+        if self.encoding != MAP_ENCODING {
+            return Err(SpecError::new(
+                "map.encoding",
+                format!(
+                    "`{}` is not supported; expected `{MAP_ENCODING}`",
+                    self.encoding
+                ),
+            ));
+        }
+        if !(self.resolution_m > 0.0) {
+            return Err(SpecError::not_in(
+                "map.resolution_m",
+                self.resolution_m,
+                0.0,
+                f64::MAX,
+            ));
+        }
+        let packed = base64::engine::general_purpose::STANDARD
+            .decode(&self.data)
+            .map_err(|e| SpecError::new("map.data", format!("not base64: {e}")))?;
+        let mut bits = Vec::new();
+        flate2::read::ZlibDecoder::new(&packed[..])
+            .read_to_end(&mut bits)
+            .map_err(|e| SpecError::new("map.data", format!("not zlib data: {e}")))?;
+        let n = self.rows * self.cols;
+        if bits.len() != n.div_ceil(8) {
+            return Err(SpecError::new(
+                "map.data",
+                format!(
+                    "holds {} bytes; {} × {} cells need {}",
+                    bits.len(),
+                    self.rows,
+                    self.cols,
+                    n.div_ceil(8)
+                ),
+            ));
+        }
+        let cells = (0..n)
+            .map(|i| bits[i / 8] & (0x80 >> (i % 8)) != 0)
+            .collect();
+        Ok(Map {
+            grid: OccupancyGrid {
+                rows: self.rows,
+                cols: self.cols,
+                cells,
+            },
+            resolution_m: self.resolution_m,
+        })
+    }
+}
+
+impl Situation {
+    /// Assemble a situation and compute its content hash.
+    pub fn new(map: &Map, robots: Vec<Robot>, spec: SituationSpec, seed: u64) -> Self {
+        let map = EmbeddedMap::encode(map);
+        let mut s = Self {
+            format: FORMAT.into(),
+            map,
+            robots,
+            provenance: Provenance {
+                spec,
+                seed,
+                sitgen_version: crate::VERSION.into(),
+                content_hash: String::new(),
+            },
+        };
+        s.provenance.content_hash = s.content_hash();
+        s
+    }
+
+    /// The hash of the map and robots, as stored in provenance when generated.
+    pub fn content_hash(&self) -> String {
+        let content = serde_json::to_vec(&Content {
+            map: &self.map,
+            robots: &self.robots,
+        })
+        .expect("a situation serialises");
+        let digest = Sha256::digest(&content);
+        let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+        format!("sha256:{hex}")
+    }
+
+    /// Pretty JSON, as written to files.
+    pub fn to_json(&self) -> String {
+        let mut text = serde_json::to_string_pretty(self).expect("a situation serialises");
+        text.push('\n');
+        text
+    }
+
+    /// Read a situation from JSON; the error names the bad field.
+    pub fn from_json(text: &str) -> Result<Self, SpecError> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let s: Situation = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let path = e.path().to_string();
+            let path = if path == "." { String::new() } else { path };
+            SpecError::new(path, e.inner().to_string())
+        })?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Check what types cannot: the format, the map, the robots' ids and roles.
+    pub fn validate(&self) -> Result<(), SpecError> {
+        if self.format != FORMAT {
+            return Err(SpecError::new(
+                "format",
+                format!("`{}` is not supported; expected `{FORMAT}`", self.format),
+            ));
+        }
+        self.map.decode()?;
+        for (i, r) in self.robots.iter().enumerate() {
+            let path = format!("robots[{i}]");
+            if r.id as usize != i {
+                return Err(SpecError::new(
+                    format!("{path}.id"),
+                    format!("{} must equal its index {i}", r.id),
+                ));
+            }
+            let agent = r.role == Role::Agent;
+            if agent != (i == 0) {
+                return Err(SpecError::new(
+                    format!("{path}.role"),
+                    "the first robot, and only it, is the agent",
+                ));
+            }
+            r.body.validate(&format!("{path}.body"))?;
+        }
+        if self.robots.is_empty() {
+            return Err(SpecError::new("robots", "must hold at least the agent"));
+        }
+        Ok(())
+    }
+}
+
+/// Generate the situation of `spec` with master seed `seed`: terrain from the `terrain`
+/// stream, robot placement and the agent's route from `mission`, peers' routes from `peers`.
+pub fn generate(
+    spec: &SituationSpec,
+    seed: u64,
+) -> Result<(Situation, terrain::Terrain), GenerationFailed> {
+    let terrain = terrain::generate(
+        &spec.terrain,
+        &mut ChoiceSource::stream(seed, stream::TERRAIN),
+    )?;
+    let robots = mission::generate(
+        &terrain.map,
+        &spec.mission,
+        &mut ChoiceSource::stream(seed, stream::MISSION),
+        &mut ChoiceSource::stream(seed, stream::PEERS),
+    )?;
+    Ok((
+        Situation::new(&terrain.map, robots, spec.clone(), seed),
+        terrain,
+    ))
+}
+
+/// The JSON Schema of [`Situation`], pretty-printed, as checked in under `schema/`.
+pub fn json_schema() -> String {
+    let schema = schemars::schema_for!(Situation);
+    let mut text = serde_json::to_string_pretty(&schema).expect("a schema serialises");
+    text.push('\n');
+    text
+}
