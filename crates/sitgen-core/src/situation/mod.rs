@@ -157,14 +157,7 @@ impl EmbeddedMap {
                 ),
             ));
         }
-        if !(self.resolution_m > 0.0) {
-            return Err(SpecError::not_in(
-                "map.resolution_m",
-                self.resolution_m,
-                0.0,
-                f64::MAX,
-            ));
-        }
+        SpecError::check_positive("map.resolution_m", self.resolution_m, 10.0)?;
         let packed = base64::engine::general_purpose::STANDARD
             .decode(&self.data)
             .map_err(|e| SpecError::new("map.data", format!("not base64: {e}")))?;
