@@ -35,7 +35,8 @@ BAD_SPECS = [
         "terrain.source.octaves: 0 is not in [1, 16]",
     ),
     ({"terrain": {"preset": "caves", "width_m": -3}}, "terrain.width_m: -3 is not in (0, 10000]"),
-    ({"mission": {}}, "mission: unknown field `mission`"),
+    ({"mision": {}}, "mision: unknown field `mision`"),
+    ({"mission": {"peers_min": 4, "peers_max": 2}}, "mission.peers_max: 2 is not in [4, 20]"),
 ]
 
 

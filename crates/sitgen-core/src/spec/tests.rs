@@ -76,7 +76,7 @@ fn unknown_fields_are_rejected_inside_tagged_items() {
 fn unknown_top_level_and_terrain_fields_are_rejected() {
     assert_eq!(
         error_of("[terrian]\n"),
-        "terrian: unknown field `terrian`, expected `terrain`"
+        "terrian: unknown field `terrian`, expected `terrain` or `mission`"
     );
     let e = error_of("[terrain]\nsize = 3\n");
     assert!(

@@ -29,7 +29,7 @@ use filters::{
     Border, Coverage, Dilate, Erode, Invert, KeepLargestFreeRegion, Pixelise, RemoveIslands,
     Threshold,
 };
-use sources::{Caves, ImageSource, Maze, Perlin, Rocks, Rooms};
+use sources::{Caves, ImageSource, MapSource, Maze, Perlin, Rocks, Rooms};
 
 /// Largest map the generator accepts, in cells (10⁸ cells ≈ 100 MB of occupancy).
 pub const MAX_CELLS: f64 = 1e8;
@@ -97,6 +97,8 @@ pub enum SourceSpec {
     Rocks(Rocks),
     /// A PNG or PGM image (a scalar field: dark = occupied).
     Image(ImageSource),
+    /// A map file: ROS YAML, PNG/PGM or MovingAI `.map` (an occupancy grid).
+    Map(MapSource),
 }
 
 kind_tagged!(SourceSpec, "source", {
@@ -106,6 +108,7 @@ kind_tagged!(SourceSpec, "source", {
     "maze" => Maze,
     "rocks" => Rocks,
     "image" => Image,
+    "map" => Map,
 });
 
 impl Default for SourceSpec {
@@ -225,13 +228,16 @@ impl SourceSpec {
             Self::Maze(s) => s,
             Self::Rocks(s) => s,
             Self::Image(s) => s,
+            Self::Map(s) => s,
         }
     }
 
     /// Make relative file paths relative to `dir` (the spec file's folder).
     pub fn resolve_paths(&mut self, dir: &Path) {
-        if let Self::Image(image) = self {
-            image.resolve_path(dir);
+        match self {
+            Self::Image(image) => image.resolve_path(dir),
+            Self::Map(map) => map.resolve_path(dir),
+            _ => {}
         }
     }
 }
@@ -276,6 +282,16 @@ impl TerrainSpec {
             ));
         }
         let source_path = join(path, "source");
+        if let SourceSpec::Map(_) = self.source {
+            for (name, value) in [("width_m", self.width_m), ("height_m", self.height_m)] {
+                if value.is_some() {
+                    return Err(SpecError::new(
+                        join(path, name),
+                        "a map source takes its size from the file; leave width_m and height_m out",
+                    ));
+                }
+            }
+        }
         let source = self.source.as_source();
         source.validate(&source_path)?;
         let mut kind = source.output();

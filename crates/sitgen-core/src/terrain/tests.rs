@@ -288,3 +288,27 @@ fn an_unreachable_coverage_draws_the_source_again() {
         "no seed needed a second draw; the test no longer tests retries"
     );
 }
+
+#[test]
+fn a_map_source_keeps_the_file_size_at_the_spec_resolution() {
+    let Some(data) = shared_data() else {
+        eprintln!("SKIPPED: ../shared/data not found; map source not checked");
+        return;
+    };
+    let depot = data.join("rosmaps/nav2_bringup/depot.yaml");
+    let spec = from_toml_str(&format!(
+        "[terrain]\nresolution_m = 0.1\n[terrain.source]\nkind = \"map\"\npath = {:?}\n",
+        depot.display().to_string()
+    ))
+    .unwrap();
+    let t = generate_seeded(&spec.terrain, 0);
+    // 604 × 307 cells of 0.05 m → 30.2 m × 15.35 m → 302 × 154 cells of 0.1 m.
+    assert_eq!((t.map.grid.cols, t.map.grid.rows), (302, 154));
+    assert!(t.map.grid.coverage() > 0.0);
+    let e = from_toml_str(&format!(
+        "[terrain]\nwidth_m = 3\n[terrain.source]\nkind = \"map\"\npath = {:?}\n",
+        depot.display().to_string()
+    ))
+    .unwrap_err();
+    assert_eq!(e.path, "terrain.width_m");
+}

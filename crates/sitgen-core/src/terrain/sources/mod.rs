@@ -3,6 +3,7 @@
 
 mod caves;
 mod image;
+mod map;
 mod maze;
 mod perlin;
 mod rocks;
@@ -10,6 +11,7 @@ mod rooms;
 
 pub use self::image::ImageSource;
 pub use caves::Caves;
+pub use map::{MapSource, UnknownCells};
 pub use maze::Maze;
 pub use perlin::Perlin;
 pub use rocks::{RockShape, Rocks};
