@@ -1,6 +1,8 @@
-//! Maps in and out of files: images (PNG/PGM), ROS map_server YAML, MovingAI `.map`.
+//! Maps in and out of files: images (PNG/PGM), ROS map_server YAML, MovingAI `.map`, and
+//! situations out to Player/Stage world files.
 
 pub mod image;
 pub mod maps;
 pub mod movingai;
 pub mod ros;
+pub mod stage;
