@@ -90,3 +90,32 @@ def test_presets_and_schema_commands() -> None:
     assert 'kind = "caves"' in r.stdout
     r = run_cli("schema")
     assert json.loads(r.stdout)["title"] == "SituationSpec"
+
+
+def test_generate_show_and_export_end_to_end(tmp_path: Path) -> None:
+    situation = tmp_path / "s.json"
+    r = run_cli("generate", "--preset", "urban", "--seed", "5", "-o", str(situation))
+    assert r.returncode == 0, r.stderr
+    assert "peers" in r.stdout and "sha256:" in r.stdout
+    again = tmp_path / "again.json"
+    run_cli("generate", "--preset", "urban", "--seed", "5", "-o", str(again))
+    assert situation.read_bytes() == again.read_bytes()
+    r = run_cli("show", str(situation), "-o", str(tmp_path / "fig.png"))
+    assert r.returncode == 0, r.stderr
+    assert Image.open(tmp_path / "fig.png").size[0] > 400
+    r = run_cli("export", str(situation), "--format", "stage", "-o", str(tmp_path / "stage"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "stage" / "situation.world").is_file()
+    r = run_cli("export", str(situation), "--format", "ros", "-o", str(tmp_path / "ros"))
+    assert r.returncode == 0 and (tmp_path / "ros" / "map.yaml").is_file()
+
+
+def test_bad_situation_files_and_formats_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "sitgen.situation/1"}')
+    r = run_cli("show", str(bad))
+    assert r.returncode == 2
+    assert r.stderr.startswith(f"error: {bad}: ") and "Traceback" not in r.stderr
+    r = run_cli("generate", "--preset", "maze", "-o", str(tmp_path / "s.json"))
+    r = run_cli("export", str(tmp_path / "s.json"), "--format", "gazebo")
+    assert r.returncode == 2 and "stage, ros" in r.stderr

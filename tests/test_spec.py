@@ -36,7 +36,10 @@ BAD_SPECS = [
     ),
     ({"terrain": {"preset": "caves", "width_m": -3}}, "terrain.width_m: -3 is not in (0, 10000]"),
     ({"mision": {}}, "mision: unknown field `mision`"),
-    ({"mission": {"peers_min": 4, "peers_max": 2}}, "mission.peers_max: 2 is not in [4, 20]"),
+    (
+        {"terrain": {"preset": "maze"}, "mission": {"peers_min": 4, "peers_max": 2}},
+        "mission.peers_max: 2 is not in [4, 20]",
+    ),
 ]
 
 

@@ -17,6 +17,7 @@ from rich.table import Table
 
 from sitgen import _core
 from sitgen.config import preset_names, preset_spec
+from sitgen.situation import Situation, generate_situation
 from sitgen.terrain import Grid, generate_terrain
 
 app = typer.Typer(
@@ -84,16 +85,9 @@ def terrain(
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON summary.")] = False,
 ) -> None:
     """Generate a terrain map: write the image and a ROS map_server YAML beside it."""
-    if spec is not None and preset is not None:
-        raise UsageError(
-            "give a SPEC file or --preset, not both (a spec names its preset in terrain.preset)"
-        )
     if output.suffix.lower() not in (".png", ".pgm"):
         raise UsageError(f"--output: {output} must end in .png or .pgm")
-    source: Path | dict[str, Any] = (
-        spec if spec is not None else preset_spec(preset or "rocky_desert")
-    )
-    grid = generate_terrain(source, seed=seed)
+    grid = generate_terrain(_spec_or_preset(spec, preset, "rocky_desert"), seed=seed)
     output.parent.mkdir(parents=True, exist_ok=True)
     yaml = grid.save(output)
     if as_json:
@@ -101,6 +95,73 @@ def terrain(
     else:
         typer.echo(f"{output}: {_describe(grid)}")
         typer.echo(f"wrote {output} and {yaml}")
+
+
+def _spec_or_preset(spec: Path | None, preset: str | None, default: str) -> Path | dict[str, Any]:
+    if spec is not None and preset is not None:
+        raise UsageError(
+            "give a SPEC file or --preset, not both (a spec names its preset in terrain.preset)"
+        )
+    return spec if spec is not None else preset_spec(preset or default)
+
+
+@app.command()
+def generate(
+    spec: Annotated[
+        Path | None, typer.Argument(help="Situation spec (TOML). Omit to use --preset.")
+    ] = None,
+    preset: Annotated[
+        str | None, typer.Option("--preset", "-p", help="Built-in terrain preset.")
+    ] = None,
+    seed: SeedOption = 0,
+    output: Annotated[
+        Path, typer.Option("--output", "-o", help="Situation file to write (JSON).")
+    ] = Path("situation.json"),
+) -> None:
+    """Generate a situation: terrain, robots and routes, as JSON."""
+    situation = generate_situation(_spec_or_preset(spec, preset, "rocky_desert"), seed=seed)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    situation.save(output)
+    agent = situation.agent
+    width, height = situation.grid.size_m
+    typer.echo(
+        f"{output}: {width:g} m × {height:g} m, {len(situation.robots) - 1} peers, "
+        f"agent route {len(agent.waypoints)} waypoints, {situation.content_hash}"
+    )
+
+
+@app.command()
+def show(
+    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Figure to write (PNG).")] = Path(
+        "situation.png"
+    ),
+) -> None:
+    """Draw a situation in the paper's style: map, routes, starts and goals, scale bar."""
+    from sitgen.figure import save_situation_figure
+
+    loaded = Situation.load(situation)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    save_situation_figure(loaded, output)
+    typer.echo(f"wrote {output}")
+
+
+@app.command()
+def export(
+    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    format: Annotated[
+        str,
+        typer.Option("--format", "-f", help="stage (Player/Stage world) or ros (map YAML+PGM)."),
+    ] = "stage",
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
+        "export"
+    ),
+) -> None:
+    """Export a situation for Player/Stage or ROS."""
+    if format not in ("stage", "ros"):
+        raise UsageError(f"--format: `{format}` is not one of stage, ros")
+    for path in Situation.load(situation).export(output, format):
+        typer.echo(f"wrote {path}")
 
 
 @app.command()
@@ -147,9 +208,14 @@ def presets(
 
 
 @app.command()
-def schema() -> None:
-    """Print the JSON Schema of the situation spec."""
-    typer.echo(_core.spec_json_schema(), nl=False)
+def schema(
+    situation: Annotated[
+        bool, typer.Option("--situation", help="The schema of situation files instead.")
+    ] = False,
+) -> None:
+    """Print the JSON Schema of the situation spec (or of situation files)."""
+    text = _core.situation_json_schema() if situation else _core.spec_json_schema()
+    typer.echo(text, nl=False)
 
 
 def main() -> None:

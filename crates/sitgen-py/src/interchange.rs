@@ -2,11 +2,11 @@
 
 use std::path::PathBuf;
 
-use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use sitgen_core::grid::{Map, OccupancyGrid};
-use sitgen_core::interchange::{image, ros};
+use sitgen_core::interchange::{image, maps, ros};
 
 fn to_map(occupied: &PyReadonlyArray2<'_, bool>, resolution_m: f64) -> PyResult<Map> {
     let shape = occupied.shape();
@@ -39,7 +39,29 @@ fn write_map(
     Ok(())
 }
 
+/// Load a map file (ROS YAML, PNG, PGM, MovingAI `.map`): (occupied array, resolution in
+/// metres). `resolution_m` is used for formats that carry none.
+#[pyfunction]
+#[pyo3(signature = (path, resolution_m=0.1, unknown_free=false))]
+fn load_map<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    resolution_m: f64,
+    unknown_free: bool,
+) -> PyResult<(Bound<'py, PyAny>, f64)> {
+    let unknown = if unknown_free {
+        maps::Unknown::Free
+    } else {
+        maps::Unknown::Occupied
+    };
+    let map = maps::load_map(&path, resolution_m, unknown).map_err(PyOSError::new_err)?;
+    let g = map.grid;
+    let occupied = PyArray1::from_vec(py, g.cells).reshape([g.rows, g.cols])?;
+    Ok((occupied.into_any(), map.resolution_m))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(write_map, m)?)?;
+    m.add_function(wrap_pyfunction!(load_map, m)?)?;
     Ok(())
 }

@@ -2,6 +2,8 @@
 //! modules; long calls release the GIL.
 
 mod interchange;
+mod mission;
+mod situation;
 mod spec;
 mod terrain;
 
@@ -28,5 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     spec::register(m)?;
     terrain::register(m)?;
     interchange::register(m)?;
+    mission::register(m)?;
+    situation::register(m)?;
     Ok(())
 }

@@ -1,0 +1,27 @@
+//! Bindings of `sitgen_core::mission`.
+
+use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use sitgen_core::mission::astar;
+
+/// A* with the MovingAI rules on `blocked` (row 0 = top); cells are (column, row). Returns
+/// (cells, length in cells), or None when there is no path.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn shortest_path(
+    py: Python<'_>,
+    blocked: PyReadonlyArray2<'_, bool>,
+    start: (usize, usize),
+    goal: (usize, usize),
+) -> Option<(Vec<(usize, usize)>, f64)> {
+    let shape = blocked.shape();
+    let (rows, cols) = (shape[0], shape[1]);
+    let cells: Vec<bool> = blocked.as_array().iter().copied().collect();
+    py.detach(|| astar::shortest_path(&cells, rows, cols, start, goal))
+        .map(|p| (p.cells, p.length))
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(shortest_path, m)?)?;
+    Ok(())
+}
