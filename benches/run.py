@@ -17,9 +17,15 @@ from pathlib import Path
 from typing import Any
 
 import sitgen
+from sitgen import _core
 from sitgen.config import preset_spec
 
 RESULTS = Path(__file__).resolve().parent / "results"
+SHARED = Path(
+    os.environ.get("SITGEN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
+)
+ASTAR_MAP = "mazes/maze512-1-0.map"
+"""The hardest of the largest (512 × 512) MovingAI maps in the shared data."""
 
 # 100 m × 100 m at 0.1 m (10^6 cells), 6 octaves, and every filter that keeps the map's phase.
 FULL_CHAIN: dict[str, Any] = {
@@ -86,13 +92,46 @@ def main() -> None:
         rows.append((f"preset {name} ({size[0]:g}×{size[1]:g} m)", m))
         results["terrain"][f"preset_{name}"] = m
 
+    for name in sitgen.preset_names():
+        spec = preset_spec(name)
+
+        def situation(i: int, spec: dict[str, Any] = spec) -> object:
+            return sitgen.generate_situation(spec, seed=i + 1)
+
+        m = measure(situation, repeats=9)
+        rows.append((f"situation {name} (terrain + robots + routes)", m))
+        results.setdefault("situation", {})[f"preset_{name}"] = m
+
+    scen = SHARED / "movingai" / "scenarios" / (ASTAR_MAP + ".scen")
+    if scen.is_file():
+        grid = sitgen.load_map(SHARED / "movingai" / "maps" / ASTAR_MAP)
+        problems = []
+        # Every 10th problem: all path lengths (buckets) at a tenth of the time.
+        for line in scen.read_text().splitlines()[1::10]:
+            f = line.split("\t")
+            problems.append(((int(f[4]), int(f[5])), (int(f[6]), int(f[7]))))
+        blocked = grid.occupied
+        m = measure(lambda _: _core.shortest_path_lengths(blocked, problems), repeats=5)
+        per_second = len(problems) / m["median_s"]
+        rows.append((f"A* {ASTAR_MAP}: {len(problems)} problems, one core", m))
+        results["astar"] = {
+            "map": ASTAR_MAP,
+            "problems": len(problems),
+            "problems_per_s": per_second,
+            **m,
+        }
+    else:
+        print(f"skipped A*: {scen} not found (set SITGEN_SHARED_DATA)")
+
     print(f"sitgen {sitgen.__version__} on {results['machine']['cpu']}, {os.cpu_count()} cores")
-    print(f"{'benchmark':52} {'median':>10} {'min':>10} {'max':>10}")
+    print(f"{'benchmark':60} {'median':>10} {'min':>10} {'max':>10}")
     for label, m in rows:
         print(
-            f"{label:52} {m['median_s'] * 1e3:8.1f}ms {m['min_s'] * 1e3:8.1f}ms "
+            f"{label:60} {m['median_s'] * 1e3:8.1f}ms {m['min_s'] * 1e3:8.1f}ms "
             f"{m['max_s'] * 1e3:8.1f}ms"
         )
+    if "astar" in results:
+        print(f"A*: {results['astar']['problems_per_s']:.0f} problems/s")
     RESULTS.mkdir(exist_ok=True)
     out = RESULTS / "latest.json"
     out.write_text(json.dumps(results, indent=2) + "\n")

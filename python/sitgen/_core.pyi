@@ -36,3 +36,7 @@ def load_map(
 def shortest_path(
     blocked: npt.NDArray[np.bool_], start: tuple[int, int], goal: tuple[int, int]
 ) -> tuple[list[tuple[int, int]], float] | None: ...
+def shortest_path_lengths(
+    blocked: npt.NDArray[np.bool_],
+    problems: list[tuple[tuple[int, int], tuple[int, int]]],
+) -> list[float | None]: ...
