@@ -78,8 +78,9 @@ def test_demo_writes_every_preset(tmp_path: Path) -> None:
     r = run_cli("demo", "-o", str(tmp_path / "demo"))
     assert r.returncode == 0, r.stderr
     for name in sitgen.preset_names():
-        assert (tmp_path / "demo" / f"{name}.png").is_file()
-        assert (tmp_path / "demo" / f"{name}.yaml").is_file()
+        for suffix in (".png", ".yaml", ".json", "-situation.png"):
+            assert (tmp_path / "demo" / f"{name}{suffix}").is_file(), f"{name}{suffix}"
+        sitgen.Situation.load(tmp_path / "demo" / f"{name}.json")
 
 
 def test_presets_and_schema_commands() -> None:

@@ -39,6 +39,7 @@ def test_ros_maps_load_with_their_resolution_and_unknown_policy(shared_data: Pat
     occupied = sitgen.load_map(yaml)
     free = sitgen.load_map(yaml, unknown_free=True)
     assert occupied.resolution == 0.05
+    assert occupied.origin == (-10.0, -10.0, 0.0)
     assert occupied.occupied.shape == (384, 384)
     assert occupied.occupied.sum() > free.occupied.sum()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -171,27 +172,35 @@ def demo(
     ),
     seed: SeedOption = 0,
 ) -> None:
-    """Generate one map of every built-in preset (the main job on built-in defaults)."""
+    """Generate one situation of every built-in preset: its map (PNG + ROS YAML), the situation
+    (JSON) and its figure (the main job on built-in defaults)."""
+    from sitgen.figure import save_situation_figure
+
     output.mkdir(parents=True, exist_ok=True)
-    table = Table(title=f"sitgen terrain presets, seed {seed}")
-    for column in ("preset", "size", "cells", "coverage", "target", "draws"):
+    table = Table(title=f"sitgen presets, seed {seed}")
+    for column in ("preset", "size", "coverage", "target", "peers", "waypoints"):
         table.add_column(column)
     for name in preset_names():
-        grid = generate_terrain(preset_spec(name), seed=seed)
-        image = output / f"{name}.png"
-        grid.save(image)
-        rows, cols = grid.occupied.shape
+        situation = generate_situation(preset_spec(name), seed=seed)
+        grid = situation.grid
+        grid.save(output / f"{name}.png")
+        situation.save(output / f"{name}.json")
+        save_situation_figure(situation, output / f"{name}-situation.png")
         width, height = grid.size_m
+        target = _coverage_target(replace(grid, spec=situation.spec))
         table.add_row(
             name,
             f"{width:g} × {height:g} m",
-            f"{cols} × {rows}",
             f"{grid.coverage:.4f}",
-            _coverage_target(grid).strip(" ()").removeprefix("target "),
-            str(grid.attempts),
+            target.strip(" ()").removeprefix("target "),
+            str(len(situation.robots) - 1),
+            str(len(situation.agent.waypoints)),
         )
     Console().print(table)
-    typer.echo(f"wrote {len(preset_names())} maps (PNG + ROS YAML) to {output}/")
+    typer.echo(
+        f"wrote {len(preset_names())} maps (PNG + ROS YAML), situations (JSON) and figures "
+        f"to {output}/"
+    )
 
 
 @app.command()

@@ -27,8 +27,8 @@ def load_map(
 ) -> Grid:
     """Load a map as a :class:`Grid` (row 0 = top).
 
-    - ``.yaml``/``.yml``: ROS map_server (image, resolution, negate, thresholds); unknown cells
-      are occupied unless ``unknown_free``;
+    - ``.yaml``/``.yml``: ROS map_server (image, resolution, negate, thresholds, origin, kept
+      in ``Grid.origin``); unknown cells are occupied unless ``unknown_free``;
     - ``.png``/``.pgm``: ROS's default thresholds, at ``resolution`` m/cell;
     - ``.map``: MovingAI, at ``resolution`` m/cell;
     - ``.npy``: BARN grids (1 = obstacle), one 30 × 30 grid or a stack of them (pick with
@@ -40,8 +40,8 @@ def load_map(
     path = Path(path)
     if path.suffix.lower() == ".npy":
         return _load_barn(path, index)
-    occupied, res = _core.load_map(path, resolution, unknown_free)
-    return Grid(occupied=occupied, resolution=res)
+    occupied, res, origin = _core.load_map(path, resolution, unknown_free)
+    return Grid(occupied=occupied, resolution=res, origin=origin)
 
 
 def _load_barn(path: Path, index: int | None) -> Grid:

@@ -48,6 +48,9 @@ class Grid:
     """What each step of the chain did."""
     spec: dict[str, Any] = field(default_factory=dict)
     """The resolved spec (preset applied, defaults filled)."""
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """For a loaded ROS map, the pose (x m, y m, yaw rad) of its bottom-left corner in the ROS
+    map frame; sitgen's own frame starts at that corner."""
 
     @property
     def size_m(self) -> tuple[float, float]:

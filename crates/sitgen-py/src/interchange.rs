@@ -40,7 +40,7 @@ fn write_map(
 }
 
 /// Load a map file (ROS YAML, PNG, PGM, MovingAI `.map`): (occupied array, resolution in
-/// metres). `resolution_m` is used for formats that carry none.
+/// metres, origin (x, y, yaw) of a ROS map). `resolution_m` is used for formats that carry none.
 #[pyfunction]
 #[pyo3(signature = (path, resolution_m=0.1, unknown_free=false))]
 fn load_map<'py>(
@@ -48,16 +48,18 @@ fn load_map<'py>(
     path: PathBuf,
     resolution_m: f64,
     unknown_free: bool,
-) -> PyResult<(Bound<'py, PyAny>, f64)> {
+) -> PyResult<(Bound<'py, PyAny>, f64, (f64, f64, f64))> {
     let unknown = if unknown_free {
         maps::Unknown::Free
     } else {
         maps::Unknown::Occupied
     };
-    let map = maps::load_map(&path, resolution_m, unknown).map_err(PyOSError::new_err)?;
-    let g = map.grid;
+    let loaded =
+        maps::load_map_with_origin(&path, resolution_m, unknown).map_err(PyOSError::new_err)?;
+    let g = loaded.map.grid;
     let occupied = PyArray1::from_vec(py, g.cells).reshape([g.rows, g.cols])?;
-    Ok((occupied.into_any(), map.resolution_m))
+    let [x, y, yaw] = loaded.origin;
+    Ok((occupied.into_any(), loaded.map.resolution_m, (x, y, yaw)))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -10,8 +10,9 @@
 //! colour channels (alpha left out); occupancy is (255 − p) / 255, or p / 255 with `negate`;
 //! a cell is occupied above `occupied_thresh`, free below `free_thresh`, otherwise unknown.
 //! Unknown cells are occupied unless the caller says free: a robot must not be sent into
-//! space nobody has seen. The ROS `origin` is not carried over: sitgen's frame starts at the
-//! map's bottom-left corner.
+//! space nobody has seen. The ROS `origin` (pose of the bottom-left corner in the ROS map
+//! frame) is returned beside the map, so positions can be carried between the two frames;
+//! sitgen's own frame starts at the map's bottom-left corner.
 
 use std::path::Path;
 
@@ -47,6 +48,17 @@ struct RosMapYaml {
     occupied_thresh: f64,
     #[serde(default = "default_free")]
     free_thresh: f64,
+    #[serde(default)]
+    origin: Option<Vec<f64>>,
+}
+
+/// A loaded map and, for a ROS map, its `origin` (x m, y m, yaw rad); zeros otherwise.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadedMap {
+    /// The map, in sitgen's frame.
+    pub map: Map,
+    /// Pose of the map's bottom-left corner in the file's frame.
+    pub origin: [f64; 3],
 }
 
 fn default_occupied() -> f64 {
@@ -79,6 +91,19 @@ impl Default for Thresholds {
 
 /// Load a map; `resolution_m` is used for formats that carry none. Errors name the file.
 pub fn load_map(path: &Path, resolution_m: f64, unknown: Unknown) -> Result<Map, String> {
+    load_map_with_origin(path, resolution_m, unknown).map(|loaded| loaded.map)
+}
+
+/// Load a map with its origin; see [`load_map`].
+pub fn load_map_with_origin(
+    path: &Path,
+    resolution_m: f64,
+    unknown: Unknown,
+) -> Result<LoadedMap, String> {
+    let at_zero = |map: Map| LoadedMap {
+        map,
+        origin: [0.0; 3],
+    };
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -86,17 +111,17 @@ pub fn load_map(path: &Path, resolution_m: f64, unknown: Unknown) -> Result<Map,
     let shown = path.display();
     match ext.as_str() {
         "yaml" | "yml" => load_ros_yaml(path, unknown),
-        "png" | "pgm" => Ok(Map {
+        "png" | "pgm" => Ok(at_zero(Map {
             grid: read_trinary(path, Thresholds::default(), unknown)?,
             resolution_m,
-        }),
+        })),
         "map" => {
             let text =
                 std::fs::read_to_string(path).map_err(|e| format!("cannot read {shown}: {e}"))?;
-            Ok(Map {
+            Ok(at_zero(Map {
                 grid: movingai::parse_map(&text).map_err(|e| format!("{shown}: {e}"))?,
                 resolution_m,
-            })
+            }))
         }
         _ => Err(format!(
             "{shown}: unknown map format; expected .yaml (ROS), .png, .pgm or .map (MovingAI)"
@@ -104,7 +129,7 @@ pub fn load_map(path: &Path, resolution_m: f64, unknown: Unknown) -> Result<Map,
     }
 }
 
-fn load_ros_yaml(path: &Path, unknown: Unknown) -> Result<Map, String> {
+fn load_ros_yaml(path: &Path, unknown: Unknown) -> Result<LoadedMap, String> {
     let shown = path.display();
     let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {shown}: {e}"))?;
     let yaml: RosMapYaml = serde_yaml_ng::from_str(&text).map_err(|e| format!("{shown}: {e}"))?;
@@ -126,9 +151,22 @@ fn load_ros_yaml(path: &Path, unknown: Unknown) -> Result<Map, String> {
         free: yaml.free_thresh,
         negate,
     };
-    Ok(Map {
-        grid: read_trinary(&image, thresholds, unknown)?,
-        resolution_m: yaml.resolution,
+    let origin = match yaml.origin.as_deref() {
+        None => [0.0; 3],
+        Some(&[x, y, yaw]) => [x, y, yaw],
+        Some(other) => {
+            return Err(format!(
+                "{shown}: origin: expected [x, y, yaw], found {} values",
+                other.len()
+            ))
+        }
+    };
+    Ok(LoadedMap {
+        map: Map {
+            grid: read_trinary(&image, thresholds, unknown)?,
+            resolution_m: yaml.resolution,
+        },
+        origin,
     })
 }
 

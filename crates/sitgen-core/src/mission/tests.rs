@@ -159,7 +159,7 @@ mod situations {
     #[test]
     fn situations_keep_their_invariants_over_seeds_and_presets() {
         for name in presets::NAMES {
-            for seed in 0..25 {
+            for seed in 0..50 {
                 let s = generate(name, seed, "");
                 let spec = &s.provenance.spec.mission;
                 let map = s.map.decode().unwrap();
