@@ -39,6 +39,9 @@ fn write_map(
     Ok(())
 }
 
+/// (occupied array, resolution in metres, origin (x, y, yaw)).
+type LoadedMapTuple<'py> = (Bound<'py, PyAny>, f64, (f64, f64, f64));
+
 /// Load a map file (ROS YAML, PNG, PGM, MovingAI `.map`): (occupied array, resolution in
 /// metres, origin (x, y, yaw) of a ROS map). `resolution_m` is used for formats that carry none.
 #[pyfunction]
@@ -48,7 +51,7 @@ fn load_map<'py>(
     path: PathBuf,
     resolution_m: f64,
     unknown_free: bool,
-) -> PyResult<(Bound<'py, PyAny>, f64, (f64, f64, f64))> {
+) -> PyResult<LoadedMapTuple<'py>> {
     let unknown = if unknown_free {
         maps::Unknown::Free
     } else {
