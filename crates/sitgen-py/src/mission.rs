@@ -4,16 +4,18 @@ use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use sitgen_core::mission::astar;
 
+/// Cells (column, row) from start to goal, and the length in cells.
+type PathAndLength = (Vec<(usize, usize)>, f64);
+
 /// A* with the MovingAI rules on `blocked` (row 0 = top); cells are (column, row). Returns
 /// (cells, length in cells), or None when there is no path.
 #[pyfunction]
-#[allow(clippy::type_complexity)]
 fn shortest_path(
     py: Python<'_>,
     blocked: PyReadonlyArray2<'_, bool>,
     start: (usize, usize),
     goal: (usize, usize),
-) -> Option<(Vec<(usize, usize)>, f64)> {
+) -> Option<PathAndLength> {
     let shape = blocked.shape();
     let (rows, cols) = (shape[0], shape[1]);
     let cells: Vec<bool> = blocked.as_array().iter().copied().collect();
