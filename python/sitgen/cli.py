@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import sys
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -39,8 +38,8 @@ class UsageError(Exception):
     """Bad command-line input that is not a spec field (exit 2)."""
 
 
-def _coverage_target(grid: Grid) -> str:
-    for f in grid.spec.get("terrain", {}).get("filters", []):
+def _coverage_target(spec: dict[str, Any]) -> str:
+    for f in spec.get("terrain", {}).get("filters", []):
         if f.get("kind") == "coverage":
             return f" (target {f['target']} ± {f.get('tolerance', 0.01)})"
     return ""
@@ -51,7 +50,7 @@ def _describe(grid: Grid) -> str:
     width, height = grid.size_m
     return (
         f"{cols} × {rows} cells, {width:g} m × {height:g} m at {grid.resolution:g} m/cell, "
-        f"coverage {grid.coverage:.4f}{_coverage_target(grid)}"
+        f"coverage {grid.coverage:.4f}{_coverage_target(grid.spec)}"
     )
 
 
@@ -187,7 +186,7 @@ def demo(
         situation.save(output / f"{name}.json")
         save_situation_figure(situation, output / f"{name}-situation.png")
         width, height = grid.size_m
-        target = _coverage_target(replace(grid, spec=situation.spec))
+        target = _coverage_target(situation.spec)
         table.add_row(
             name,
             f"{width:g} × {height:g} m",

@@ -18,5 +18,8 @@ pub mod situation;
 pub mod spec;
 pub mod terrain;
 
+#[cfg(test)]
+mod test_data;
+
 /// The version of sitgen that produced a result, recorded in provenance.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

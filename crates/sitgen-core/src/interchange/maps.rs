@@ -205,17 +205,7 @@ pub fn read_trinary(path: &Path, t: Thresholds, unknown: Unknown) -> Result<Occu
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::path::PathBuf;
-
-    fn shared(rel: &str) -> Option<PathBuf> {
-        let p = std::env::var_os("SITGEN_SHARED_DATA")
-            .map(PathBuf::from)
-            .unwrap_or_else(|| {
-                PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data")
-            })
-            .join(rel);
-        p.exists().then_some(p)
-    }
+    use crate::test_data::shared;
 
     #[test]
     fn ros_maps_read_with_their_thresholds() {

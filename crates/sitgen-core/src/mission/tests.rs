@@ -5,18 +5,11 @@ use rayon::prelude::*;
 use super::astar::PathSearch;
 use super::rdp::simplify_indices;
 use crate::interchange::movingai::{parse_map, parse_scenarios};
-
-/// `../shared/data` beside the repository, or `$SITGEN_SHARED_DATA`.
-fn shared_data() -> Option<PathBuf> {
-    let dir = std::env::var_os("SITGEN_SHARED_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    dir.is_dir().then_some(dir)
-}
+use crate::test_data::shared;
 
 #[test]
 fn astar_gives_the_movingai_optimal_length_for_every_problem() {
-    let Some(data) = shared_data() else {
+    let Some(data) = shared("") else {
         eprintln!(
             "SKIPPED: ../shared/data not found (set SITGEN_SHARED_DATA); MovingAI not checked"
         );
@@ -74,7 +67,7 @@ fn astar_gives_the_movingai_optimal_length_for_every_problem() {
 
 #[test]
 fn rdp_matches_simplify_js_high_quality_on_every_reference_case() {
-    let Some(data) = shared_data() else {
+    let Some(data) = shared("") else {
         eprintln!("SKIPPED: ../shared/data not found (set SITGEN_SHARED_DATA); RDP not checked");
         return;
     };
@@ -317,16 +310,9 @@ mod situations {
 
     #[test]
     fn the_checked_in_situation_schema_matches_the_types() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../schema/situation.schema.json");
-        let generated = situation::json_schema();
-        if std::env::var_os("SITGEN_BLESS").is_some() {
-            std::fs::write(&path, &generated).unwrap();
-        }
-        let checked_in = std::fs::read_to_string(&path).unwrap_or_default();
-        assert!(
-            checked_in == generated,
-            "schema/situation.schema.json is out of date; run `SITGEN_BLESS=1 cargo test -p sitgen-core schema` and commit it"
+        crate::test_data::assert_schema_checked_in(
+            "situation.schema.json",
+            &situation::json_schema(),
         );
     }
 }

@@ -217,19 +217,8 @@ fn a_resolved_spec_round_trips_through_json() {
     assert_eq!(from_json_str(&json).unwrap(), spec);
 }
 
-/// The checked-in schema must equal the one generated from the types. Run with
-/// `SITGEN_BLESS=1` to rewrite it after changing a spec type.
+/// The checked-in schema must equal the one generated from the types.
 #[test]
 fn the_checked_in_schema_matches_the_types() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../schema/situation-spec.schema.json");
-    let generated = json_schema();
-    if std::env::var_os("SITGEN_BLESS").is_some() {
-        std::fs::write(&path, &generated).unwrap();
-    }
-    let checked_in = std::fs::read_to_string(&path).unwrap_or_default();
-    assert!(
-        checked_in == generated,
-        "schema/situation-spec.schema.json is out of date; run `SITGEN_BLESS=1 cargo test -p sitgen-core schema` and commit it"
-    );
+    crate::test_data::assert_schema_checked_in("situation-spec.schema.json", &json_schema());
 }

@@ -1,11 +1,10 @@
-use std::path::PathBuf;
-
 use proptest::prelude::*;
 
 use super::*;
 use crate::grid::regions::{label_regions, Connectivity, Regions};
 use crate::rng::{stream, ChoiceSource};
 use crate::spec::from_toml_str;
+use crate::test_data::shared;
 
 fn preset(name: &str) -> TerrainSpec {
     from_toml_str(&format!("[terrain]\npreset = \"{name}\"\n"))
@@ -27,17 +26,9 @@ fn target_of(spec: &TerrainSpec) -> (f64, f64) {
         .expect("every preset has a coverage constraint")
 }
 
-/// `../shared/data` beside the repository, or `$SITGEN_SHARED_DATA`.
-fn shared_data() -> Option<PathBuf> {
-    let dir = std::env::var_os("SITGEN_SHARED_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data"));
-    dir.is_dir().then_some(dir)
-}
-
 #[test]
 fn perlin_equals_the_reference_bit_for_bit_at_every_listed_point() {
-    let Some(data) = shared_data() else {
+    let Some(data) = shared("") else {
         eprintln!("SKIPPED: ../shared/data not found (set SITGEN_SHARED_DATA); Perlin reference table not checked");
         return;
     };
@@ -291,7 +282,7 @@ fn an_unreachable_coverage_draws_the_source_again() {
 
 #[test]
 fn a_map_source_keeps_the_file_size_at_the_spec_resolution() {
-    let Some(data) = shared_data() else {
+    let Some(data) = shared("") else {
         eprintln!("SKIPPED: ../shared/data not found; map source not checked");
         return;
     };
