@@ -174,3 +174,43 @@ def test_the_figure_is_drawn_in_the_papers_style(tmp_path: Path) -> None:
     pixels = np.asarray(Image.open(tmp_path / "fig.png").convert("RGB")).reshape(-1, 3)
     colours = {tuple(int(v) for v in p) for p in np.unique(pixels, axis=0)}
     assert {AGENT, PEER, ROUTE} <= colours
+
+
+def _stage_m_per_px(bitmap: Path | np.ndarray, size_x: float, size_y: float) -> tuple[float, float]:
+    """Stage's scaling: the bounding box of pixels whose first channel is <= 127 is stretched
+    to the model's size."""
+    if isinstance(bitmap, Path):
+        opened = Image.open(bitmap)
+        # The first channel: grey for grey and 1-bit images, red otherwise.
+        bitmap = np.asarray(opened.convert("L" if opened.mode in ("1", "L", "I") else "RGB"))
+    first = bitmap[..., 0] if bitmap.ndim == 3 else bitmap
+    dark_rows, dark_cols = np.nonzero(first.astype(int) <= 127)
+    width = dark_cols.max() - dark_cols.min() + 1
+    height = dark_rows.max() - dark_rows.min() + 1
+    return size_x / width, size_y / height
+
+
+def test_the_stage_scaling_rule_matches_the_shared_worlds_and_our_export(
+    shared_data: Path, tmp_path: Path
+) -> None:
+    table = (shared_data / "stage" / "world_bitmap_table.tsv").read_text().splitlines()
+    header = table[0].split("\t")
+    checked = 0
+    for line in table[1:]:
+        row = dict(zip(header, line.split("\t"), strict=True))
+        bitmap = shared_data / "stage" / "worlds" / "bitmaps" / row["bitmap"]
+        if not bitmap.is_file():
+            continue
+        size = [float(v) for v in row["size_xyz_m"].split()]
+        mx, my = _stage_m_per_px(bitmap, size[0], size[1])
+        assert abs(mx - float(row["eff_m_per_px_x"])) < 1e-5, row["world_file"]
+        assert abs(my - float(row["eff_m_per_px_y"])) < 1e-5, row["world_file"]
+        checked += 1
+    assert checked >= 3
+    s = sitgen.generate_situation(preset_spec("rocky_desert"), seed=2)
+    s.export(tmp_path, "stage")
+    world = (tmp_path / "situation.world").read_text()
+    size_line = next(line for line in world.splitlines() if line.strip().startswith("size ["))
+    sx, sy, _ = (float(v) for v in size_line.strip()[6:-1].split())
+    mx, my = _stage_m_per_px(tmp_path / "situation.png", sx, sy)
+    assert mx == pytest.approx(s.grid.resolution) and my == pytest.approx(s.grid.resolution)
