@@ -14,6 +14,7 @@ pub mod grid;
 pub mod interchange;
 pub mod mission;
 pub mod rng;
+pub mod sim;
 pub mod situation;
 pub mod spec;
 pub mod terrain;

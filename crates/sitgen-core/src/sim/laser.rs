@@ -1,0 +1,253 @@
+//! The laser rangefinder: rays against the grid and against other robots' footprints.
+//!
+//! Beams follow Stage's ranger geometry: n beams, beam t at bearing −fov/2 + t·fov/(n − 1)
+//! from the heading (the first and last exactly at the edges of the field of view), from the
+//! sensor's mount point. Each ray is traced through the occupancy grid cell by cell (Amanatides
+//! & Woo's traversal, so no cell is skipped and the range is the exact distance to where the ray
+//! enters the first occupied cell), and intersected with every other robot's rectangle (slab
+//! method); the nearest hit wins, and the robot carrying the sensor is never hit. A ray that
+//! leaves the map or reaches `range_m` without a hit reads `range_m` exactly. Ranges are rounded
+//! to `range_step_m` (1 cm for the SICK LMS200), and optional Gaussian noise is added to hits.
+//!
+//! Unlike Stage's default models, every robot's full body is visible to the beam (Stage's
+//! stock beam height passes over other Pioneers' bodies): sitgen tests avoidance, and a robot
+//! the laser cannot see by construction would be a fault of the test, not of the controller.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use super::collision::Rect;
+use crate::grid::Map;
+use crate::spec::{join, SpecError};
+
+/// The laser's parameters; defaults are the SICK LMS200 as Arnold & Alexander used it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LaserSpec {
+    /// Field of view, degrees, in (0, 360]. Default 180.
+    #[serde(default = "default_fov_deg")]
+    pub fov_deg: f64,
+    /// Number of beams, in [1, 10000]. Default 181.
+    #[serde(default = "default_beams")]
+    pub beams: u32,
+    /// Maximum range, metres, in (0, 1000]. Default 10.
+    #[serde(default = "default_range_m")]
+    pub range_m: f64,
+    /// Ranges are rounded to multiples of this, metres, in [0, 1]; 0 = no rounding. Default 0.01.
+    #[serde(default = "default_range_step_m")]
+    pub range_step_m: f64,
+    /// Mount point ahead of the rotation centre along the heading, metres, in [-5, 5].
+    /// Default 0 (Stage mounts `sicklaser` at the rotation centre).
+    #[serde(default)]
+    pub offset_x_m: f64,
+    /// Standard deviation of Gaussian range noise on hits, metres, in [0, 10]. Default 0.
+    #[serde(default)]
+    pub noise_sd_m: f64,
+}
+
+fn default_fov_deg() -> f64 {
+    180.0
+}
+fn default_beams() -> u32 {
+    181
+}
+fn default_range_m() -> f64 {
+    10.0
+}
+fn default_range_step_m() -> f64 {
+    0.01
+}
+
+impl Default for LaserSpec {
+    fn default() -> Self {
+        Self {
+            fov_deg: default_fov_deg(),
+            beams: default_beams(),
+            range_m: default_range_m(),
+            range_step_m: default_range_step_m(),
+            offset_x_m: 0.0,
+            noise_sd_m: 0.0,
+        }
+    }
+}
+
+impl LaserSpec {
+    /// Check every range; `path` names the laser in errors.
+    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
+        SpecError::check_positive(&join(path, "fov_deg"), self.fov_deg, 360.0)?;
+        if !(1..=10_000).contains(&self.beams) {
+            return Err(SpecError::new(
+                join(path, "beams"),
+                format!("{} is not in [1, 10000]", self.beams),
+            ));
+        }
+        SpecError::check_positive(&join(path, "range_m"), self.range_m, 1000.0)?;
+        SpecError::check_in(&join(path, "range_step_m"), self.range_step_m, 0.0, 1.0)?;
+        SpecError::check_in(&join(path, "offset_x_m"), self.offset_x_m, -5.0, 5.0)?;
+        SpecError::check_in(&join(path, "noise_sd_m"), self.noise_sd_m, 0.0, 10.0)
+    }
+
+    /// Bearing of each beam relative to the heading, radians.
+    pub fn bearings(&self) -> Vec<f64> {
+        let fov = self.fov_deg.to_radians();
+        let n = self.beams as usize;
+        if n == 1 {
+            return vec![0.0];
+        }
+        (0..n)
+            .map(|t| -fov / 2.0 + t as f64 * fov / (n - 1) as f64)
+            .collect()
+    }
+
+    /// Round a range to the range step.
+    pub fn quantise(&self, r: f64) -> f64 {
+        if self.range_step_m > 0.0 {
+            ((r / self.range_step_m).round() * self.range_step_m).min(self.range_m)
+        } else {
+            r
+        }
+    }
+}
+
+/// Distance along the ray from `(ox, oy)` in unit direction `(dx, dy)` to where it enters the
+/// first occupied cell, or `max` if it meets none within `max` or leaves the map first.
+pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f64) -> f64 {
+    let g = &map.grid;
+    let res = map.resolution_m;
+    let (cols, rows) = (g.cols as i64, g.rows as i64);
+    // Column index from x, and row-from-the-bottom index from y.
+    let (mut cu, mut cw) = ((ox / res).floor() as i64, (oy / res).floor() as i64);
+    let occupied = |cu: i64, cw: i64| g.cells[((rows - 1 - cw) * cols + cu) as usize];
+    let inside = |cu: i64, cw: i64| cu >= 0 && cw >= 0 && cu < cols && cw < rows;
+    if !inside(cu, cw) {
+        return max;
+    }
+    if occupied(cu, cw) {
+        return 0.0;
+    }
+    let step_u = if dx > 0.0 { 1 } else { -1 };
+    let step_w = if dy > 0.0 { 1 } else { -1 };
+    let delta_u = if dx != 0.0 {
+        res / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let delta_w = if dy != 0.0 {
+        res / dy.abs()
+    } else {
+        f64::INFINITY
+    };
+    let boundary = |o: f64, c: i64, step: i64| {
+        if step > 0 {
+            (c + 1) as f64 * res - o
+        } else {
+            o - c as f64 * res
+        }
+    };
+    let mut t_u = if dx != 0.0 {
+        boundary(ox, cu, step_u) / dx.abs()
+    } else {
+        f64::INFINITY
+    };
+    let mut t_w = if dy != 0.0 {
+        boundary(oy, cw, step_w) / dy.abs()
+    } else {
+        f64::INFINITY
+    };
+    loop {
+        let t = if t_u < t_w {
+            cu += step_u;
+            let t = t_u;
+            t_u += delta_u;
+            t
+        } else {
+            cw += step_w;
+            let t = t_w;
+            t_w += delta_w;
+            t
+        };
+        if t >= max || !inside(cu, cw) {
+            return max;
+        }
+        if occupied(cu, cw) {
+            return t;
+        }
+    }
+}
+
+/// Distance along the ray to the rectangle `rect`, if it hits within `max` (0 if the origin is
+/// inside it).
+pub fn ray_to_rect(
+    rect: &Rect,
+    (ox, oy): (f64, f64),
+    (dx, dy): (f64, f64),
+    max: f64,
+) -> Option<f64> {
+    let (ux, uy) = rect.u;
+    let (px, py) = (ox - rect.centre.0, oy - rect.centre.1);
+    // Origin and direction in the rectangle's frame.
+    let (p, d) = (
+        (px * ux + py * uy, -px * uy + py * ux),
+        (dx * ux + dy * uy, -dx * uy + dy * ux),
+    );
+    let mut near = f64::NEG_INFINITY;
+    let mut far = f64::INFINITY;
+    for (p, d, h) in [(p.0, d.0, rect.half_length), (p.1, d.1, rect.half_width)] {
+        if d.abs() < 1e-15 {
+            if p.abs() > h {
+                return None;
+            }
+        } else {
+            let (a, b) = ((-h - p) / d, (h - p) / d);
+            near = near.max(a.min(b));
+            far = far.min(a.max(b));
+        }
+    }
+    if far < near.max(0.0) {
+        return None;
+    }
+    let t = near.max(0.0);
+    (t < max).then_some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::OccupancyGrid;
+
+    #[test]
+    fn beams_span_the_field_of_view_edge_to_edge() {
+        let b = LaserSpec::default().bearings();
+        assert_eq!(b.len(), 181);
+        assert_eq!(b[0], -std::f64::consts::FRAC_PI_2);
+        assert!((b[180] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert!((b[90]).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_rectangle_is_hit_on_its_near_face() {
+        let r = Rect {
+            centre: (5.0, 0.0),
+            u: (1.0, 0.0),
+            half_length: 0.5,
+            half_width: 0.25,
+        };
+        assert_eq!(ray_to_rect(&r, (0.0, 0.0), (1.0, 0.0), 10.0), Some(4.5));
+        assert_eq!(ray_to_rect(&r, (0.0, 1.0), (1.0, 0.0), 10.0), None);
+        assert_eq!(ray_to_rect(&r, (0.0, 0.0), (-1.0, 0.0), 10.0), None);
+        assert_eq!(ray_to_rect(&r, (0.0, 0.0), (1.0, 0.0), 4.0), None);
+    }
+
+    #[test]
+    fn the_grid_ray_stops_at_the_entry_of_the_first_occupied_cell() {
+        let mut g = OccupancyGrid::filled(10, 10, false);
+        g.set(5, 7, true); // x ∈ [0.7, 0.8], y ∈ [0.4, 0.5]
+        let map = Map {
+            grid: g,
+            resolution_m: 0.1,
+        };
+        let t = ray_to_grid(&map, (0.05, 0.45), (1.0, 0.0), 10.0);
+        assert!((t - 0.65).abs() < 1e-12, "{t}");
+        assert_eq!(ray_to_grid(&map, (0.05, 0.15), (1.0, 0.0), 10.0), 10.0);
+    }
+}

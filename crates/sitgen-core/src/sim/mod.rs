@@ -1,0 +1,469 @@
+//! The simulator: a 2-D world with Player/Stage semantics (`reference/algorithms.md` §2).
+//!
+//! One [`World::step`] advances simulated time by `dt_s` (no wall clock anywhere):
+//! 1. commands given to the step replace the robots' latched commands (a command stays in force
+//!    until replaced, as in Stage's velocity mode), clamped to the velocity limits;
+//! 2. each robot's velocity follows its command (at once, or within the acceleration limits if
+//!    set);
+//! 3. robots move **in id order** (the agent first), each against the others' poses as they
+//!    stand at that moment: the new pose is the exact unicycle arc for (v, ω) over `dt_s`; if the
+//!    footprint there would overlap an occupied cell, the space outside the map, or another
+//!    robot, the move is not made at all and the robot is *stalled* for the step (Stage: whole
+//!    step undone, command kept, so a robot pushing against a wall stays stalled step after step);
+//!    a robot with zero velocity does not move and keeps its stall flag, as in Stage;
+//! 4. time advances.
+//!
+//! Deviation from Stage, deliberate: Stage integrates with explicit Euler (translation along
+//! the heading at the start of the step); sitgen integrates the unicycle exactly, so a constant
+//! (v, ω) drives a circle of radius v/ω. The two differ by O(dt²) per step.
+//!
+//! Sensing is on demand ([`World::observe`]) and reads the poses at the end of the last step,
+//! which is what Stage's sensors see at the start of the next one.
+
+pub mod collision;
+pub mod laser;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::geometry::Body;
+use crate::grid::Map;
+use crate::rng::{stream, ChoiceSource};
+use crate::situation::{Pose, Role, Situation};
+use crate::spec::{join, SpecError};
+
+use collision::Rect;
+use laser::{ray_to_grid, ray_to_rect, LaserSpec};
+
+/// Simulator settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SimSpec {
+    /// Simulated time per step, seconds, in (0, 10]. Default 0.1 (Stage's `interval_sim`).
+    #[serde(default = "default_dt_s")]
+    pub dt_s: f64,
+    /// Largest speed forward or backward, m/s, in (0, 100]. Default 0.8 (Pioneer 3-AT).
+    #[serde(default = "default_max_speed")]
+    pub max_speed_m_s: f64,
+    /// Largest turn rate, degrees per second, in (0, 3600]. Default 90.
+    #[serde(default = "default_max_turn")]
+    pub max_turn_rate_deg_s: f64,
+    /// Largest change of speed, m/s², in (0, 1000]; none by default (Stage's velocity mode).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_accel_m_s2: Option<f64>,
+    /// Largest change of turn rate, degrees/s², in (0, 36000]; none by default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_turn_accel_deg_s2: Option<f64>,
+    /// The agent's laser.
+    #[serde(default)]
+    pub laser: LaserSpec,
+}
+
+fn default_dt_s() -> f64 {
+    0.1
+}
+fn default_max_speed() -> f64 {
+    0.8
+}
+fn default_max_turn() -> f64 {
+    90.0
+}
+
+impl Default for SimSpec {
+    fn default() -> Self {
+        Self {
+            dt_s: default_dt_s(),
+            max_speed_m_s: default_max_speed(),
+            max_turn_rate_deg_s: default_max_turn(),
+            max_accel_m_s2: None,
+            max_turn_accel_deg_s2: None,
+            laser: LaserSpec::default(),
+        }
+    }
+}
+
+impl SimSpec {
+    /// Check every range; `path` names the section in errors.
+    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
+        SpecError::check_positive(&join(path, "dt_s"), self.dt_s, 10.0)?;
+        SpecError::check_positive(&join(path, "max_speed_m_s"), self.max_speed_m_s, 100.0)?;
+        SpecError::check_positive(
+            &join(path, "max_turn_rate_deg_s"),
+            self.max_turn_rate_deg_s,
+            3600.0,
+        )?;
+        if let Some(a) = self.max_accel_m_s2 {
+            SpecError::check_positive(&join(path, "max_accel_m_s2"), a, 1000.0)?;
+        }
+        if let Some(a) = self.max_turn_accel_deg_s2 {
+            SpecError::check_positive(&join(path, "max_turn_accel_deg_s2"), a, 36_000.0)?;
+        }
+        self.laser.validate(&join(path, "laser"))
+    }
+}
+
+/// What a robot is in contact with after a blocked move.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Contact {
+    /// An occupied cell or the edge of the map.
+    Wall,
+    /// Robot with this id.
+    Robot(u32),
+}
+
+/// The state of one robot, readable after every step.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RobotState {
+    /// Id, as in the situation.
+    pub id: u32,
+    /// Agent or peer.
+    pub role: Role,
+    /// Footprint.
+    pub body: Body,
+    /// Pose of the rotation centre.
+    pub pose: Pose,
+    /// Latched command (v m/s, ω rad/s), after clamping.
+    pub command: (f64, f64),
+    /// Current velocity (v m/s, ω rad/s).
+    pub velocity: (f64, f64),
+    /// Whether the last move was blocked.
+    pub stalled: bool,
+    /// What blocked the last blocked move (empty when not stalled).
+    pub contacts: Vec<Contact>,
+}
+
+impl RobotState {
+    /// The footprint at `pose`.
+    pub fn footprint_at(&self, pose: &Pose) -> Rect {
+        let (s, c) = pose.heading_rad.sin_cos();
+        Rect {
+            centre: (
+                pose.x_m + c * self.body.origin_x_m,
+                pose.y_m + s * self.body.origin_x_m,
+            ),
+            u: (c, s),
+            half_length: self.body.length_m / 2.0,
+            half_width: self.body.width_m / 2.0,
+        }
+    }
+
+    /// The footprint now.
+    pub fn footprint(&self) -> Rect {
+        self.footprint_at(&self.pose)
+    }
+}
+
+/// What a robot senses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Observation {
+    /// Laser ranges, metres, one per beam (empty for robots without a laser).
+    pub ranges: Vec<f64>,
+    /// Beam bearings relative to the heading, radians.
+    pub angles: Vec<f64>,
+    /// Own pose.
+    pub pose: Pose,
+    /// Own velocity (v, ω).
+    pub velocity: (f64, f64),
+    /// Whether the last move was blocked.
+    pub stalled: bool,
+    /// Simulated time, seconds.
+    pub time_s: f64,
+}
+
+/// A running world.
+#[derive(Debug, Clone)]
+pub struct World {
+    spec: SimSpec,
+    map: Map,
+    /// Distance, metres, from each cell centre to the nearest occupied cell centre: a footprint
+    /// whose enclosing circle is nearer than this (less half a cell diagonal) to nothing cannot
+    /// touch the grid, which settles most moves without testing cells.
+    clearance_m: Vec<f32>,
+    robots: Vec<RobotState>,
+    bearings: Vec<f64>,
+    time_s: f64,
+    steps: u64,
+    seed: u64,
+}
+
+/// Unicycle motion over `dt` from `pose` at constant (v, ω), exactly.
+pub fn integrate(pose: &Pose, v: f64, w: f64, dt: f64) -> Pose {
+    let a = pose.heading_rad;
+    let (x, y, heading) = if w.abs() < 1e-12 {
+        (pose.x_m + v * dt * a.cos(), pose.y_m + v * dt * a.sin(), a)
+    } else {
+        let b = a + w * dt;
+        let r = v / w;
+        (
+            pose.x_m + r * (b.sin() - a.sin()),
+            pose.y_m - r * (b.cos() - a.cos()),
+            b,
+        )
+    };
+    Pose {
+        x_m: x,
+        y_m: y,
+        heading_rad: wrap_angle(heading),
+    }
+}
+
+/// An angle in (−π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let wrapped = a.rem_euclid(std::f64::consts::TAU);
+    if wrapped > std::f64::consts::PI {
+        wrapped - std::f64::consts::TAU
+    } else {
+        wrapped
+    }
+}
+
+fn limit(value: f64, previous: f64, max_change: Option<f64>) -> f64 {
+    match max_change {
+        Some(m) => value.clamp(previous - m, previous + m),
+        None => value,
+    }
+}
+
+impl World {
+    /// A world at the start of `situation`, with sensor noise drawn from `seed`.
+    pub fn new(situation: &Situation, spec: SimSpec, seed: u64) -> Result<Self, SpecError> {
+        spec.validate("sim")?;
+        let map = situation.map.decode()?;
+        let g = &map.grid;
+        let clearance_m = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols)
+            .into_iter()
+            .map(|d2| (d2.sqrt() * map.resolution_m) as f32)
+            .collect();
+        let robots = situation
+            .robots
+            .iter()
+            .map(|r| RobotState {
+                id: r.id,
+                role: r.role,
+                body: r.body.clone(),
+                pose: r.start,
+                command: (0.0, 0.0),
+                velocity: (0.0, 0.0),
+                stalled: false,
+                contacts: Vec::new(),
+            })
+            .collect();
+        let bearings = spec.laser.bearings();
+        Ok(Self {
+            spec,
+            map,
+            clearance_m,
+            robots,
+            bearings,
+            time_s: 0.0,
+            steps: 0,
+            seed,
+        })
+    }
+
+    /// Simulated time, seconds.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Every robot's state.
+    pub fn robots(&self) -> &[RobotState] {
+        &self.robots
+    }
+
+    /// The map.
+    pub fn map(&self) -> &Map {
+        &self.map
+    }
+
+    /// The settings.
+    pub fn spec(&self) -> &SimSpec {
+        &self.spec
+    }
+
+    /// Advance one step; `commands` are (robot id, v m/s, ω rad/s) and replace the robots'
+    /// latched commands. An unknown id is an error and changes nothing.
+    pub fn step(&mut self, commands: &[(u32, f64, f64)]) -> Result<(), String> {
+        if let Some(&(id, ..)) = commands.iter().find(|c| c.0 as usize >= self.robots.len()) {
+            return Err(format!(
+                "no robot {id}: the world has {}",
+                self.robots.len()
+            ));
+        }
+        if let Some(&(id, v, w)) = commands
+            .iter()
+            .find(|c| !c.1.is_finite() || !c.2.is_finite())
+        {
+            return Err(format!("robot {id}: command ({v}, {w}) is not finite"));
+        }
+        let vmax = self.spec.max_speed_m_s;
+        let wmax = self.spec.max_turn_rate_deg_s.to_radians();
+        for &(id, v, w) in commands {
+            self.robots[id as usize].command = (v.clamp(-vmax, vmax), w.clamp(-wmax, wmax));
+        }
+        let dt = self.spec.dt_s;
+        let dv = self.spec.max_accel_m_s2.map(|a| a * dt);
+        let dw = self.spec.max_turn_accel_deg_s2.map(|a| a.to_radians() * dt);
+        for i in 0..self.robots.len() {
+            let r = &mut self.robots[i];
+            r.velocity = (
+                limit(r.command.0, r.velocity.0, dv),
+                limit(r.command.1, r.velocity.1, dw),
+            );
+            if r.velocity == (0.0, 0.0) {
+                continue;
+            }
+            let next = integrate(&r.pose, r.velocity.0, r.velocity.1, dt);
+            let contacts = self.contacts_at(i, &next);
+            let r = &mut self.robots[i];
+            if contacts.is_empty() {
+                r.pose = next;
+                r.stalled = false;
+                r.contacts.clear();
+            } else {
+                r.stalled = true;
+                r.contacts = contacts;
+            }
+        }
+        self.time_s = (self.steps + 1) as f64 * dt;
+        self.steps += 1;
+        Ok(())
+    }
+
+    /// What robot `i` would overlap at `pose`: the grid (or the map's edge) and other robots.
+    fn contacts_at(&self, i: usize, pose: &Pose) -> Vec<Contact> {
+        let me = &self.robots[i];
+        let rect = me.footprint_at(pose);
+        let mut contacts = Vec::new();
+        if self.overlaps_grid(&rect, pose, me.body.enclosing_radius()) {
+            contacts.push(Contact::Wall);
+        }
+        for (j, other) in self.robots.iter().enumerate() {
+            if j != i && rect.overlaps(&other.footprint()) {
+                contacts.push(Contact::Robot(other.id));
+            }
+        }
+        contacts
+    }
+
+    /// Whether `rect` overlaps an occupied cell or leaves the map.
+    fn overlaps_grid(&self, rect: &Rect, pose: &Pose, enclosing: f64) -> bool {
+        let g = &self.map.grid;
+        let res = self.map.resolution_m;
+        let (x0, y0, x1, y1) = rect.bounds();
+        if x0 < 0.0 || y0 < 0.0 || x1 > g.cols as f64 * res || y1 > g.rows as f64 * res {
+            return true;
+        }
+        // Fast path: the enclosing circle is clear of every occupied cell's square.
+        let c = (pose.x_m / res) as usize;
+        let r_from_bottom = (pose.y_m / res) as usize;
+        if c < g.cols && r_from_bottom < g.rows {
+            let row = g.rows - 1 - r_from_bottom;
+            let clear = f64::from(self.clearance_m[row * g.cols + c]);
+            // Pose to its cell centre is at most half a diagonal; a cell's square reaches half a
+            // diagonal beyond its centre.
+            if clear - res * std::f64::consts::SQRT_2 > enclosing {
+                return false;
+            }
+        }
+        let (c0, c1) = (
+            (x0 / res).floor() as usize,
+            ((x1 / res).ceil() as usize).min(g.cols),
+        );
+        let (w0, w1) = (
+            (y0 / res).floor() as usize,
+            ((y1 / res).ceil() as usize).min(g.rows),
+        );
+        for w in w0..w1 {
+            let row = g.rows - 1 - w;
+            for c in c0..c1 {
+                if g.cells[row * g.cols + c]
+                    && rect.overlaps_square(c as f64 * res, w as f64 * res, res)
+                {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// What robot `id` senses now. Only the agent carries the laser.
+    pub fn observe(&self, id: u32) -> Result<Observation, String> {
+        let r = self
+            .robots
+            .get(id as usize)
+            .ok_or_else(|| format!("no robot {id}: the world has {}", self.robots.len()))?;
+        let (ranges, angles) = if r.role == Role::Agent {
+            (self.scan(id as usize), self.bearings.clone())
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        Ok(Observation {
+            ranges,
+            angles,
+            pose: r.pose,
+            velocity: r.velocity,
+            stalled: r.stalled,
+            time_s: self.time_s,
+        })
+    }
+
+    /// One laser scan of robot `i` from its current pose.
+    pub fn scan(&self, i: usize) -> Vec<f64> {
+        let laser = &self.spec.laser;
+        let me = &self.robots[i];
+        let (s, c) = me.pose.heading_rad.sin_cos();
+        let origin = (
+            me.pose.x_m + c * laser.offset_x_m,
+            me.pose.y_m + s * laser.offset_x_m,
+        );
+        let others: Vec<Rect> = self
+            .robots
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, r)| r.footprint())
+            .collect();
+        // Noise is drawn from a stream keyed by (seed, step, robot), so observing twice gives
+        // the same scan and the thread count never matters.
+        let mut noise = (laser.noise_sd_m > 0.0).then(|| {
+            ChoiceSource::stream(
+                self.seed ^ self.steps.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (i as u64) << 56,
+                stream::SENSOR_NOISE,
+            )
+        });
+        self.bearings
+            .iter()
+            .map(|b| {
+                let a = me.pose.heading_rad + b;
+                let dir = (a.cos(), a.sin());
+                let mut t = ray_to_grid(&self.map, origin, dir, laser.range_m);
+                for rect in &others {
+                    if let Some(hit) = ray_to_rect(rect, origin, dir, t) {
+                        t = hit;
+                    }
+                }
+                if let (Some(noise), true) = (noise.as_mut(), t < laser.range_m) {
+                    t = (t + laser.noise_sd_m * gaussian(noise)).clamp(0.0, laser.range_m);
+                }
+                laser.quantise(t)
+            })
+            .collect()
+    }
+}
+
+/// A standard normal draw by the Box–Muller transform.
+fn gaussian(choices: &mut ChoiceSource) -> f64 {
+    let u1 = 1.0 - choices.unit();
+    let u2 = choices.unit();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+#[cfg(test)]
+mod tests;

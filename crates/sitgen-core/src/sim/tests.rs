@@ -1,0 +1,350 @@
+use proptest::prelude::*;
+
+use super::*;
+use crate::grid::OccupancyGrid;
+use crate::mission::{AtEnd, ControllerSpec};
+use crate::rng::ChoiceSource;
+use crate::situation::{Robot, Situation};
+use crate::spec::SituationSpec;
+
+fn robot(id: u32, x: f64, y: f64, heading: f64) -> Robot {
+    Robot {
+        id,
+        role: if id == 0 { Role::Agent } else { Role::Peer },
+        body: Body::default(),
+        start: Pose {
+            x_m: x,
+            y_m: y,
+            heading_rad: heading,
+        },
+        waypoints: vec![[x, y]],
+        controller: ControllerSpec {
+            name: "test".into(),
+            params: Default::default(),
+        },
+        at_end: AtEnd::Stop,
+    }
+}
+
+/// A `size` × `size` cell map at 0.1 m with the given occupied cells (row, col).
+fn world(size: usize, occupied: &[(usize, usize)], robots: Vec<Robot>) -> World {
+    let mut g = OccupancyGrid::filled(size, size, false);
+    for &(r, c) in occupied {
+        g.set(r, c, true);
+    }
+    let map = Map {
+        grid: g,
+        resolution_m: 0.1,
+    };
+    let s = Situation::new(&map, robots, SituationSpec::default(), 0);
+    World::new(&s, SimSpec::default(), 0).unwrap()
+}
+
+#[test]
+fn a_straight_line_is_exact() {
+    let mut w = world(200, &[], vec![robot(0, 2.0, 10.0, 0.0)]);
+    for _ in 0..10 {
+        w.step(&[(0, 0.5, 0.0)]).unwrap();
+    }
+    let p = w.robots()[0].pose;
+    assert!((p.x_m - 2.5).abs() < 1e-9 && (p.y_m - 10.0).abs() < 1e-12);
+    assert!((w.time_s() - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn a_constant_turn_drives_a_circle_of_radius_v_over_omega() {
+    let (v, om) = (0.4, 0.5);
+    let mut w = world(400, &[], vec![robot(0, 20.0, 20.0, 0.0)]);
+    // Circle centre: left of the heading at distance v/ω.
+    let centre = (20.0, 20.0 + v / om);
+    for _ in 0..200 {
+        w.step(&[(0, v, om)]).unwrap();
+        let p = w.robots()[0].pose;
+        let r = (p.x_m - centre.0).hypot(p.y_m - centre.1);
+        assert!((r - v / om).abs() < 1e-9, "{r}");
+    }
+}
+
+#[test]
+fn commands_are_clamped_and_latched() {
+    let mut w = world(400, &[], vec![robot(0, 20.0, 20.0, 0.0)]);
+    w.step(&[(0, 5.0, -10.0)]).unwrap();
+    let r = &w.robots()[0];
+    assert_eq!(r.command, (0.8, -std::f64::consts::FRAC_PI_2));
+    w.step(&[]).unwrap();
+    assert_eq!(
+        w.robots()[0].velocity,
+        (0.8, -std::f64::consts::FRAC_PI_2),
+        "latched"
+    );
+}
+
+#[test]
+fn acceleration_limits_ramp_the_speed() {
+    let map = Map {
+        grid: OccupancyGrid::filled(200, 200, false),
+        resolution_m: 0.1,
+    };
+    let s = Situation::new(
+        &map,
+        vec![robot(0, 5.0, 5.0, 0.0)],
+        SituationSpec::default(),
+        0,
+    );
+    let spec = SimSpec {
+        max_accel_m_s2: Some(1.0),
+        ..SimSpec::default()
+    };
+    let mut w = World::new(&s, spec, 0).unwrap();
+    w.step(&[(0, 0.8, 0.0)]).unwrap();
+    assert!((w.robots()[0].velocity.0 - 0.1).abs() < 1e-12);
+}
+
+#[test]
+fn a_robot_driven_into_a_wall_stalls_and_stays_stalled_while_pushing() {
+    // A wall at x ∈ [5.0, 5.1] m.
+    let wall: Vec<(usize, usize)> = (0..100).map(|r| (r, 50)).collect();
+    let mut w = world(100, &wall, vec![robot(0, 3.0, 5.0, 0.0)]);
+    let mut stalled_at = None;
+    for k in 0..100 {
+        w.step(&[(0, 0.5, 0.0)]).unwrap();
+        let r = &w.robots()[0];
+        if r.stalled {
+            stalled_at.get_or_insert(k);
+            assert_eq!(r.contacts, vec![Contact::Wall]);
+        } else {
+            assert!(stalled_at.is_none(), "unstalled while still pushing");
+        }
+    }
+    assert!(stalled_at.is_some());
+    let front = w.robots()[0].footprint().bounds().2;
+    assert!(
+        front <= 5.0 && front > 5.0 - 0.05 - 1e-9,
+        "stopped within one step: {front}"
+    );
+}
+
+#[test]
+fn two_robots_driven_head_on_both_stop_stalled_and_touching() {
+    let mut w = world(
+        200,
+        &[],
+        vec![
+            robot(0, 5.0, 10.0, 0.0),
+            robot(1, 8.0, 10.0, std::f64::consts::PI),
+        ],
+    );
+    for _ in 0..60 {
+        w.step(&[(0, 0.5, 0.0), (1, 0.5, 0.0)]).unwrap();
+    }
+    let (a, b) = (&w.robots()[0], &w.robots()[1]);
+    assert!(a.stalled && b.stalled);
+    assert_eq!(a.contacts, vec![Contact::Robot(1)]);
+    assert_eq!(b.contacts, vec![Contact::Robot(0)]);
+    let gap = b.footprint().bounds().0 - a.footprint().bounds().2;
+    assert!((0.0..=0.05 + 1e-9).contains(&gap), "gap {gap}");
+}
+
+/// Whether any footprint overlaps an occupied cell, the outside, or another footprint.
+fn any_overlap(w: &World) -> bool {
+    let g = &w.map().grid;
+    let res = w.map().resolution_m;
+    let robots = w.robots();
+    robots.iter().enumerate().any(|(i, r)| {
+        let rect = r.footprint();
+        let (x0, y0, x1, y1) = rect.bounds();
+        let outside = x0 < 0.0 || y0 < 0.0 || x1 > g.cols as f64 * res || y1 > g.rows as f64 * res;
+        let on_cell = (0..g.rows).any(|row| {
+            (0..g.cols).any(|c| {
+                g.get(row, c)
+                    && rect.overlaps_square(c as f64 * res, (g.rows - 1 - row) as f64 * res, res)
+            })
+        });
+        let on_robot = robots
+            .iter()
+            .skip(i + 1)
+            .any(|o| rect.overlaps(&o.footprint()));
+        outside || on_cell || on_robot
+    })
+}
+
+#[test]
+fn no_footprint_ever_overlaps_anything_over_thousands_of_random_steps() {
+    let mut choices = ChoiceSource::stream(99, "test");
+    for trial in 0..20 {
+        let occupied: Vec<(usize, usize)> = (0..120)
+            .map(|_| (choices.index(60), choices.index(60)))
+            .collect();
+        let mut robots = Vec::new();
+        // Robots on free, separated starts.
+        let mut attempts = 0;
+        while robots.len() < 4 && attempts < 1000 {
+            attempts += 1;
+            let r = robot(
+                robots.len() as u32,
+                choices.uniform(0.6, 5.4),
+                choices.uniform(0.6, 5.4),
+                choices.uniform(-3.0, 3.0),
+            );
+            let mut w = world(60, &occupied, {
+                let mut all = robots.clone();
+                all.push(r.clone());
+                all
+            });
+            w.step(&[]).unwrap();
+            if !any_overlap(&w) {
+                robots.push(r);
+            }
+        }
+        let mut w = world(60, &occupied, robots.clone());
+        assert!(!any_overlap(&w), "trial {trial} starts clear");
+        for _ in 0..150 {
+            let commands: Vec<(u32, f64, f64)> = (0..robots.len() as u32)
+                .map(|id| (id, choices.uniform(-0.8, 0.8), choices.uniform(-1.6, 1.6)))
+                .collect();
+            w.step(&commands).unwrap();
+            assert!(!any_overlap(&w), "trial {trial} at {} s", w.time_s());
+        }
+    }
+}
+
+#[test]
+fn the_laser_reads_analytic_ranges() {
+    // A wall at x ∈ [5.0, 5.1] m; the robot at x = 2 facing east.
+    let wall: Vec<(usize, usize)> = (0..100).map(|r| (r, 50)).collect();
+    let w = world(100, &wall, vec![robot(0, 2.0, 5.0, 0.0)]);
+    let o = w.observe(0).unwrap();
+    assert_eq!(o.ranges.len(), 181);
+    assert!(
+        (o.ranges[90] - 3.0).abs() < 1e-9,
+        "perpendicular: {}",
+        o.ranges[90]
+    );
+    // 30° to the left: 3 / cos 30° = 3.4641 → 3.46.
+    assert!(
+        (o.ranges[120] - 3.46).abs() < 1e-9,
+        "at an angle: {}",
+        o.ranges[120]
+    );
+    // Straight up the wall's side, nothing: max range.
+    assert_eq!(o.ranges[180], 10.0);
+    // A peer ahead, facing away: the agent sees its rear face, 0.313 + 0.04465 behind its pose.
+    let w = world(
+        100,
+        &[],
+        vec![robot(0, 2.0, 5.0, 0.0), robot(1, 4.0, 5.0, 0.0)],
+    );
+    let o = w.observe(0).unwrap();
+    assert!(
+        (o.ranges[90] - 1.64).abs() < 1e-9,
+        "robot ahead: {}",
+        o.ranges[90]
+    );
+    assert!(
+        w.observe(1).unwrap().ranges.is_empty(),
+        "peers carry no laser"
+    );
+}
+
+/// The obviously correct reference: march along the ray in 0.1 mm steps.
+fn reference_range(w: &World, i: usize, bearing: f64) -> f64 {
+    let r = &w.robots()[i];
+    let g = &w.map().grid;
+    let res = w.map().resolution_m;
+    let a = r.pose.heading_rad + bearing;
+    let others: Vec<Rect> = w
+        .robots()
+        .iter()
+        .filter(|o| o.id != r.id)
+        .map(|o| o.footprint())
+        .collect();
+    let mut t = 0.0;
+    while t < 10.0 {
+        let (x, y) = (r.pose.x_m + t * a.cos(), r.pose.y_m + t * a.sin());
+        if x < 0.0 || y < 0.0 || x >= g.cols as f64 * res || y >= g.rows as f64 * res {
+            return 10.0;
+        }
+        let (c, row) = ((x / res) as usize, g.rows - 1 - (y / res) as usize);
+        let inside = |q: &Rect| {
+            let (dx, dy) = (x - q.centre.0, y - q.centre.1);
+            (dx * q.u.0 + dy * q.u.1).abs() <= q.half_length
+                && (-dx * q.u.1 + dy * q.u.0).abs() <= q.half_width
+        };
+        if g.get(row, c) || others.iter().any(inside) {
+            return t;
+        }
+        t += 1e-4;
+    }
+    10.0
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    #[test]
+    fn the_fast_ray_caster_agrees_with_the_reference(seed in 0u64..1000) {
+        let mut choices = ChoiceSource::stream(seed, "test");
+        let occupied: Vec<(usize, usize)> = (0..300).map(|_| (choices.index(120), choices.index(120))).collect();
+        let agent = robot(0, choices.uniform(1.0, 11.0), choices.uniform(1.0, 11.0), choices.uniform(-3.0, 3.0));
+        let peer = robot(1, choices.uniform(1.0, 11.0), choices.uniform(1.0, 11.0), choices.uniform(-3.0, 3.0));
+        let mut w = world(120, &occupied, vec![agent, peer]);
+        // Unrounded ranges: compare before quantisation.
+        w.spec.laser.range_step_m = 0.0;
+        let scan = w.scan(0);
+        for (k, b) in w.bearings.clone().iter().enumerate().step_by(9) {
+            let reference = reference_range(&w, 0, *b);
+            prop_assert!((scan[k] - reference).abs() <= 2e-4, "beam {}: {} vs {}", k, scan[k], reference);
+        }
+    }
+}
+
+#[test]
+fn same_situation_and_commands_give_identical_trajectories() {
+    let run = || {
+        let spec =
+            crate::spec::from_toml_str("[terrain]\npreset = \"caves\"\n[mission]\npeers_min = 3\n")
+                .unwrap();
+        let (s, _) = crate::situation::generate(&spec, 12).unwrap();
+        let sim = SimSpec {
+            laser: LaserSpec {
+                noise_sd_m: 0.02,
+                ..LaserSpec::default()
+            },
+            ..SimSpec::default()
+        };
+        let mut w = World::new(&s, sim, 7).unwrap();
+        let mut trace = Vec::new();
+        for k in 0..300 {
+            let commands: Vec<(u32, f64, f64)> = w
+                .robots()
+                .iter()
+                .map(|r| (r.id, 0.6, ((k + r.id as usize) % 7) as f64 * 0.1 - 0.3))
+                .collect();
+            let scan = w.observe(0).unwrap().ranges;
+            w.step(&commands).unwrap();
+            for r in w.robots() {
+                trace.extend([
+                    r.pose.x_m.to_bits(),
+                    r.pose.y_m.to_bits(),
+                    r.pose.heading_rad.to_bits(),
+                ]);
+            }
+            trace.extend(scan.iter().map(|v| v.to_bits()));
+        }
+        trace
+    };
+    assert_eq!(run(), run());
+}
+
+#[test]
+fn bad_commands_are_errors_that_change_nothing() {
+    let mut w = world(100, &[], vec![robot(0, 2.0, 5.0, 0.0)]);
+    assert!(w
+        .step(&[(3, 0.1, 0.0)])
+        .unwrap_err()
+        .starts_with("no robot 3"));
+    assert!(w
+        .step(&[(0, f64::NAN, 0.0)])
+        .unwrap_err()
+        .contains("not finite"));
+    assert_eq!(w.steps(), 0);
+}
