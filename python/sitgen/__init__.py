@@ -6,6 +6,7 @@ Public API (see ARCHITECTURE.md for the pipeline):
 - :func:`generate_situation` — a complete :class:`Situation` (map, robots, routes);
 - :func:`load_map` — a :class:`Grid` from ROS YAML, PNG/PGM, MovingAI ``.map`` or BARN ``.npy``;
 - :func:`shortest_path` — A* with the MovingAI movement rules;
+- :class:`World` — the simulator: ``observe``, ``step``, ``state``;
 - :func:`perlin` — Ken Perlin's improved noise, bit for bit the 2002 reference;
 - :class:`Grid` — an occupancy map with its resolution, size and coverage;
 - :exc:`SpecError`, :exc:`GenerationFailed` — what bad specs and failed generation raise.
@@ -14,17 +15,20 @@ Public API (see ARCHITECTURE.md for the pipeline):
 from sitgen._core import GenerationFailed, SpecError, __version__, perlin
 from sitgen.config import load_spec, preset_names
 from sitgen.maps import load_map, shortest_path
+from sitgen.sim import Observation, World
 from sitgen.situation import Pose, Robot, Situation, generate_situation
 from sitgen.terrain import Grid, Stage, generate_terrain
 
 __all__ = [
     "GenerationFailed",
     "Grid",
+    "Observation",
     "Pose",
     "Robot",
     "Situation",
     "SpecError",
     "Stage",
+    "World",
     "__version__",
     "generate_situation",
     "generate_terrain",

@@ -3,6 +3,7 @@
 
 mod interchange;
 mod mission;
+mod sim;
 mod situation;
 mod spec;
 mod terrain;
@@ -32,5 +33,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     interchange::register(m)?;
     mission::register(m)?;
     situation::register(m)?;
+    sim::register(m)?;
     Ok(())
 }
