@@ -63,6 +63,28 @@ def measure(run: Callable[[int], object], repeats: int) -> dict[str, float]:
     }
 
 
+def bench_reference_scene(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """Steps per second on the reference scene: 40 × 40 m caves at 0.1 m, the agent scanning
+    its 181-beam laser every step, five peers; one core (the simulator is single-threaded)."""
+    spec = {"terrain": {"preset": "caves"}, "mission": {"peers_min": 5, "peers_max": 5}}
+    situation = sitgen.generate_situation(spec, seed=1)
+    steps = 20_000
+
+    def run(_: int) -> None:
+        world = sitgen.World(situation)
+        world.step({r.id: (0.5, 0.15 * (r.id % 3 - 1)) for r in situation.robots})
+        world.advance(steps)
+
+    m = measure(run, repeats=5)
+    steps_per_s = steps / m["median_s"]
+    rows.append((f"simulator reference scene: {steps} steps", m))
+    print(
+        f"simulator: {steps_per_s:,.0f} steps/s, {steps_per_s * 0.1:,.0f}x real time "
+        f"(spread {steps / m['max_s']:,.0f}-{steps / m['min_s']:,.0f} steps/s)"
+    )
+    return {"steps": steps, "steps_per_s": steps_per_s, "real_time_factor": steps_per_s * 0.1, **m}
+
+
 def machine() -> dict[str, Any]:
     return {
         "cpu": platform.processor() or platform.machine(),
@@ -101,6 +123,8 @@ def main() -> None:
         m = measure(situation, repeats=9)
         rows.append((f"situation {name} (terrain + robots + routes)", m))
         results.setdefault("situation", {})[f"preset_{name}"] = m
+
+    results["sim"] = bench_reference_scene(rows)
 
     scen = SHARED / "movingai" / "scenarios" / (ASTAR_MAP + ".scen")
     if scen.is_file():

@@ -116,17 +116,26 @@ pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f
     let res = map.resolution_m;
     let (cols, rows) = (g.cols as i64, g.rows as i64);
     // Column index from x, and row-from-the-bottom index from y.
-    let (mut cu, mut cw) = ((ox / res).floor() as i64, (oy / res).floor() as i64);
-    let occupied = |cu: i64, cw: i64| g.cells[((rows - 1 - cw) * cols + cu) as usize];
-    let inside = |cu: i64, cw: i64| cu >= 0 && cw >= 0 && cu < cols && cw < rows;
-    if !inside(cu, cw) {
+    let (cu, cw) = ((ox / res).floor() as i64, (oy / res).floor() as i64);
+    if cu < 0 || cw < 0 || cu >= cols || cw >= rows {
         return max;
     }
-    if occupied(cu, cw) {
+    // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols (row 0
+    // is the top); the cells left to each edge bound the walk.
+    let mut index = ((rows - 1 - cw) * cols + cu) as usize;
+    if g.cells[index] {
         return 0.0;
     }
-    let step_u = if dx > 0.0 { 1 } else { -1 };
-    let step_w = if dy > 0.0 { 1 } else { -1 };
+    let (step_u, mut left_u) = if dx > 0.0 {
+        (1isize, cols - 1 - cu)
+    } else {
+        (-1, cu)
+    };
+    let (step_w, mut left_w) = if dy > 0.0 {
+        (-(cols as isize), rows - 1 - cw)
+    } else {
+        (cols as isize, cw)
+    };
     let delta_u = if dx != 0.0 {
         res / dx.abs()
     } else {
@@ -137,39 +146,39 @@ pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f
     } else {
         f64::INFINITY
     };
-    let boundary = |o: f64, c: i64, step: i64| {
-        if step > 0 {
-            (c + 1) as f64 * res - o
-        } else {
-            o - c as f64 * res
-        }
+    let mut t_u = match dx {
+        d if d > 0.0 => ((cu + 1) as f64 * res - ox) / d,
+        d if d < 0.0 => (ox - cu as f64 * res) / -d,
+        _ => f64::INFINITY,
     };
-    let mut t_u = if dx != 0.0 {
-        boundary(ox, cu, step_u) / dx.abs()
-    } else {
-        f64::INFINITY
-    };
-    let mut t_w = if dy != 0.0 {
-        boundary(oy, cw, step_w) / dy.abs()
-    } else {
-        f64::INFINITY
+    let mut t_w = match dy {
+        d if d > 0.0 => ((cw + 1) as f64 * res - oy) / d,
+        d if d < 0.0 => (oy - cw as f64 * res) / -d,
+        _ => f64::INFINITY,
     };
     loop {
-        let t = if t_u < t_w {
-            cu += step_u;
-            let t = t_u;
+        let t;
+        if t_u < t_w {
+            if left_u == 0 {
+                return max;
+            }
+            left_u -= 1;
+            index = index.wrapping_add_signed(step_u);
+            t = t_u;
             t_u += delta_u;
-            t
         } else {
-            cw += step_w;
-            let t = t_w;
+            if left_w == 0 {
+                return max;
+            }
+            left_w -= 1;
+            index = index.wrapping_add_signed(step_w);
+            t = t_w;
             t_w += delta_w;
-            t
-        };
-        if t >= max || !inside(cu, cw) {
+        }
+        if t >= max {
             return max;
         }
-        if occupied(cu, cw) {
+        if g.cells[index] {
             return t;
         }
     }

@@ -182,6 +182,9 @@ pub struct World {
     clearance_m: Vec<f32>,
     robots: Vec<RobotState>,
     bearings: Vec<f64>,
+    /// (cos, sin) of each bearing: a beam's direction is the heading's rotation of these, which
+    /// spares a sine and a cosine per beam per scan.
+    bearing_dirs: Vec<(f64, f64)>,
     time_s: f64,
     steps: u64,
     seed: u64,
@@ -250,12 +253,14 @@ impl World {
             })
             .collect();
         let bearings = spec.laser.bearings();
+        let bearing_dirs = bearings.iter().map(|b| (b.cos(), b.sin())).collect();
         Ok(Self {
             spec,
             map,
             clearance_m,
             robots,
             bearings,
+            bearing_dirs,
             time_s: 0.0,
             steps: 0,
             seed,
@@ -423,12 +428,18 @@ impl World {
             me.pose.x_m + c * laser.offset_x_m,
             me.pose.y_m + s * laser.offset_x_m,
         );
-        let others: Vec<Rect> = self
+        // Other robots with their enclosing circle relative to the sensor, to skip beams that
+        // pass wide of them before the exact slab test.
+        let others: Vec<(Rect, (f64, f64), f64)> = self
             .robots
             .iter()
             .enumerate()
             .filter(|(j, _)| *j != i)
-            .map(|(_, r)| r.footprint())
+            .map(|(_, r)| {
+                let rect = r.footprint();
+                let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
+                (rect, to, rect.half_length.hypot(rect.half_width))
+            })
             .collect();
         // Noise is drawn from a stream keyed by (seed, step, robot), so observing twice gives
         // the same scan and the thread count never matters.
@@ -438,13 +449,17 @@ impl World {
                 stream::SENSOR_NOISE,
             )
         });
-        self.bearings
+        self.bearing_dirs
             .iter()
-            .map(|b| {
-                let a = me.pose.heading_rad + b;
-                let dir = (a.cos(), a.sin());
+            .map(|&(cb, sb)| {
+                let dir = (c * cb - s * sb, s * cb + c * sb);
                 let mut t = ray_to_grid(&self.map, origin, dir, laser.range_m);
-                for rect in &others {
+                for (rect, to, radius) in &others {
+                    let along = to.0 * dir.0 + to.1 * dir.1;
+                    let across = to.0 * dir.1 - to.1 * dir.0;
+                    if across.abs() > *radius || along + radius < 0.0 || along - radius > t {
+                        continue;
+                    }
                     if let Some(hit) = ray_to_rect(rect, origin, dir, t) {
                         t = hit;
                     }
