@@ -30,6 +30,8 @@ app = typer.Typer(
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 1
+DEFAULT_PRESET = "rocky_desert"
+"""The preset used when a command gets neither a spec nor --preset."""
 
 SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")]
 
@@ -87,7 +89,7 @@ def terrain(
     """Generate a terrain map: write the image and a ROS map_server YAML beside it."""
     if output.suffix.lower() not in (".png", ".pgm"):
         raise UsageError(f"--output: {output} must end in .png or .pgm")
-    grid = generate_terrain(_spec_or_preset(spec, preset, "rocky_desert"), seed=seed)
+    grid = generate_terrain(_spec_or_preset(spec, preset), seed=seed)
     output.parent.mkdir(parents=True, exist_ok=True)
     yaml = grid.save(output)
     if as_json:
@@ -97,12 +99,12 @@ def terrain(
         typer.echo(f"wrote {output} and {yaml}")
 
 
-def _spec_or_preset(spec: Path | None, preset: str | None, default: str) -> Path | dict[str, Any]:
+def _spec_or_preset(spec: Path | None, preset: str | None) -> Path | dict[str, Any]:
     if spec is not None and preset is not None:
         raise UsageError(
             "give a SPEC file or --preset, not both (a spec names its preset in terrain.preset)"
         )
-    return spec if spec is not None else preset_spec(preset or default)
+    return spec if spec is not None else preset_spec(preset or DEFAULT_PRESET)
 
 
 @app.command()
@@ -119,7 +121,7 @@ def generate(
     ] = Path("situation.json"),
 ) -> None:
     """Generate a situation: terrain, robots and routes, as JSON."""
-    situation = generate_situation(_spec_or_preset(spec, preset, "rocky_desert"), seed=seed)
+    situation = generate_situation(_spec_or_preset(spec, preset), seed=seed)
     output.parent.mkdir(parents=True, exist_ok=True)
     situation.save(output)
     agent = situation.agent
