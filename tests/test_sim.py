@@ -36,6 +36,8 @@ def test_observe_step_and_state_from_python() -> None:
     assert [r["role"] for r in state] == ["agent", "peer", "peer"]
     assert state[0]["command"] == (0.3, 0.0)
     assert world.observe(1).ranges.size == 0
+    for track in world.observe(0).tracks:
+        assert track["id"] in (1, 2) and len(track["position"]) == 2
 
 
 def test_the_same_inputs_give_the_same_trajectory() -> None:

@@ -37,6 +37,9 @@ class Observation:
     """Whether the last move was blocked."""
     time: float
     """Simulated time, seconds."""
+    tracks: tuple[dict[str, Any], ...] = ()
+    """The other robots the laser sees now: ``id``, ``position`` (x, y), ``velocity``
+    (vx, vy) in the world frame; standing in for a perception module."""
 
 
 class World:
@@ -70,6 +73,7 @@ class World:
     def observe(self, robot_id: int) -> Observation:
         """What robot ``robot_id`` senses now."""
         o = self._world.observe(robot_id)
+        o["tracks"] = tuple(o["tracks"])
         return Observation(**o)
 
     def step(self, commands: Mapping[int, tuple[float, float]] | None = None) -> None:

@@ -74,7 +74,8 @@ impl PyWorld {
         .map_err(PyValueError::new_err)
     }
 
-    /// What robot `robot_id` senses: ranges and angles (numpy), pose, velocity, stalled, time.
+    /// What robot `robot_id` senses: ranges and angles (numpy), pose, velocity, stalled, time,
+    /// tracks (the robots its laser sees: id, position, velocity).
     fn observe<'py>(&self, py: Python<'py>, robot_id: u32) -> PyResult<Bound<'py, PyDict>> {
         let o = self
             .world
@@ -87,6 +88,15 @@ impl PyWorld {
         out.set_item("velocity", o.velocity)?;
         out.set_item("stalled", o.stalled)?;
         out.set_item("time", o.time_s)?;
+        let tracks = PyList::empty(py);
+        for t in &o.tracks {
+            let d = PyDict::new(py);
+            d.set_item("id", t.id)?;
+            d.set_item("position", t.position)?;
+            d.set_item("velocity", t.velocity)?;
+            tracks.append(d)?;
+        }
+        out.set_item("tracks", tracks)?;
         Ok(out)
     }
 

@@ -154,6 +154,17 @@ impl RobotState {
     }
 }
 
+/// Another robot as a perception module would report it: what the laser sees right now.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Track {
+    /// Its id.
+    pub id: u32,
+    /// Position of its rotation centre (x, y), metres.
+    pub position: (f64, f64),
+    /// Its velocity in the world frame (vx, vy), m/s.
+    pub velocity: (f64, f64),
+}
+
 /// What a robot senses.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Observation {
@@ -169,6 +180,8 @@ pub struct Observation {
     pub stalled: bool,
     /// Simulated time, seconds.
     pub time_s: f64,
+    /// The other robots that at least one beam hits first, in id order (empty without a laser).
+    pub tracks: Vec<Track>,
 }
 
 /// A running world.
@@ -404,10 +417,24 @@ impl World {
             .robots
             .get(id as usize)
             .ok_or_else(|| format!("no robot {id}: the world has {}", self.robots.len()))?;
-        let (ranges, angles) = if r.role == Role::Agent {
-            (self.scan(id as usize), self.bearings.clone())
+        let (ranges, angles, tracks) = if r.role == Role::Agent {
+            let (ranges, seen) = self.scan_seeing(id as usize);
+            let tracks = self
+                .robots
+                .iter()
+                .filter(|o| seen.contains(&o.id))
+                .map(|o| {
+                    let (s, c) = o.pose.heading_rad.sin_cos();
+                    Track {
+                        id: o.id,
+                        position: (o.pose.x_m, o.pose.y_m),
+                        velocity: (o.velocity.0 * c, o.velocity.0 * s),
+                    }
+                })
+                .collect();
+            (ranges, self.bearings.clone(), tracks)
         } else {
-            (Vec::new(), Vec::new())
+            (Vec::new(), Vec::new(), Vec::new())
         };
         Ok(Observation {
             ranges,
@@ -416,11 +443,17 @@ impl World {
             velocity: r.velocity,
             stalled: r.stalled,
             time_s: self.time_s,
+            tracks,
         })
     }
 
     /// One laser scan of robot `i` from its current pose.
     pub fn scan(&self, i: usize) -> Vec<f64> {
+        self.scan_seeing(i).0
+    }
+
+    /// One laser scan, and the ids of the robots that some beam hits first.
+    pub fn scan_seeing(&self, i: usize) -> (Vec<f64>, Vec<u32>) {
         let laser = &self.spec.laser;
         let me = &self.robots[i];
         let (s, c) = me.pose.heading_rad.sin_cos();
@@ -430,7 +463,7 @@ impl World {
         );
         // Other robots with their enclosing circle relative to the sensor, to skip beams that
         // pass wide of them before the exact slab test.
-        let others: Vec<(Rect, (f64, f64), f64)> = self
+        let others: Vec<(u32, Rect, (f64, f64), f64)> = self
             .robots
             .iter()
             .enumerate()
@@ -438,9 +471,10 @@ impl World {
             .map(|(_, r)| {
                 let rect = r.footprint();
                 let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
-                (rect, to, rect.half_length.hypot(rect.half_width))
+                (r.id, rect, to, rect.half_length.hypot(rect.half_width))
             })
             .collect();
+        let mut seen = Vec::new();
         // Noise is drawn from a stream keyed by (seed, step, robot), so observing twice gives
         // the same scan and the thread count never matters.
         let mut noise = (laser.noise_sd_m > 0.0).then(|| {
@@ -449,12 +483,14 @@ impl World {
                 stream::SENSOR_NOISE,
             )
         });
-        self.bearing_dirs
+        let ranges = self
+            .bearing_dirs
             .iter()
             .map(|&(cb, sb)| {
                 let dir = (c * cb - s * sb, s * cb + c * sb);
                 let mut t = ray_to_grid(&self.map, origin, dir, laser.range_m);
-                for (rect, to, radius) in &others {
+                let mut hit_robot = None;
+                for (id, rect, to, radius) in &others {
                     let along = to.0 * dir.0 + to.1 * dir.1;
                     let across = to.0 * dir.1 - to.1 * dir.0;
                     if across.abs() > *radius || along + radius < 0.0 || along - radius > t {
@@ -462,6 +498,12 @@ impl World {
                     }
                     if let Some(hit) = ray_to_rect(rect, origin, dir, t) {
                         t = hit;
+                        hit_robot = Some(*id);
+                    }
+                }
+                if let Some(id) = hit_robot {
+                    if !seen.contains(&id) {
+                        seen.push(id);
                     }
                 }
                 if let (Some(noise), true) = (noise.as_mut(), t < laser.range_m) {
@@ -469,7 +511,8 @@ impl World {
                 }
                 laser.quantise(t)
             })
-            .collect()
+            .collect();
+        (ranges, seen)
     }
 }
 

@@ -348,3 +348,31 @@ fn bad_commands_are_errors_that_change_nothing() {
         .contains("not finite"));
     assert_eq!(w.steps(), 0);
 }
+
+#[test]
+fn tracks_are_the_robots_the_laser_sees_now() {
+    // Peer 1 ahead in the open, peer 2 behind the agent (outside the 180° view), peer 3 ahead
+    // but behind a wall at x ∈ [5.0, 5.1] m, y ∈ [4, 10] m.
+    let wall: Vec<(usize, usize)> = (100..160).map(|r| (r, 50)).collect();
+    let mut w = world(
+        200,
+        &wall,
+        vec![
+            robot(0, 3.0, 3.0, 0.0),
+            robot(1, 6.0, 3.0, 0.0),
+            robot(2, 1.0, 3.0, 0.0),
+            robot(3, 7.0, 6.0, 0.0),
+        ],
+    );
+    w.step(&[(1, 0.5, 0.0)]).unwrap();
+    let o = w.observe(0).unwrap();
+    let ids: Vec<u32> = o.tracks.iter().map(|t| t.id).collect();
+    assert_eq!(ids, vec![1]);
+    let t = o.tracks[0];
+    assert!((t.velocity.0 - 0.5).abs() < 1e-12 && t.velocity.1.abs() < 1e-12);
+    assert!((t.position.0 - 6.05).abs() < 1e-9);
+    assert!(
+        w.observe(1).unwrap().tracks.is_empty(),
+        "peers carry no laser"
+    );
+}
