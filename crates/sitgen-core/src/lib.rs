@@ -9,6 +9,7 @@
 //! [`rng`] (named seed streams, recordable choices), [`grid`] (scalar fields and occupancy
 //! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out).
 
+pub mod control;
 pub mod geometry;
 pub mod grid;
 pub mod interchange;

@@ -1,0 +1,78 @@
+//! Controllers: what drives each robot. A controller sees only an [`Observation`] (its laser,
+//! own pose and velocity, stall flag, time, and the robots its laser sees) plus its own route,
+//! given at reset; it returns a command (v m/s, ω rad/s). It never sees the map.
+//!
+//! Built in so far: `straight` (the peers'). The agent's controllers (`snd_follow`, `follow`,
+//! `vo`, `dwa`) and user controllers come next.
+
+pub mod route;
+mod straight;
+
+use std::collections::BTreeMap;
+
+pub use straight::Straight;
+
+use crate::mission::ControllerSpec;
+use crate::sim::Observation;
+use crate::situation::Robot;
+use crate::spec::{join, SpecError};
+
+/// A velocity command: (v m/s, ω rad/s).
+pub type Command = (f64, f64);
+
+/// What every controller implements.
+pub trait Controller: Send {
+    /// Start a run as `robot` (its route, body and behaviour at the end of the route).
+    fn reset(&mut self, robot: &Robot);
+    /// The command for this step.
+    fn act(&mut self, obs: &Observation) -> Command;
+}
+
+/// Names of the built-in controllers.
+pub const BUILT_IN: &[&str] = &["straight"];
+
+/// The built-in controller a spec names; `path` names the spec in errors.
+pub fn build(spec: &ControllerSpec, path: &str) -> Result<Box<dyn Controller>, SpecError> {
+    let params_path = join(path, "params");
+    match spec.name.as_str() {
+        "straight" => Ok(Box::new(Straight::from_params(&spec.params, &params_path)?)),
+        other => Err(SpecError::new(
+            join(path, "name"),
+            format!(
+                "unknown controller `{other}`; built in: {}",
+                BUILT_IN.join(", ")
+            ),
+        )),
+    }
+}
+
+/// Reject parameters a controller does not have.
+fn check_known(
+    params: &BTreeMap<String, f64>,
+    known: &[&str],
+    path: &str,
+) -> Result<(), SpecError> {
+    match params.keys().find(|k| !known.contains(&k.as_str())) {
+        Some(k) => Err(SpecError::new(
+            join(path, k),
+            format!("unknown parameter; expected one of {}", known.join(", ")),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Parameter `name` in (0, hi], or `default`.
+fn param(
+    params: &BTreeMap<String, f64>,
+    path: &str,
+    name: &str,
+    default: f64,
+    hi: f64,
+) -> Result<f64, SpecError> {
+    let value = params.get(name).copied().unwrap_or(default);
+    SpecError::check_positive(&join(path, name), value, hi)?;
+    Ok(value)
+}
+
+#[cfg(test)]
+mod tests;

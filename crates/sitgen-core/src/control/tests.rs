@@ -1,0 +1,112 @@
+use super::*;
+use crate::sim::{SimSpec, World};
+use crate::situation::{self, Role};
+use crate::spec::from_toml_str;
+
+/// Run every robot with its built controller for `steps`, returning the world.
+fn drive(spec_text: &str, seed: u64, steps: usize) -> (World, Vec<Box<dyn Controller>>) {
+    let spec = from_toml_str(spec_text).unwrap();
+    let (s, _) = situation::generate(&spec, seed).unwrap();
+    let mut world = World::new(&s, SimSpec::default(), 0).unwrap();
+    let mut controllers: Vec<Box<dyn Controller>> = s
+        .robots
+        .iter()
+        .map(|r| {
+            let mut c = build(
+                &ControllerSpec {
+                    name: "straight".into(),
+                    params: Default::default(),
+                },
+                "c",
+            )
+            .unwrap();
+            c.reset(r);
+            c
+        })
+        .collect();
+    for _ in 0..steps {
+        let commands: Vec<(u32, f64, f64)> = controllers
+            .iter_mut()
+            .enumerate()
+            .map(|(i, c)| {
+                let (v, w) = c.act(&world.observe(i as u32).unwrap());
+                (i as u32, v, w)
+            })
+            .collect();
+        world.step(&commands).unwrap();
+    }
+    (world, controllers)
+}
+
+#[test]
+fn straight_peers_drive_their_clear_routes_to_the_end_and_stop() {
+    let text = "[terrain]\npreset = \"open_field\"\n[mission]\npeers_min = 3\npeers_max = 3\npeer_at_end = \"stop\"\n";
+    let spec = from_toml_str(text).unwrap();
+    let (s, _) = situation::generate(&spec, 4).unwrap();
+    let (world, _) = drive(text, 4, 3000);
+    for (r, state) in s
+        .robots
+        .iter()
+        .zip(world.robots())
+        .filter(|(r, _)| r.role == Role::Peer)
+    {
+        let last = r.waypoints.last().unwrap();
+        let d = (state.pose.x_m - last[0]).hypot(state.pose.y_m - last[1]);
+        assert!(
+            d <= 0.3 + 1e-9,
+            "peer {} ended {d} m from its last waypoint",
+            r.id
+        );
+        assert_eq!(state.command, (0.0, 0.0), "peer {} stopped", r.id);
+    }
+}
+
+#[test]
+fn unknown_controllers_and_parameters_are_named() {
+    let e = build(
+        &ControllerSpec {
+            name: "teleport".into(),
+            params: Default::default(),
+        },
+        "mission.agent_controller",
+    )
+    .err()
+    .unwrap();
+    assert!(e
+        .to_string()
+        .starts_with("mission.agent_controller.name: unknown controller `teleport`"));
+    let params = [("speed".to_string(), 1.0)].into_iter().collect();
+    let e = build(
+        &ControllerSpec {
+            name: "straight".into(),
+            params,
+        },
+        "c",
+    )
+    .err()
+    .unwrap();
+    assert!(e
+        .to_string()
+        .starts_with("c.params.speed: unknown parameter"));
+    let params = [("speed_m_s".to_string(), -1.0)].into_iter().collect();
+    let e = build(
+        &ControllerSpec {
+            name: "straight".into(),
+            params,
+        },
+        "c",
+    )
+    .err()
+    .unwrap();
+    assert_eq!(e.to_string(), "c.params.speed_m_s: -1 is not in (0, 10]");
+}
+
+#[test]
+fn straight_never_reverses() {
+    let (world, _) = drive(
+        "[terrain]\npreset = \"caves\"\n[mission]\npeers_min = 5\npeers_max = 5\n",
+        2,
+        400,
+    );
+    assert!(world.robots().iter().all(|r| r.command.0 >= 0.0));
+}
