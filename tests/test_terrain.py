@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +57,6 @@ def test_a_spec_can_be_a_path_toml_text_or_a_dict(tmp_path: Path) -> None:
     assert g.occupied.shape == (90, 120)
     assert g.size_m == pytest.approx((12.0, 9.0))
     assert g.resolution == 0.1
-    assert g.coverage == pytest.approx(g.occupied.mean())
 
 
 @pytest.mark.parametrize("name", sitgen.preset_names())
@@ -178,4 +176,3 @@ def test_keep_largest_free_region_leaves_one_region() -> None:
                         seen[nr, nc] = True
                         stack.append((nr, nc))
     assert regions == 1
-    assert math.isclose(grid.coverage, float(grid.occupied.mean()))

@@ -1,11 +1,11 @@
-//! Bindings of `sitgen_core::situation` and `sitgen_core::interchange::stage`.
+//! Bindings of `sitgen_core::situation` and its exports (`interchange::{stage, ros}`).
 
 use std::path::PathBuf;
 
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
-use sitgen_core::interchange::stage;
+use sitgen_core::interchange::{ros, stage};
 use sitgen_core::situation::{self, Situation};
 
 use crate::{spec::parse, GenerationFailed, SpecError};
@@ -57,7 +57,7 @@ fn export_stage(json: &str, dir: PathBuf) -> PyResult<Vec<PathBuf>> {
 /// Write the situation's map as ROS map_server files into `dir`; returns the files written.
 #[pyfunction]
 fn export_ros(json: &str, dir: PathBuf) -> PyResult<Vec<PathBuf>> {
-    stage::write_ros(&read(json)?, &dir).map_err(PyOSError::new_err)
+    ros::write_ros(&read(json)?, &dir).map_err(PyOSError::new_err)
 }
 
 /// The JSON Schema of a situation file.

@@ -61,44 +61,26 @@ fn straight_peers_drive_their_clear_routes_to_the_end_and_stop() {
     }
 }
 
+/// The error building controller `name` with `params` gives, as text.
+fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> String {
+    let spec = ControllerSpec {
+        name: name.into(),
+        params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
+    };
+    build(&spec, path)
+        .err()
+        .expect("the spec is bad")
+        .to_string()
+}
+
 #[test]
 fn unknown_controllers_and_parameters_are_named() {
-    let e = build(
-        &ControllerSpec {
-            name: "teleport".into(),
-            params: Default::default(),
-        },
-        "mission.agent_controller",
-    )
-    .err()
-    .unwrap();
-    assert!(e
-        .to_string()
-        .starts_with("mission.agent_controller.name: unknown controller `teleport`"));
-    let params = [("speed".to_string(), 1.0)].into_iter().collect();
-    let e = build(
-        &ControllerSpec {
-            name: "straight".into(),
-            params,
-        },
-        "c",
-    )
-    .err()
-    .unwrap();
-    assert!(e
-        .to_string()
-        .starts_with("c.params.speed: unknown parameter"));
-    let params = [("speed_m_s".to_string(), -1.0)].into_iter().collect();
-    let e = build(
-        &ControllerSpec {
-            name: "straight".into(),
-            params,
-        },
-        "c",
-    )
-    .err()
-    .unwrap();
-    assert_eq!(e.to_string(), "c.params.speed_m_s: -1 is not in (0, 10]");
+    let e = build_error("teleport", &[], "mission.agent_controller");
+    assert!(e.starts_with("mission.agent_controller.name: unknown controller `teleport`"));
+    let e = build_error("straight", &[("speed", 1.0)], "c");
+    assert!(e.starts_with("c.params.speed: unknown parameter"));
+    let e = build_error("straight", &[("speed_m_s", -1.0)], "c");
+    assert_eq!(e, "c.params.speed_m_s: -1 is not in (0, 10]");
 }
 
 #[test]

@@ -143,17 +143,6 @@ pub fn write_stage(situation: &Situation, dir: &Path) -> Result<Vec<PathBuf>, St
     Ok(vec![world, include, bitmap])
 }
 
-/// Write the map as a ROS map_server PGM and YAML (`map.pgm`, `map.yaml`) into `dir`.
-pub fn write_ros(situation: &Situation, dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let map = situation.map.decode().map_err(|e| e.to_string())?;
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-    let image = dir.join("map.pgm");
-    let yaml = dir.join("map.yaml");
-    write_image(&map.grid, &image)?;
-    super::ros::write_map_yaml(&map, &yaml, &image)?;
-    Ok(vec![yaml, image])
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

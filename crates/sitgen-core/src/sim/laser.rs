@@ -146,16 +146,8 @@ pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f
     } else {
         f64::INFINITY
     };
-    let mut t_u = match dx {
-        d if d > 0.0 => ((cu + 1) as f64 * res - ox) / d,
-        d if d < 0.0 => (ox - cu as f64 * res) / -d,
-        _ => f64::INFINITY,
-    };
-    let mut t_w = match dy {
-        d if d > 0.0 => ((cw + 1) as f64 * res - oy) / d,
-        d if d < 0.0 => (oy - cw as f64 * res) / -d,
-        _ => f64::INFINITY,
-    };
+    let mut t_u = first_crossing(ox, cu, dx, res);
+    let mut t_w = first_crossing(oy, cw, dy, res);
     loop {
         let t;
         if t_u < t_w {
@@ -181,6 +173,19 @@ pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f
         if g.cells[index] {
             return t;
         }
+    }
+}
+
+/// Distance along a ray (coordinate `o`, direction component `d`) from inside cell `cell` to
+/// the first cell boundary it crosses on that axis; infinite when it never does.
+#[inline]
+fn first_crossing(o: f64, cell: i64, d: f64, res: f64) -> f64 {
+    if d > 0.0 {
+        ((cell + 1) as f64 * res - o) / d
+    } else if d < 0.0 {
+        (o - cell as f64 * res) / -d
+    } else {
+        f64::INFINITY
     }
 }
 
