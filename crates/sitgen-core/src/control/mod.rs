@@ -75,4 +75,4 @@ fn param(
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -1,30 +1,35 @@
 use super::*;
 use crate::sim::{SimSpec, World};
-use crate::situation::{self, Role};
+use crate::situation::{self, Role, Situation};
 use crate::spec::from_toml_str;
 
-/// Run every robot with its built controller for `steps`, returning the world.
-fn drive(spec_text: &str, seed: u64, steps: usize) -> (World, Vec<Box<dyn Controller>>) {
-    let spec = from_toml_str(spec_text).unwrap();
-    let (s, _) = situation::generate(&spec, seed).unwrap();
-    let mut world = World::new(&s, SimSpec::default(), 0).unwrap();
+/// Run situation `s`: the agent with `agent`, every peer with its own controller, for at most
+/// `max_steps` steps or until `done(world)`; returns the world. Shared by every controller's tests.
+pub(crate) fn run_situation(
+    s: &Situation,
+    agent: &ControllerSpec,
+    max_steps: usize,
+    mut done: impl FnMut(&World) -> bool,
+) -> World {
+    let mut world = World::new(s, SimSpec::default(), 0).unwrap();
     let mut controllers: Vec<Box<dyn Controller>> = s
         .robots
         .iter()
         .map(|r| {
-            let mut c = build(
-                &ControllerSpec {
-                    name: "straight".into(),
-                    params: Default::default(),
-                },
-                "c",
-            )
-            .unwrap();
+            let spec = if r.role == Role::Agent {
+                agent
+            } else {
+                &r.controller
+            };
+            let mut c = build(spec, "c").unwrap();
             c.reset(r);
             c
         })
         .collect();
-    for _ in 0..steps {
+    for _ in 0..max_steps {
+        if done(&world) {
+            break;
+        }
         let commands: Vec<(u32, f64, f64)> = controllers
             .iter_mut()
             .enumerate()
@@ -35,7 +40,18 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> (World, Vec<Box<dyn Contro
             .collect();
         world.step(&commands).unwrap();
     }
-    (world, controllers)
+    world
+}
+
+/// Generate the situation `spec_text` describes with `seed` and run every robot with `straight`.
+fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
+    let spec = from_toml_str(spec_text).unwrap();
+    let (s, _) = situation::generate(&spec, seed).unwrap();
+    let straight = ControllerSpec {
+        name: "straight".into(),
+        params: Default::default(),
+    };
+    run_situation(&s, &straight, steps, |_| false)
 }
 
 #[test]
@@ -43,7 +59,7 @@ fn straight_peers_drive_their_clear_routes_to_the_end_and_stop() {
     let text = "[terrain]\npreset = \"open_field\"\n[mission]\npeers_min = 3\npeers_max = 3\npeer_at_end = \"stop\"\n";
     let spec = from_toml_str(text).unwrap();
     let (s, _) = situation::generate(&spec, 4).unwrap();
-    let (world, _) = drive(text, 4, 3000);
+    let world = drive(text, 4, 3000);
     for (r, state) in s
         .robots
         .iter()
@@ -85,7 +101,7 @@ fn unknown_controllers_and_parameters_are_named() {
 
 #[test]
 fn straight_never_reverses() {
-    let (world, _) = drive(
+    let world = drive(
         "[terrain]\npreset = \"caves\"\n[mission]\npeers_min = 5\npeers_max = 5\n",
         2,
         400,
