@@ -7,14 +7,20 @@
 //!
 //! Pipeline stages, one module each: [`spec`] (situation spec, TOML, presets, validation),
 //! [`rng`] (named seed streams, recordable choices), [`grid`] (scalar fields and occupancy
-//! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out).
+//! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out),
+//! [`mission`] (placement and routes), [`situation`] (the situation file), [`sim`] (the
+//! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties), and
+//! [`run`] (one situation driven to its end).
 
 pub mod control;
 pub mod geometry;
 pub mod grid;
 pub mod interchange;
 pub mod mission;
+pub mod monitor;
 pub mod rng;
+pub mod run;
+pub mod scoring;
 pub mod sim;
 pub mod situation;
 pub mod spec;

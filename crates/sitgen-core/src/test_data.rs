@@ -1,7 +1,48 @@
-//! Helpers shared by the crate's tests: the reference data beside the repository and the
-//! checked-in schema files.
+//! Helpers shared by the crate's tests: the reference data beside the repository, the
+//! checked-in schema files, and hand-built situations.
 
 use std::path::PathBuf;
+
+use crate::geometry::Body;
+use crate::grid::{Map, OccupancyGrid};
+use crate::mission::{AtEnd, ControllerSpec};
+use crate::situation::{Pose, Robot, Role, Situation};
+use crate::spec::SituationSpec;
+
+/// A Pioneer 3-AT with id `id` (0 is the agent) at (x, y, heading) driving to `waypoints` with
+/// controller `controller`, stopping at the end.
+pub fn robot(id: u32, start: (f64, f64, f64), waypoints: &[[f64; 2]], controller: &str) -> Robot {
+    Robot {
+        id,
+        role: if id == 0 { Role::Agent } else { Role::Peer },
+        body: Body::default(),
+        start: Pose {
+            x_m: start.0,
+            y_m: start.1,
+            heading_rad: start.2,
+        },
+        waypoints: waypoints.to_vec(),
+        controller: ControllerSpec {
+            name: controller.into(),
+            params: Default::default(),
+        },
+        at_end: AtEnd::Stop,
+    }
+}
+
+/// A situation on a `size` × `size` cell map at 0.1 m with the given occupied cells (row from
+/// the top, column).
+pub fn situation(size: usize, occupied: &[(usize, usize)], robots: Vec<Robot>) -> Situation {
+    let mut g = OccupancyGrid::filled(size, size, false);
+    for &(r, c) in occupied {
+        g.set(r, c, true);
+    }
+    let map = Map {
+        grid: g,
+        resolution_m: 0.1,
+    };
+    Situation::new(&map, robots, SituationSpec::default(), 0)
+}
 
 /// `../shared/data` beside the repository (or `$SITGEN_SHARED_DATA`) joined with `rel`, if it
 /// exists; tests that need it print why they skip when it does not.

@@ -57,6 +57,40 @@ impl Rect {
             .all(|a| (d.0 * a.0 + d.1 * a.1).abs() < self.radius_on(a) + other.radius_on(a))
     }
 
+    /// The four corners, counter-clockwise.
+    pub fn corners(&self) -> [(f64, f64); 4] {
+        let (ux, uy) = self.u;
+        let (lx, ly) = (ux * self.half_length, uy * self.half_length);
+        let (wx, wy) = (-uy * self.half_width, ux * self.half_width);
+        let (cx, cy) = self.centre;
+        [
+            (cx + lx - wx, cy + ly - wy),
+            (cx + lx + wx, cy + ly + wy),
+            (cx - lx + wx, cy - ly + wy),
+            (cx - lx - wx, cy - ly - wy),
+        ]
+    }
+
+    /// Clearance between two rectangles, metres: 0 when they touch or overlap. For disjoint
+    /// convex polygons the nearest points include a vertex of one of them, so the smallest
+    /// vertex-to-edge distance either way is exact.
+    pub fn distance(&self, other: &Rect) -> f64 {
+        if self.overlaps(other) {
+            return 0.0;
+        }
+        let (a, b) = (self.corners(), other.corners());
+        let one_way = |p: &[(f64, f64); 4], q: &[(f64, f64); 4]| {
+            let mut best = f64::INFINITY;
+            for &v in p {
+                for k in 0..4 {
+                    best = best.min(point_segment_distance(v, q[k], q[(k + 1) % 4]));
+                }
+            }
+            best
+        };
+        one_way(&a, &b).min(one_way(&b, &a))
+    }
+
     /// Whether the interior of the rectangle intersects the axis-aligned square with lower-left
     /// corner `(x0, y0)` and side `side`.
     pub fn overlaps_square(&self, x0: f64, y0: f64, side: f64) -> bool {
@@ -68,6 +102,18 @@ impl Rect {
             .chain(self.axes())
             .all(|a| (d.0 * a.0 + d.1 * a.1).abs() < self.radius_on(a) + square_radius(a))
     }
+}
+
+/// Distance from point `p` to the segment `a`–`b`.
+fn point_segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
 }
 
 #[cfg(test)]
@@ -98,5 +144,21 @@ mod tests {
         // The bounding box's corner region is empty for a 45° rectangle.
         assert!(!r.overlaps_square(x1 - 0.05, y1 - 0.05, 0.05));
         assert!(x0 < 0.0 && y0 < 0.0);
+    }
+
+    #[test]
+    fn clearance_between_rectangles_is_exact() {
+        // Side by side along x: gap 1.5 − 1.0 = 0.5.
+        let d = rect(0.0, 0.0, 0.0).distance(&rect(1.5, 0.0, 0.0));
+        assert!((d - 0.5).abs() < 1e-12, "{d}");
+        // A 45° rectangle whose corner points at the other's side: the corner is at
+        // x = 2 − (0.5 + 0.25)/√2 and the side at x = 0.5.
+        let d = rect(0.0, 0.0, 0.0).distance(&rect(2.0, 0.0, std::f64::consts::FRAC_PI_4));
+        let expected = 2.0 - 0.75 * std::f64::consts::FRAC_1_SQRT_2 - 0.5;
+        assert!((d - expected).abs() < 1e-12, "{d} vs {expected}");
+        // Diagonal corner to corner.
+        let d = rect(0.0, 0.0, 0.0).distance(&rect(2.0, 1.5, 0.0));
+        assert!((d - 1.0f64.hypot(1.0)).abs() < 1e-12, "{d}");
+        assert_eq!(rect(0.0, 0.0, 0.0).distance(&rect(0.9, 0.0, 0.0)), 0.0);
     }
 }

@@ -2,42 +2,23 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::grid::OccupancyGrid;
-use crate::mission::{AtEnd, ControllerSpec};
 use crate::rng::ChoiceSource;
-use crate::situation::{Robot, Situation};
+use crate::situation::Robot;
 use crate::spec::SituationSpec;
+use crate::test_data;
 
 fn robot(id: u32, x: f64, y: f64, heading: f64) -> Robot {
-    Robot {
-        id,
-        role: if id == 0 { Role::Agent } else { Role::Peer },
-        body: Body::default(),
-        start: Pose {
-            x_m: x,
-            y_m: y,
-            heading_rad: heading,
-        },
-        waypoints: vec![[x, y]],
-        controller: ControllerSpec {
-            name: "test".into(),
-            params: Default::default(),
-        },
-        at_end: AtEnd::Stop,
-    }
+    test_data::robot(id, (x, y, heading), &[[x, y]], "test")
 }
 
 /// A `size` × `size` cell map at 0.1 m with the given occupied cells (row, col).
 fn world(size: usize, occupied: &[(usize, usize)], robots: Vec<Robot>) -> World {
-    let mut g = OccupancyGrid::filled(size, size, false);
-    for &(r, c) in occupied {
-        g.set(r, c, true);
-    }
-    let map = Map {
-        grid: g,
-        resolution_m: 0.1,
-    };
-    let s = Situation::new(&map, robots, SituationSpec::default(), 0);
-    World::new(&s, SimSpec::default(), 0).unwrap()
+    World::new(
+        &test_data::situation(size, occupied, robots),
+        SimSpec::default(),
+        0,
+    )
+    .unwrap()
 }
 
 #[test]

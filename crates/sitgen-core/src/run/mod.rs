@@ -1,0 +1,334 @@
+//! A run: one situation driven to its end, watched, and scored.
+//!
+//! Each step, in this order (the paper's Player/Stage loop made synchronous):
+//! 1. every robot observes the world as the last step left it (only the agent has a laser);
+//! 2. every controller acts on its observation — the agent's is a built-in controller, or the
+//!    command comes from outside (a Python or external controller driven by the Python layer);
+//! 3. a command that is not finite ends the run with outcome `error`;
+//! 4. the world steps ([`World::step`]);
+//! 5. the monitor watches the new state, and every robot's pose is appended to the trajectory;
+//! 6. the run ends when the monitor sees the agent complete its route (`completed`) or the time
+//!    limit is reached (`timeout`, with a timeout event).
+//!
+//! A run is a pure function of (situation, run spec, seed): no clock, no shared state.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::control::{self, Command, Controller};
+use crate::mission::ControllerSpec;
+use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
+use crate::scoring::{self, Score, ScoringSpec};
+use crate::sim::{Observation, SimSpec, World};
+use crate::situation::Situation;
+use crate::spec::{join, SpecError};
+
+/// How to run a situation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    /// The agent's controller; default: the one the situation names (`snd_follow` unless its
+    /// mission said otherwise). `python:module:Class` and `cmd:program args` are run by the
+    /// Python layer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller: Option<ControllerSpec>,
+    /// Simulated seconds after which an unfinished run stops with a timeout, in (0, 86400].
+    /// Default 600.
+    #[serde(default = "default_time_limit_s")]
+    pub time_limit_s: f64,
+    /// The simulator.
+    #[serde(default)]
+    pub sim: SimSpec,
+    /// The monitor's thresholds.
+    #[serde(default)]
+    pub monitor: MonitorSpec,
+    /// Penalties.
+    #[serde(default)]
+    pub scoring: ScoringSpec,
+}
+
+fn default_time_limit_s() -> f64 {
+    600.0
+}
+
+impl Default for RunSpec {
+    fn default() -> Self {
+        Self {
+            controller: None,
+            time_limit_s: default_time_limit_s(),
+            sim: SimSpec::default(),
+            monitor: MonitorSpec::default(),
+            scoring: ScoringSpec::default(),
+        }
+    }
+}
+
+impl RunSpec {
+    /// Check every field; `path` names the section in errors.
+    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
+        SpecError::check_positive(&join(path, "time_limit_s"), self.time_limit_s, 86_400.0)?;
+        self.sim.validate(&join(path, "sim"))?;
+        self.monitor.validate(&join(path, "monitor"))?;
+        self.scoring.validate(&join(path, "scoring"))
+    }
+
+    /// Parse and validate a run spec from JSON; errors name the field under `path`.
+    pub fn from_json(text: &str, path: &str) -> Result<Self, SpecError> {
+        let mut de = serde_json::Deserializer::from_str(text);
+        let spec: RunSpec = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            // serde_json appends where in the text; the field path says it better.
+            let message = e.inner().to_string();
+            let message = message.split(" at line ").next().unwrap_or_default();
+            SpecError::new(join(path, &e.path().to_string()), message)
+        })?;
+        spec.validate(path)?;
+        Ok(spec)
+    }
+}
+
+/// Whether a controller name is run outside the core (by the Python layer).
+pub fn is_external(name: &str) -> bool {
+    name.starts_with("python:") || name.starts_with("cmd:")
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// The agent completed its route.
+    Completed,
+    /// The time limit came first.
+    Timeout,
+    /// The agent's controller failed (crashed, hung, or returned garbage).
+    Error,
+}
+
+/// The result of a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunRecord {
+    /// How it ended.
+    pub outcome: Outcome,
+    /// Why, for `error` (and a one-line summary otherwise).
+    pub reason: String,
+    /// Score and breakdown.
+    pub score: Score,
+    /// The event log, in start order.
+    pub events: Vec<Event>,
+    /// Steps simulated.
+    pub steps: u64,
+    /// Simulated seconds.
+    pub time_s: f64,
+    /// Robots, in id order.
+    pub robots: usize,
+    /// Poses (x, y, heading) of every robot at the start and after every step, flat:
+    /// `[step][robot][3]`.
+    #[serde(skip)]
+    pub trajectory: Vec<f64>,
+}
+
+impl RunRecord {
+    /// The event log as JSON Lines.
+    pub fn events_jsonl(&self) -> String {
+        monitor::to_jsonl(&self.events)
+    }
+}
+
+/// A run in progress.
+pub struct Run {
+    world: World,
+    monitor: Option<Monitor>,
+    controllers: Vec<Option<Box<dyn Controller>>>,
+    agent: u32,
+    scoring: ScoringSpec,
+    limit_steps: u64,
+    trajectory: Vec<f64>,
+    ended: Option<(Outcome, String)>,
+}
+
+impl Run {
+    /// Start a run of `situation`; sensor noise is drawn from `seed`. The agent's controller is
+    /// built here unless it is external (`python:`/`cmd:`), in which case every step needs
+    /// its command from [`Run::step`].
+    pub fn new(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<Self, SpecError> {
+        spec.validate("run")?;
+        let world = World::new(situation, spec.sim.clone(), seed)?;
+        let monitor = Monitor::new(situation, &world, &spec.monitor);
+        let agent = monitor.agent();
+        let mut controllers = Vec::with_capacity(situation.robots.len());
+        for r in &situation.robots {
+            let (controller, path) = match &spec.controller {
+                Some(c) if r.id == agent => (c, "run.controller".to_string()),
+                _ => (&r.controller, format!("robots[{}].controller", r.id)),
+            };
+            if is_external(&controller.name) {
+                if r.id != agent {
+                    return Err(SpecError::new(
+                        join(&path, "name"),
+                        "only the agent may have a Python or external controller",
+                    ));
+                }
+                controllers.push(None);
+                continue;
+            }
+            let mut c = control::build(controller, &path)?;
+            c.reset(r);
+            controllers.push(Some(c));
+        }
+        let limit_steps = (spec.time_limit_s / spec.sim.dt_s - 1e-9).ceil() as u64;
+        let mut run = Self {
+            world,
+            monitor: Some(monitor),
+            controllers,
+            agent,
+            scoring: spec.scoring.clone(),
+            limit_steps,
+            trajectory: Vec::new(),
+            ended: None,
+        };
+        run.record_poses();
+        Ok(run)
+    }
+
+    /// Whether the agent's commands come from outside.
+    pub fn agent_is_external(&self) -> bool {
+        self.controllers[self.agent as usize].is_none()
+    }
+
+    /// The world as it stands.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The agent's id.
+    pub fn agent(&self) -> u32 {
+        self.agent
+    }
+
+    /// What the agent senses now (for an external controller).
+    pub fn agent_observation(&self) -> Observation {
+        self.world
+            .observe(self.agent)
+            .expect("the agent is in the world")
+    }
+
+    /// Whether the run has ended.
+    pub fn ended(&self) -> bool {
+        self.ended.is_some()
+    }
+
+    /// One step. `agent_command` is the external controller's command (ignored for a built-in
+    /// agent); returns whether the run has ended.
+    pub fn step(&mut self, agent_command: Option<Command>) -> bool {
+        if self.ended.is_some() {
+            return true;
+        }
+        let n = self.controllers.len();
+        let mut commands = Vec::with_capacity(n);
+        let mut seen = Vec::new();
+        for id in 0..n as u32 {
+            let obs = self.world.observe(id).expect("ids are the world's");
+            if id == self.agent {
+                seen = obs.tracks.iter().map(|t| t.id).collect();
+            }
+            let command = match &mut self.controllers[id as usize] {
+                Some(c) => c.act(&obs),
+                None => agent_command.unwrap_or((0.0, 0.0)),
+            };
+            if !(command.0.is_finite() && command.1.is_finite()) {
+                let who = monitor::robot_name(id, self.agent);
+                return self.fail(format!(
+                    "{who}'s controller returned a command that is not finite: ({}, {})",
+                    command.0, command.1
+                ));
+            }
+            commands.push((id, command.0, command.1));
+        }
+        self.world
+            .step(&commands)
+            .expect("commands are finite and for known robots");
+        self.record_poses();
+        let monitor = self
+            .monitor
+            .as_mut()
+            .expect("the monitor lives until the end");
+        monitor.observe(&Frame {
+            step: self.world.steps(),
+            robots: self.world.robots(),
+            seen_by_agent: &seen,
+        });
+        if monitor.route_completed(self.agent) {
+            self.ended = Some((Outcome::Completed, "the agent completed its route".into()));
+        } else if self.world.steps() >= self.limit_steps {
+            self.ended = Some((
+                Outcome::Timeout,
+                format!("route not completed within {:.1} s", self.world.time_s()),
+            ));
+        }
+        self.ended.is_some()
+    }
+
+    /// End the run with outcome `error` for `reason` (a controller that crashed, hung or sent
+    /// garbage); returns true.
+    pub fn fail(&mut self, reason: String) -> bool {
+        if self.ended.is_none() {
+            self.ended = Some((Outcome::Error, reason));
+        }
+        true
+    }
+
+    /// Step a run whose controllers are all built in until it ends.
+    pub fn run_to_end(&mut self) {
+        while !self.step(None) {}
+    }
+
+    /// The record of the run; a run not yet ended is ended here with a timeout.
+    pub fn finish(mut self) -> RunRecord {
+        let (outcome, reason) = self.ended.take().unwrap_or_else(|| {
+            (
+                Outcome::Timeout,
+                format!("stopped at {:.1} s", self.world.time_s()),
+            )
+        });
+        let agent = self.agent;
+        let score_peers = self.scoring.score_peers;
+        let events = self.monitor.take().expect("finished once").finish(
+            self.world.steps(),
+            outcome == Outcome::Timeout,
+            |e| score_peers || e.concerns(agent),
+        );
+        let score = scoring::score(&events, &self.scoring);
+        RunRecord {
+            outcome,
+            reason,
+            score,
+            events,
+            steps: self.world.steps(),
+            time_s: self.world.time_s(),
+            robots: self.controllers.len(),
+            trajectory: self.trajectory,
+        }
+    }
+
+    fn record_poses(&mut self) {
+        for r in self.world.robots() {
+            self.trajectory
+                .extend([r.pose.x_m, r.pose.y_m, r.pose.heading_rad]);
+        }
+    }
+}
+
+/// Run `situation` with built-in controllers to its end.
+pub fn run(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<RunRecord, SpecError> {
+    let mut r = Run::new(situation, spec, seed)?;
+    if r.agent_is_external() {
+        return Err(SpecError::new(
+            "run.controller.name",
+            "Python and external controllers run through the Python layer (sitgen.run)",
+        ));
+    }
+    r.run_to_end();
+    Ok(r.finish())
+}
+
+#[cfg(test)]
+mod tests;

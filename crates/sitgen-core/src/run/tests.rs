@@ -1,0 +1,338 @@
+//! Hand-built situations in which each event kind must appear with the right times and
+//! parties; times are derived in the comments from the Pioneer 3-AT footprint (0.626 m long,
+//! rotation centre 0.04465 m ahead of the footprint's centre, so its front is 0.26835 m and its
+//! rear 0.35765 m from the rotation centre) and the `straight` controller's 0.5 m/s.
+
+use super::*;
+use crate::mission::ControllerSpec;
+use crate::monitor::{EventKind, Party};
+use crate::test_data::{robot, situation};
+
+const FRONT: f64 = 0.26835;
+const REAR: f64 = 0.35765;
+
+fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
+    RunSpec {
+        controller: controller.map(|name| ControllerSpec {
+            name: name.into(),
+            params: Default::default(),
+        }),
+        time_limit_s,
+        ..RunSpec::default()
+    }
+}
+
+/// Run `s` with an agent that stands still (an external controller sending (0, 0)).
+fn run_with_still_agent(s: &Situation, time_limit_s: f64) -> RunRecord {
+    let mut r = Run::new(s, &spec(Some("cmd:still"), time_limit_s), 0).unwrap();
+    while !r.step(Some((0.0, 0.0))) {}
+    r.finish()
+}
+
+fn of_kind(rec: &RunRecord, kind: EventKind) -> Vec<&Event> {
+    rec.events.iter().filter(|e| e.kind == kind).collect()
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() < 1e-9
+}
+
+#[test]
+fn a_peer_driving_into_the_still_agent_from_behind_is_an_unseen_collision() {
+    // Agent at x = 10 facing +x; its rear is at 10 − REAR. The peer starts at x = 6 behind it
+    // and drives at 0.5 m/s (0.05 m per step): its front passes the agent's rear when
+    // 6 + 0.05 k + FRONT > 10 − REAR, first at k = 68 (6.8 s); the move is refused there.
+    // Unsafe proximity (< 0.5 m) first at 6 + 0.05 k + FRONT > 10 − REAR − 0.5, k = 58.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
+            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
+        ],
+    );
+    let rec = run_with_still_agent(&s, 20.0);
+    let hits = of_kind(&rec, EventKind::Collision);
+    assert_eq!(hits.len(), 1, "{:#?}", rec.events);
+    let hit = hits[0];
+    assert_eq!((hit.robot, hit.other), (0, Some(Party::Robot(1))));
+    assert!(close(hit.start_s, 6.8), "{}", hit.start_s);
+    assert_eq!(
+        hit.end_s,
+        Some(20.0),
+        "the peer keeps pushing until the end"
+    );
+    assert_eq!(hit.details["visible"], false, "the peer came from behind");
+    assert_eq!(hit.details["blocked"], serde_json::json!([1]));
+    assert_eq!(hit.details["speed_m_s"], 0.0);
+    assert_eq!(hit.details["other_speed_m_s"], 0.5);
+    assert!(hit.scored);
+    let near = of_kind(&rec, EventKind::UnsafeProximity);
+    assert_eq!(near.len(), 1);
+    assert!(close(near[0].start_s, 5.8), "{}", near[0].start_s);
+    // The peer stops 0.05 m short of the overlap: 10 − REAR − (6 + 0.05·67 + FRONT).
+    let least = near[0].details["min_clearance_m"].as_f64().unwrap();
+    assert!(
+        close(least, 10.0 - REAR - (6.0 + 0.05 * 67.0 + FRONT)),
+        "{least}"
+    );
+    assert_eq!(rec.outcome, Outcome::Timeout);
+    assert!(
+        near[0].to_text(0).contains("unsafe proximity to peer 1"),
+        "{}",
+        near[0].to_text(0)
+    );
+    // Standing still is loitering too, from the start.
+    let loiter = of_kind(&rec, EventKind::Loitering);
+    assert!(loiter.iter().any(|e| e.robot == 0 && e.start_s == 0.0));
+    assert!(hit
+        .to_text(0)
+        .contains("collision with peer 1 at 0.00 m/s (not visible 1 s before), 13.2 s"));
+}
+
+#[test]
+fn a_head_on_approach_is_unsafe_proximity_then_a_visible_collision() {
+    let s = situation(
+        300,
+        &[],
+        vec![
+            robot(0, (5.0, 10.0, 0.0), &[[25.0, 10.0]], "straight"),
+            robot(
+                1,
+                (20.0, 10.0, std::f64::consts::PI),
+                &[[2.0, 10.0]],
+                "straight",
+            ),
+        ],
+    );
+    let rec = run(&s, &spec(None, 30.0), 0).unwrap();
+    let near = of_kind(&rec, EventKind::UnsafeProximity);
+    let hits = of_kind(&rec, EventKind::Collision);
+    assert_eq!((near.len(), hits.len()), (1, 1), "{:#?}", rec.events);
+    assert!(near[0].start_s < hits[0].start_s);
+    // A refused move leaves the robots apart by less than the step they could not take.
+    let least = near[0].details["min_clearance_m"].as_f64().unwrap();
+    assert!(least < 2.0 * 0.05, "{least}");
+    assert_eq!(hits[0].details["visible"], true, "it came from ahead");
+    assert_eq!(hits[0].details["blocked"], serde_json::json!([0, 1]));
+    // Closing at 1 m/s from 15 m apart less FRONT twice: contact within a step of 14.46 s.
+    let meet = 15.0 - 2.0 * FRONT;
+    assert!(
+        (hits[0].start_s - meet).abs() <= 0.1 + 1e-9,
+        "{}",
+        hits[0].start_s
+    );
+}
+
+/// A wall 0.5 m thick across the map at x = 15 m (columns 150–154 of a 0.1 m grid).
+fn wall_at_15m(size: usize) -> Vec<(usize, usize)> {
+    (0..size)
+        .flat_map(|r| (150..155).map(move |c| (r, c)))
+        .collect()
+}
+
+#[test]
+fn driving_at_a_wall_is_a_lasting_visible_wall_collision() {
+    // Front reaches x = 15 when 10 + 0.05 k + FRONT > 15: k = 95 (9.5 s).
+    let s = situation(
+        200,
+        &wall_at_15m(200),
+        vec![robot(0, (10.0, 10.0, 0.0), &[[18.0, 10.0]], "straight")],
+    );
+    let rec = run(&s, &spec(Some("follow"), 20.0), 0).unwrap();
+    let hits = of_kind(&rec, EventKind::Collision);
+    assert_eq!(hits.len(), 1, "{:#?}", rec.events);
+    assert_eq!(hits[0].other, Some(Party::Wall));
+    assert_eq!(hits[0].end_s, Some(20.0), "lasting while it pushes");
+    assert_eq!(hits[0].details["visible"], true);
+    assert!(hits[0].start_s > 5.0 && hits[0].start_s < 20.0);
+}
+
+#[test]
+fn a_blocked_route_loiters_and_times_out() {
+    // `straight` stalls at the wall from 9.5 s (see above); its net progress over 20 s first
+    // drops below 1 m when x(k − 200) > 15 − FRONT − 1, i.e. at k − 200 = 75: loitering from
+    // 7.5 s, detected at 27.5 s, lasting to the end.
+    let s = situation(
+        200,
+        &wall_at_15m(200),
+        vec![robot(0, (10.0, 10.0, 0.0), &[[18.0, 10.0]], "straight")],
+    );
+    let rec = run(&s, &spec(None, 60.0), 0).unwrap();
+    let hits = of_kind(&rec, EventKind::Collision);
+    assert!(close(hits[0].start_s, 9.5), "{}", hits[0].start_s);
+    let loiter = of_kind(&rec, EventKind::Loitering);
+    assert_eq!(loiter.len(), 1, "{:#?}", rec.events);
+    assert!(close(loiter[0].start_s, 7.5), "{}", loiter[0].start_s);
+    assert_eq!(loiter[0].end_s, Some(60.0));
+    let timeout = of_kind(&rec, EventKind::Timeout);
+    assert_eq!(timeout.len(), 1);
+    assert!(close(timeout[0].start_s, 60.0));
+    assert_eq!(timeout[0].details["reached"], 0);
+    assert_eq!(rec.outcome, Outcome::Timeout);
+    // Score: collision 100 + 10·50.5, loitering 5 + 0.1·52.5, timeout 20.
+    let expected = (100.0 + 10.0 * 50.5) + (5.0 + 0.1 * 52.5) + 20.0;
+    assert!(close(rec.score.total, expected), "{}", rec.score.total);
+    assert_eq!(rec.score.breakdown["collision"].count, 1);
+}
+
+#[test]
+fn a_clear_route_reaches_every_waypoint_and_completes_with_score_zero() {
+    let waypoints = [[14.0, 10.0], [14.0, 14.0], [10.0, 14.0]];
+    let s = situation(
+        200,
+        &[],
+        vec![robot(0, (10.0, 10.0, 0.0), &waypoints, "straight")],
+    );
+    let rec = run(&s, &spec(None, 120.0), 0).unwrap();
+    assert_eq!(rec.outcome, Outcome::Completed);
+    let reached: Vec<u64> = of_kind(&rec, EventKind::WaypointReached)
+        .iter()
+        .map(|e| e.details["index"].as_u64().unwrap())
+        .collect();
+    assert_eq!(reached, vec![1, 2, 3]);
+    let done = of_kind(&rec, EventKind::RouteCompleted);
+    assert_eq!(done.len(), 1);
+    assert_eq!(rec.events.last().unwrap().kind, EventKind::RouteCompleted);
+    assert_eq!(rec.score.total, 0.0);
+    assert!(rec.score.breakdown.is_empty());
+    // The run stops at completion, and the trajectory has every pose.
+    assert!(close(done[0].start_s, rec.time_s));
+    assert_eq!(rec.trajectory.len(), (rec.steps as usize + 1) * 3);
+}
+
+#[test]
+fn events_between_peers_are_logged_but_not_scored() {
+    let s = situation(
+        300,
+        &[],
+        vec![
+            robot(0, (3.0, 3.0, 0.0), &[[3.0, 25.0]], "straight"),
+            robot(1, (5.0, 20.0, 0.0), &[[25.0, 20.0]], "straight"),
+            robot(
+                2,
+                (25.0, 20.0, std::f64::consts::PI),
+                &[[5.0, 20.0]],
+                "straight",
+            ),
+        ],
+    );
+    let rec = run(&s, &spec(Some("cmd:still"), 30.0), 0).map(|_| ()).err();
+    assert!(
+        rec.is_some(),
+        "an external agent cannot run in the core alone"
+    );
+    let mut r = Run::new(&s, &spec(Some("cmd:still"), 30.0), 0).unwrap();
+    while !r.step(Some((0.0, 0.0))) {}
+    let rec = r.finish();
+    let peer_hit = of_kind(&rec, EventKind::Collision);
+    assert_eq!(peer_hit.len(), 1);
+    assert_eq!(
+        (peer_hit[0].robot, peer_hit[0].other),
+        (1, Some(Party::Robot(2)))
+    );
+    assert!(!peer_hit[0].scored);
+    assert_eq!(peer_hit[0].details["visible"], serde_json::Value::Null);
+    assert!(peer_hit[0].to_text(0).ends_with("(not scored)"));
+    // Only the agent's own events count: the timeout (20) and standing still, loitering from
+    // the start to the end (5 + 0.1 · 30).
+    assert_eq!(rec.score.total, 28.0);
+    let all = RunSpec {
+        scoring: ScoringSpec {
+            score_peers: true,
+            ..Default::default()
+        },
+        ..spec(Some("cmd:still"), 30.0)
+    };
+    let mut r = Run::new(&s, &all, 0).unwrap();
+    while !r.step(Some((0.0, 0.0))) {}
+    assert!(r.finish().score.total > 100.0);
+}
+
+#[test]
+fn score_arithmetic_is_exact_for_a_given_log() {
+    let event = |kind, start_s, end_s, scored| Event {
+        kind,
+        start_s,
+        end_s,
+        robot: 0,
+        other: None,
+        scored,
+        details: Default::default(),
+    };
+    let events = vec![
+        event(EventKind::UnsafeProximity, 2.0, Some(5.5), true),
+        event(EventKind::UnsafeProximity, 7.0, Some(7.5), true),
+        event(EventKind::Collision, 3.0, Some(4.0), true),
+        event(EventKind::Collision, 9.0, Some(19.0), false),
+        event(EventKind::WaypointReached, 4.0, None, true),
+    ];
+    let mut spec = ScoringSpec::default();
+    spec.penalties.insert(
+        "collision".into(),
+        scoring::Penalty {
+            start: 50.0,
+            per_s: 4.0,
+        },
+    );
+    let s = scoring::score(&events, &spec);
+    // Proximity: 2·10 + (3.5 + 0.5)·1 = 24; collision: 50 + 4·1 = 54; the unscored one adds 0.
+    assert_eq!(s.total, 78.0);
+    assert_eq!(s.breakdown["unsafe_proximity"].points, 24.0);
+    assert_eq!(s.breakdown["unsafe_proximity"].count, 2);
+    assert_eq!(s.breakdown["unsafe_proximity"].seconds, 4.0);
+    assert_eq!(s.breakdown["collision"].points, 54.0);
+    assert!(
+        !s.breakdown.contains_key("waypoint_reached"),
+        "kinds that earn nothing are left out"
+    );
+}
+
+#[test]
+fn the_same_inputs_give_a_byte_identical_event_log() {
+    let spec_text = "[terrain]\npreset = \"caves\"\n[mission]\npeers_min = 5\npeers_max = 5\n";
+    let sspec = crate::spec::from_toml_str(spec_text).unwrap();
+    let (s, _) = crate::situation::generate(&sspec, 3).unwrap();
+    let straight = spec(Some("straight"), 120.0);
+    let a = run(&s, &straight, 7).unwrap();
+    let b = run(&s, &straight, 7).unwrap();
+    assert!(!a.events.is_empty());
+    assert_eq!(a.events_jsonl(), b.events_jsonl());
+    assert_eq!(a.trajectory, b.trajectory);
+}
+
+#[test]
+fn bad_run_specs_name_the_field() {
+    let e = RunSpec::from_json(r#"{"time_limit_s": -1}"#, "run").unwrap_err();
+    assert_eq!(e.to_string(), "run.time_limit_s: -1 is not in (0, 86400]");
+    let e = RunSpec::from_json(
+        r#"{"scoring": {"penalties": {"crash": {"start": 1}}}}"#,
+        "run",
+    )
+    .unwrap_err();
+    assert!(e
+        .to_string()
+        .starts_with("run.scoring.penalties.crash: unknown event kind"));
+    let e = RunSpec::from_json(r#"{"monitor": {"radius": 1}}"#, "run").unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("run.monitor.radius: unknown field `radius`"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_non_finite_command_is_an_error_outcome() {
+    let s = situation(
+        200,
+        &[],
+        vec![robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "straight")],
+    );
+    let mut r = Run::new(&s, &spec(Some("cmd:x"), 20.0), 0).unwrap();
+    r.step(Some((0.1, 0.0)));
+    assert!(r.step(Some((f64::NAN, 0.0))));
+    let rec = r.finish();
+    assert_eq!(rec.outcome, Outcome::Error);
+    assert!(rec.reason.contains("not finite"), "{}", rec.reason);
+    assert_eq!(rec.steps, 1);
+}
