@@ -7,6 +7,7 @@ Public API (see ARCHITECTURE.md for the pipeline):
 - :func:`load_map` — a :class:`Grid` from ROS YAML, PNG/PGM, MovingAI ``.map`` or BARN ``.npy``;
 - :func:`shortest_path` — A* with the MovingAI movement rules;
 - :class:`World` — the simulator: ``observe``, ``step``, ``state``;
+- :func:`run` — one situation driven to its end, watched and scored: a :class:`RunRecord`;
 - :func:`perlin` — Ken Perlin's improved noise, bit for bit the 2002 reference;
 - :class:`Grid` — an occupancy map with its resolution, size and coverage;
 - :exc:`SpecError`, :exc:`GenerationFailed` — what bad specs and failed generation raise.
@@ -15,6 +16,7 @@ Public API (see ARCHITECTURE.md for the pipeline):
 from sitgen._core import GenerationFailed, SpecError, __version__, perlin
 from sitgen.config import load_spec, preset_names
 from sitgen.maps import load_map, shortest_path
+from sitgen.run import RunRecord, run
 from sitgen.sim import Observation, World
 from sitgen.situation import Pose, Robot, Situation, generate_situation
 from sitgen.terrain import Grid, Stage, generate_terrain
@@ -25,6 +27,7 @@ __all__ = [
     "Observation",
     "Pose",
     "Robot",
+    "RunRecord",
     "Situation",
     "SpecError",
     "Stage",
@@ -36,5 +39,6 @@ __all__ = [
     "load_spec",
     "perlin",
     "preset_names",
+    "run",
     "shortest_path",
 ]

@@ -166,6 +166,107 @@ def export(
         typer.echo(f"wrote {path}")
 
 
+def _read_run_spec(path: Path | None) -> dict[str, Any]:
+    if path is None:
+        return {}
+    import tomllib
+
+    try:
+        return tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise _core.SpecError(f"{path}: TOML syntax error: {e}") from None
+
+
+@app.command("run")
+def run_command(
+    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    controller: Annotated[
+        str | None,
+        typer.Option(
+            "--controller",
+            "-c",
+            help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS or "
+            "'cmd:PROGRAM ARGS'. Default: the situation's.",
+        ),
+    ] = None,
+    time_limit: Annotated[
+        float | None,
+        typer.Option("--time-limit", help="Simulated seconds before a timeout (default 600)."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", "-s", min=0, help="Sensor-noise seed.")] = 0,
+    spec: Annotated[
+        Path | None,
+        typer.Option("--spec", help="Run spec (TOML): time_limit_s, [sim], [monitor], [scoring]."),
+    ] = None,
+    events: Annotated[
+        Path | None, typer.Option("--events", help="Write the event log here (JSON Lines).")
+    ] = None,
+    as_json: Annotated[
+        bool, typer.Option("--json", help="Print the record as JSON instead of text.")
+    ] = False,
+) -> None:
+    """Run one situation: print the outcome, the score with its breakdown, and the event log.
+    Exits 1 when the controller failed (outcome error)."""
+    from sitgen.run import run
+
+    record = run(
+        Situation.load(situation),
+        controller=controller,
+        time_limit=time_limit,
+        seed=seed,
+        spec=_read_run_spec(spec),
+    )
+    if events is not None:
+        events.parent.mkdir(parents=True, exist_ok=True)
+        events.write_text(record.events_jsonl)
+    if as_json:
+        typer.echo(json.dumps(record.to_dict(), indent=2))
+    else:
+        typer.echo(
+            f"{situation}: {record.controller}, outcome {record.outcome} after "
+            f"{record.time_s:.1f} s ({record.reason}), score {record.score:g}"
+        )
+        if record.breakdown:
+            table = Table(title="score breakdown")
+            for column in ("event", "count", "seconds", "points"):
+                table.add_column(column, justify="left" if column == "event" else "right")
+            for kind, line in record.breakdown.items():
+                table.add_row(
+                    kind, str(line["count"]), f"{line['seconds']:.1f}", f"{line['points']:g}"
+                )
+            Console().print(table)
+        typer.echo(record.events_text, nl=False)
+    if record.outcome == "error":
+        raise typer.Exit(EXIT_FAILED)
+
+
+@app.command("check-controller")
+def check_controller_command(
+    controller: Annotated[str, typer.Argument(help="python:MODULE:CLASS or 'cmd:PROGRAM ARGS'.")],
+    situation: Annotated[
+        Path | None,
+        typer.Option("--situation", help="Situation to drive (default: open_field, seed 0)."),
+    ] = None,
+    steps: Annotated[int, typer.Option("--steps", min=1, help="Steps to drive.")] = 50,
+) -> None:
+    """Check that a user controller speaks the interface: loads, resets, replies with finite
+    commands in time, stays within the limits, and shuts down. Exits 1 if a check fails."""
+    from sitgen.run import check_controller
+
+    if not controller.startswith(("python:", "cmd:")):
+        raise UsageError(f"controller `{controller}`: expected python:MODULE:CLASS or cmd:PROGRAM")
+    loaded = (
+        Situation.load(situation)
+        if situation is not None
+        else generate_situation(preset_spec("open_field"), seed=0)
+    )
+    checks = check_controller(controller, loaded, steps=steps)
+    for c in checks:
+        typer.echo(f"{'ok  ' if c.ok else 'FAIL'} {c.name:8} {c.detail}")
+    if not all(c.ok for c in checks):
+        raise typer.Exit(EXIT_FAILED)
+
+
 @app.command()
 def demo(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the maps.")] = Path(

@@ -40,6 +40,9 @@ class Observation:
     tracks: tuple[dict[str, Any], ...] = ()
     """The other robots the laser sees now: ``id``, ``position`` (x, y), ``velocity``
     (vx, vy) in the world frame; standing in for a perception module."""
+    waypoints_reached: int = 0
+    """Waypoints of the route reached so far, in order, as the monitor counts them: the index
+    (into the route's waypoints) of the current one, for controllers in a run."""
 
 
 class World:

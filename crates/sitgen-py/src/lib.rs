@@ -3,6 +3,7 @@
 
 mod interchange;
 mod mission;
+mod run;
 mod sim;
 mod situation;
 mod spec;
@@ -34,5 +35,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     mission::register(m)?;
     situation::register(m)?;
     sim::register(m)?;
+    run::register(m)?;
     Ok(())
 }

@@ -81,23 +81,7 @@ impl PyWorld {
             .world
             .observe(robot_id)
             .map_err(PyValueError::new_err)?;
-        let out = PyDict::new(py);
-        out.set_item("ranges", PyArray1::from_vec(py, o.ranges))?;
-        out.set_item("angles", PyArray1::from_vec(py, o.angles))?;
-        out.set_item("pose", (o.pose.x_m, o.pose.y_m, o.pose.heading_rad))?;
-        out.set_item("velocity", o.velocity)?;
-        out.set_item("stalled", o.stalled)?;
-        out.set_item("time", o.time_s)?;
-        let tracks = PyList::empty(py);
-        for t in &o.tracks {
-            let d = PyDict::new(py);
-            d.set_item("id", t.id)?;
-            d.set_item("position", t.position)?;
-            d.set_item("velocity", t.velocity)?;
-            tracks.append(d)?;
-        }
-        out.set_item("tracks", tracks)?;
-        Ok(out)
+        observation_dict(py, o)
     }
 
     /// Every robot's state: id, role, pose, velocity, command, stalled, contacts.
@@ -123,6 +107,27 @@ impl PyWorld {
         }
         Ok(list)
     }
+}
+
+/// An observation as the dict Python controllers receive.
+pub(crate) fn observation_dict(py: Python<'_>, o: sim::Observation) -> PyResult<Bound<'_, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("ranges", PyArray1::from_vec(py, o.ranges))?;
+    out.set_item("angles", PyArray1::from_vec(py, o.angles))?;
+    out.set_item("pose", (o.pose.x_m, o.pose.y_m, o.pose.heading_rad))?;
+    out.set_item("velocity", o.velocity)?;
+    out.set_item("stalled", o.stalled)?;
+    out.set_item("time", o.time_s)?;
+    let tracks = PyList::empty(py);
+    for t in &o.tracks {
+        let d = PyDict::new(py);
+        d.set_item("id", t.id)?;
+        d.set_item("position", t.position)?;
+        d.set_item("velocity", t.velocity)?;
+        tracks.append(d)?;
+    }
+    out.set_item("tracks", tracks)?;
+    Ok(out)
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -398,6 +398,11 @@ impl Monitor {
         self.loitering.observe(frame, &done, &mut self.log);
     }
 
+    /// How many waypoints of its route robot `id` has reached, in order.
+    pub fn waypoints_reached(&self, id: u32) -> usize {
+        self.waypoints.reached(id)
+    }
+
     /// Whether robot `id` has driven its whole route.
     pub fn route_completed(&self, id: u32) -> bool {
         self.waypoints.completed()[id as usize]

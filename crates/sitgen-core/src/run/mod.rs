@@ -211,6 +211,14 @@ impl Run {
             .expect("the agent is in the world")
     }
 
+    /// How many waypoints of its route the agent has reached, as the monitor sees it (the
+    /// index of its current waypoint, for controllers that do not follow the route themselves).
+    pub fn agent_waypoints_reached(&self) -> usize {
+        self.monitor
+            .as_ref()
+            .map_or(0, |m| m.waypoints_reached(self.agent))
+    }
+
     /// Whether the run has ended.
     pub fn ended(&self) -> bool {
         self.ended.is_some()

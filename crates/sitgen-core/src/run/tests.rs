@@ -336,3 +336,36 @@ fn a_non_finite_command_is_an_error_outcome() {
     assert!(rec.reason.contains("not finite"), "{}", rec.reason);
     assert_eq!(rec.steps, 1);
 }
+
+#[test]
+fn driving_out_and_back_is_not_loitering() {
+    // A peer shuttling 4 m out and back (`reverse`) returns near where it was 20 s earlier,
+    // but it never stays within 1 m.
+    let mut peer = robot(1, (5.0, 5.0, 0.0), &[[9.0, 5.0]], "straight");
+    peer.at_end = crate::mission::AtEnd::Reverse;
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (15.0, 15.0, 0.0), &[[18.0, 15.0]], "snd_follow"),
+            peer,
+        ],
+    );
+    let rec = run_with_still_agent(&s, 120.0);
+    let peer_loiters = rec
+        .events
+        .iter()
+        .filter(|e| e.kind == EventKind::Loitering && e.robot == 1)
+        .count();
+    assert_eq!(
+        peer_loiters,
+        0,
+        "{}",
+        crate::monitor::to_text(&rec.events, 0)
+    );
+    // The still agent does loiter.
+    assert!(rec
+        .events
+        .iter()
+        .any(|e| e.kind == EventKind::Loitering && e.robot == 0));
+}

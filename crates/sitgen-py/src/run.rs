@@ -1,0 +1,142 @@
+//! Bindings of `sitgen_core::run`: one run, stepped from Python (for Python and external
+//! controllers) or driven to its end in Rust without the GIL.
+
+use std::sync::{Mutex, MutexGuard};
+
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use sitgen_core::monitor;
+use sitgen_core::run::{Run, RunRecord, RunSpec};
+use sitgen_core::situation::Situation;
+
+use crate::sim::observation_dict;
+use crate::SpecError;
+
+fn spec_error(e: impl ToString) -> PyErr {
+    SpecError::new_err(e.to_string())
+}
+
+/// A run of a situation (JSON) under a run spec (JSON, `{}` for the defaults), with sensor
+/// noise drawn from `seed`.
+#[pyclass(name = "Run", module = "sitgen._core")]
+pub struct PyRun {
+    /// Behind a mutex because Python objects must be shareable between threads, and a
+    /// controller's state is only ever used by one step at a time.
+    run: Option<Mutex<Run>>,
+}
+
+fn finished() -> PyErr {
+    PyValueError::new_err("the run has been finished")
+}
+
+impl PyRun {
+    fn live(&self) -> PyResult<MutexGuard<'_, Run>> {
+        let run = self.run.as_ref().ok_or_else(finished)?;
+        Ok(run.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    fn live_mut(&mut self) -> PyResult<&mut Run> {
+        let run = self.run.as_mut().ok_or_else(finished)?;
+        Ok(run.get_mut().unwrap_or_else(|e| e.into_inner()))
+    }
+}
+
+#[pymethods]
+impl PyRun {
+    #[new]
+    #[pyo3(signature = (situation_json, spec_json="{}", seed=0))]
+    fn new(situation_json: &str, spec_json: &str, seed: u64) -> PyResult<Self> {
+        let situation = Situation::from_json(situation_json).map_err(spec_error)?;
+        let spec = RunSpec::from_json(spec_json, "run").map_err(spec_error)?;
+        let run = Run::new(&situation, &spec, seed).map_err(spec_error)?;
+        Ok(Self {
+            run: Some(Mutex::new(run)),
+        })
+    }
+
+    /// Whether the agent's commands must come from Python.
+    #[getter]
+    fn agent_is_external(&self) -> PyResult<bool> {
+        Ok(self.live()?.agent_is_external())
+    }
+
+    /// The agent's id.
+    #[getter]
+    fn agent(&self) -> PyResult<u32> {
+        Ok(self.live()?.agent())
+    }
+
+    /// Whether the run has ended.
+    #[getter]
+    fn ended(&self) -> PyResult<bool> {
+        Ok(self.live()?.ended())
+    }
+
+    /// What the agent senses now, plus `waypoints_reached` (as the monitor counts them).
+    fn observe_agent<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let run = self.live()?;
+        let d = observation_dict(py, run.agent_observation())?;
+        d.set_item("waypoints_reached", run.agent_waypoints_reached())?;
+        Ok(d)
+    }
+
+    /// One step with the agent's command (ignored for a built-in agent); returns whether the
+    /// run has ended.
+    #[pyo3(signature = (command=None))]
+    fn step(&mut self, command: Option<(f64, f64)>) -> PyResult<bool> {
+        Ok(self.live_mut()?.step(command))
+    }
+
+    /// End the run with outcome `error` for `reason`.
+    fn fail(&mut self, reason: String) -> PyResult<()> {
+        self.live_mut()?.fail(reason);
+        Ok(())
+    }
+
+    /// Step a run of built-in controllers to its end, without the GIL.
+    fn run_to_end(&mut self, py: Python<'_>) -> PyResult<()> {
+        let run = self.live_mut()?;
+        if run.agent_is_external() {
+            return Err(PyValueError::new_err(
+                "the agent's controller is external: step the run from Python",
+            ));
+        }
+        py.detach(|| run.run_to_end());
+        Ok(())
+    }
+
+    /// End the run; returns the record (see `record_dict`).
+    fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let run = self
+            .run
+            .take()
+            .ok_or_else(finished)?
+            .into_inner()
+            .unwrap_or_else(|e| e.into_inner());
+        let agent = run.agent();
+        record_dict(py, run.finish(), agent)
+    }
+}
+
+/// A record as a dict: `record` (JSON: outcome, reason, score, events, steps, time_s, robots),
+/// `events_jsonl`, `events_text`, `trajectory` (numpy, steps + 1 × robots × 3).
+fn record_dict(py: Python<'_>, rec: RunRecord, agent: u32) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item(
+        "record",
+        serde_json::to_string(&rec).map_err(|e| PyValueError::new_err(e.to_string()))?,
+    )?;
+    d.set_item("events_jsonl", rec.events_jsonl())?;
+    d.set_item("events_text", monitor::to_text(&rec.events, agent))?;
+    let rows = rec.trajectory.len() / (3 * rec.robots.max(1));
+    let trajectory = PyArray1::from_vec(py, rec.trajectory).reshape([rows, rec.robots, 3])?;
+    d.set_item("trajectory", trajectory)?;
+    Ok(d)
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyRun>()?;
+    Ok(())
+}

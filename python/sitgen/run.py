@@ -1,0 +1,263 @@
+"""Running a situation: ``sitgen.run(situation, controller=..., time_limit=...)``.
+
+A run drives every robot of a situation until the agent completes its route or the time limit
+is reached, watched by the monitor and scored (the core's ``run`` module; ARCHITECTURE.md).
+Built-in controllers run entirely in Rust with the GIL released; a Python or external
+controller (``python:…``, ``cmd:…``, or any object with ``reset`` and ``act``) is stepped from
+here, and whatever goes wrong in it ends the run with outcome ``error`` and a reason.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from sitgen import _core
+from sitgen.controllers import (
+    STEP_TIMEOUT_S,
+    ControllerError,
+    is_user_controller,
+    load_controller,
+)
+from sitgen.situation import Situation
+
+BUILT_IN_CONTROLLERS = ("snd_follow", "snd", "follow", "vo", "dwa", "straight")
+"""Controllers that run in the core."""
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What happened in a run."""
+
+    outcome: str
+    """``completed``, ``timeout`` or ``error``."""
+    reason: str
+    """Why it ended (for ``error``: what the controller did wrong)."""
+    score: float
+    """Total penalty points."""
+    breakdown: dict[str, dict[str, float]]
+    """Points by event kind: ``count``, ``seconds``, ``points`` (kinds that earned points)."""
+    events: list[dict[str, Any]]
+    """The event log: ``kind``, ``start_s``, ``end_s``, ``robot``, ``other``, ``scored``,
+    ``details``."""
+    trajectory: npt.NDArray[np.float64] = field(repr=False)
+    """Poses (x, y, heading) of every robot at the start and after every step:
+    shape (steps + 1, robots, 3)."""
+    steps: int
+    time_s: float
+    controller: str
+    """The agent's controller."""
+    seed: int
+    """Sensor-noise seed."""
+    events_jsonl: str = field(repr=False)
+    """The event log as JSON Lines (byte-identical for the same inputs)."""
+    events_text: str = field(repr=False)
+    """The event log as text, one line per event."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Everything but the trajectory, as JSON-ready data."""
+        return {
+            "outcome": self.outcome,
+            "reason": self.reason,
+            "score": self.score,
+            "breakdown": self.breakdown,
+            "controller": self.controller,
+            "seed": self.seed,
+            "steps": self.steps,
+            "time_s": self.time_s,
+            "events": self.events,
+        }
+
+
+def _controller_name(controller: Any) -> str:
+    if controller is None or isinstance(controller, str):
+        return controller or ""
+    return f"python:{type(controller).__module__}:{type(controller).__qualname__}"
+
+
+def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
+    """What a user controller is told at the start: its route, body, laser and limits."""
+    robot = situation.robots[agent]
+    sim = dict(run.get("sim", {}))
+    laser = {
+        "fov_deg": 180.0,
+        "beams": 181,
+        "range_m": 10.0,
+        "range_step_m": 0.01,
+        "offset_x_m": 0.0,
+        "noise_sd_m": 0.0,
+    }
+    laser.update(sim.get("laser", {}))
+    n, fov = int(laser["beams"]), float(np.radians(laser["fov_deg"]))
+    angles = [-fov / 2 + i * fov / (n - 1) for i in range(n)] if n > 1 else [0.0]
+    return {
+        "robot_id": robot.id,
+        "start": [robot.start.x_m, robot.start.y_m, robot.start.heading_rad],
+        "waypoints": [list(w) for w in robot.waypoints],
+        "at_end": robot.at_end,
+        "body": robot.body,
+        "laser": {**laser, "angles": angles},
+        "dt_s": float(sim.get("dt_s", 0.1)),
+        "max_speed_m_s": float(sim.get("max_speed_m_s", 0.8)),
+        "max_turn_rate_deg_s": float(sim.get("max_turn_rate_deg_s", 90.0)),
+        "time_limit_s": float(run.get("time_limit_s", 600.0)),
+    }
+
+
+def run(
+    situation: Situation | str | Path,
+    controller: Any = None,
+    time_limit: float | None = None,
+    seed: int = 0,
+    spec: Mapping[str, Any] | None = None,
+    params: Mapping[str, float] | None = None,
+    step_timeout_s: float = STEP_TIMEOUT_S,
+) -> RunRecord:
+    """Run ``situation`` (a Situation or a situation file) to its end.
+
+    ``controller``: a built-in name (``snd_follow``, ``follow``, ``vo``, ``dwa``, …),
+    ``python:module:Class``, ``cmd:program args``, or an object with ``reset(info)`` and
+    ``act(obs)``; default: the situation's own. ``time_limit``: simulated seconds (default 600).
+    ``seed``: sensor noise. ``spec``: the run spec (``sim``, ``monitor``, ``scoring``,
+    ``time_limit_s``). ``params``: the built-in controller's parameters. A bad spec raises
+    SpecError naming the field; a failing user controller gives outcome ``error``.
+    """
+    if not isinstance(situation, Situation):
+        situation = Situation.load(situation)
+    run_spec: dict[str, Any] = dict(spec or {})
+    if time_limit is not None:
+        run_spec["time_limit_s"] = time_limit
+    name = _controller_name(controller)
+    if name:
+        run_spec["controller"] = {"name": name, "params": dict(params or {})}
+    core = _core.Run(situation.to_json(), json.dumps(run_spec), seed)
+    if core.agent_is_external:
+        _drive(core, controller, situation, run_spec, step_timeout_s)
+    else:
+        core.run_to_end()
+    out = core.finish()
+    record = json.loads(out["record"])
+    return RunRecord(
+        outcome=record["outcome"],
+        reason=record["reason"],
+        score=record["score"]["total"],
+        breakdown=record["score"]["breakdown"],
+        events=record["events"],
+        trajectory=out["trajectory"],
+        steps=record["steps"],
+        time_s=record["time_s"],
+        controller=name or situation.agent.controller["name"],
+        seed=seed,
+        events_jsonl=out["events_jsonl"],
+        events_text=out["events_text"],
+    )
+
+
+def _drive(
+    core: _core.Run,
+    controller: Any,
+    situation: Situation,
+    run_spec: Mapping[str, Any],
+    step_timeout_s: float,
+) -> None:
+    """Step a run whose agent is a user controller, turning its failures into the outcome."""
+    if controller is None:
+        controller = situation.agent.controller["name"]
+    assert is_user_controller(controller)
+    try:
+        user = load_controller(controller, step_timeout_s)
+    except ControllerError as e:
+        core.fail(str(e))
+        return
+    try:
+        user.reset(_reset_info(situation, run_spec, core.agent))
+        while not core.step(user.act(core.observe_agent())):
+            pass
+    except ControllerError as e:
+        core.fail(str(e))
+    finally:
+        user.close()
+
+
+@dataclass(frozen=True)
+class Check:
+    """One conformance check of a user controller."""
+
+    name: str
+    ok: bool
+    detail: str
+
+
+def check_controller(
+    controller: Any,
+    situation: Situation,
+    steps: int = 50,
+    step_timeout_s: float = STEP_TIMEOUT_S,
+) -> list[Check]:
+    """Drive ``controller`` for ``steps`` steps of ``situation`` and say what is wrong with it,
+    check by check (in the spirit of Gymnasium's ``check_env``): it loads, it accepts the reset
+    message, every reply is a pair of finite numbers in time, commands stay within the robot's
+    limits (larger ones are clamped, which is usually a units mistake), and it shuts down."""
+    import math
+    import time
+
+    checks: list[Check] = []
+    try:
+        user = load_controller(controller, step_timeout_s)
+    except ControllerError as e:
+        return [Check("loads", False, str(e))]
+    checks.append(Check("loads", True, user.name))
+    info = _reset_info(situation, {}, 0)
+    core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)
+    try:
+        try:
+            user.reset(info)
+        except ControllerError as e:
+            checks.append(Check("reset", False, str(e)))
+            return checks
+        checks.append(Check("reset", True, "accepted the route, body, laser and limits"))
+        slowest, beyond, taken = 0.0, 0, 0
+        for _ in range(steps):
+            obs = core.observe_agent()
+            began = time.perf_counter()
+            try:
+                v, omega = user.act(obs)
+            except ControllerError as e:
+                checks.append(Check("act", False, str(e)))
+                return checks
+            slowest = max(slowest, time.perf_counter() - began)
+            if not (math.isfinite(v) and math.isfinite(omega)):
+                checks.append(
+                    Check("act", False, f"returned ({v}, {omega}) at {obs['time']:.1f} s")
+                )
+                return checks
+            if abs(v) > info["max_speed_m_s"] or abs(omega) > math.radians(
+                info["max_turn_rate_deg_s"]
+            ):
+                beyond += 1
+            taken += 1
+            if core.step((v, omega)):
+                break
+        checks.append(
+            Check("act", True, f"{taken} finite commands, slowest reply {slowest * 1e3:.1f} ms")
+        )
+        checks.append(
+            Check(
+                "limits",
+                beyond == 0,
+                "every command within the velocity limits"
+                if beyond == 0
+                else f"{beyond} of {taken} commands beyond {info['max_speed_m_s']} m/s or "
+                f"{info['max_turn_rate_deg_s']} deg/s (they are clamped; omega is in rad/s)",
+            )
+        )
+    finally:
+        user.close()
+    checks.append(Check("close", True, "shut down"))
+    return checks
