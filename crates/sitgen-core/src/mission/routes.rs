@@ -315,7 +315,20 @@ fn plan_peer_route(
             None => break,
         }
     }
+    close_loop(plan, spec.peer_at_end, &mut route);
     Ok(route)
+}
+
+/// A `loop` route drives from its last waypoint back to its first, a leg no draw checked: if
+/// that leg is not clear, the route comes back the way it went (w1 … wn, wn−1 … w2), so that
+/// every leg of the loop is one already known to be clear.
+fn close_loop(plan: &Plan<'_>, at_end: AtEnd, route: &mut Vec<(f64, f64)>) {
+    let n = route.len();
+    if at_end != AtEnd::Loop || n < 3 || plan.segment_clear(route[n - 1], route[0]) {
+        return;
+    }
+    let back: Vec<(f64, f64)> = route[1..n - 1].iter().rev().copied().collect();
+    route.extend(back);
 }
 
 /// A random clear leg: the longest of a few draws, each in a random direction, ending at a

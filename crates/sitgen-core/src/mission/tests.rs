@@ -109,6 +109,7 @@ fn rdp_matches_simplify_js_high_quality_on_every_reference_case() {
 mod situations {
     use crate::grid::distance::squared_distance_to;
     use crate::mission::astar::PathSearch;
+    use crate::mission::AtEnd;
     use crate::situation::{self, Role, Situation};
     use crate::spec::from_toml_str;
     use crate::terrain::presets;
@@ -198,13 +199,17 @@ mod situations {
                     planned >= spec.min_route_length_m - 1e-9,
                     "{name} {seed}: {planned} m"
                 );
-                // Every peer leg is a straight line clear of the dilated map (dense sampling).
+                // Every peer leg is a straight line clear of the dilated map (dense sampling),
+                // including the leg that closes a loop.
                 for p in &s.robots[1..] {
                     assert_eq!(p.role, Role::Peer);
                     let mut at = (p.start.x_m, p.start.y_m);
-                    for w in &p.waypoints {
-                        for k in 0..=400 {
-                            let t = k as f64 / 400.0;
+                    let closing = (p.at_end == AtEnd::Loop).then(|| p.waypoints[0]);
+                    for w in p.waypoints.iter().chain(&closing) {
+                        // Midpoints of 400 pieces: endpoints are cell centres, and a sample
+                        // exactly on a cell corner would count a cell the line only touches.
+                        for k in 0..400 {
+                            let t = (k as f64 + 0.5) / 400.0;
                             let q = (at.0 + t * (w[0] - at.0), at.1 + t * (w[1] - at.1));
                             let (c, row) = cell(&map, q);
                             assert!(
