@@ -1,0 +1,31 @@
+"""A controller program that misbehaves on purpose, as its argument says: `crash` exits after a
+few steps, `hang` stops replying, `garbage` replies with text that is not JSON, `noreply` sends
+an object without a command, `nan` sends NaN; `good` drives straight at 0.3 m/s."""
+
+import json
+import sys
+import time
+
+mode = sys.argv[1]
+for step, line in enumerate(sys.stdin):
+    message = json.loads(line)
+    if message["type"] == "end":
+        break
+    if message["type"] == "reset":
+        reply = '{"ready": true}'
+    elif step >= 5 and mode == "crash":
+        print("simulated failure in the planner", file=sys.stderr)
+        sys.exit(3)
+    elif step >= 5 and mode == "hang":
+        time.sleep(30)
+        reply = '{"v": 0, "omega": 0}'
+    elif step >= 5 and mode == "garbage":
+        reply = "hello"
+    elif step >= 5 and mode == "noreply":
+        reply = '{"speed": 1}'
+    elif step >= 5 and mode == "nan":
+        reply = '{"v": NaN, "omega": 0}'
+    else:
+        reply = '{"v": 0.3, "omega": 0.0}'
+    sys.stdout.write(reply + "\n")
+    sys.stdout.flush()

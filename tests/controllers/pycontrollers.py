@@ -1,0 +1,42 @@
+"""Python controllers for the tests: one that drives, and ones that fail in each way."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class Forward:
+    """Drives straight at 0.3 m/s and records what it was given."""
+
+    def __init__(self) -> None:
+        self.info: dict[str, Any] = {}
+        self.observations: list[Any] = []
+
+    def reset(self, info: dict[str, Any]) -> None:
+        self.info = info
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        self.observations.append(obs)
+        return 0.3, 0.0
+
+
+class Raises(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        if obs.time > 0.45:
+            raise ValueError("lost track of the goal")
+        return 0.3, 0.0
+
+
+class ReturnsText(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        return "fast", "left"  # type: ignore[return-value]
+
+
+class ReturnsNaN(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        return float("nan"), 0.0
+
+
+class NoAct:
+    def reset(self, info: dict[str, Any]) -> None:
+        pass
