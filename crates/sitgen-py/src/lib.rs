@@ -1,6 +1,7 @@
 //! Python bindings of sitgen-core: thin wrappers, no logic. File names mirror the core's
 //! modules; long calls release the GIL.
 
+mod campaign;
 mod interchange;
 mod mission;
 mod run;
@@ -36,5 +37,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     situation::register(m)?;
     sim::register(m)?;
     run::register(m)?;
+    campaign::register(m)?;
     Ok(())
 }

@@ -136,7 +136,15 @@ fn record_dict(py: Python<'_>, rec: RunRecord, agent: u32) -> PyResult<Bound<'_,
     Ok(d)
 }
 
+/// Check a run spec (JSON); returns it with defaults filled. The error names the field.
+#[pyfunction]
+fn check_run_spec(spec_json: &str) -> PyResult<String> {
+    let spec = RunSpec::from_json(spec_json, "run").map_err(spec_error)?;
+    serde_json::to_string(&spec).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRun>()?;
+    m.add_function(wrap_pyfunction!(check_run_spec, m)?)?;
     Ok(())
 }

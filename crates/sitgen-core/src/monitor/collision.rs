@@ -18,7 +18,9 @@
 //! have seen the other party separates perception faults (the paper's run 207: a robot
 //! outside the field of view) from control faults (run 231: seen, and still hit).
 //!
-//! **Parameters.** `monitor.visibility_window_s` (seconds, default 1).
+//! **Parameters.** `monitor.visibility_window_s` (seconds, default 1);
+//! `monitor.merge_gap_s` (seconds, default 1): a contact broken for less than this and resumed
+//! continues the same collision.
 //!
 //! **Example.** `   12.3 s  agent    collision with peer 2 at 0.00 m/s (not visible 1 s before), 4.1 s`
 //!
@@ -46,14 +48,21 @@ pub(super) struct Detector {
 }
 
 impl Detector {
-    pub(super) fn new(robots: usize, agent: u32, window_s: f64, fov_deg: f64, dt_s: f64) -> Self {
+    pub(super) fn new(
+        robots: usize,
+        agent: u32,
+        window_s: f64,
+        fov_deg: f64,
+        dt_s: f64,
+        merge_steps: u64,
+    ) -> Self {
         Self {
             agent,
             last_seen: vec![None; robots],
-            window_steps: (window_s / dt_s - 1e-9).ceil() as u64,
+            window_steps: super::steps(window_s, dt_s),
             window_s,
             sees_behind: fov_deg >= 360.0,
-            lasting: Lasting::default(),
+            lasting: Lasting::new(merge_steps),
         }
     }
 
@@ -75,7 +84,7 @@ impl Detector {
         }
         active.sort();
         let keys: Vec<Key> = active.iter().map(|a| a.0).collect();
-        self.lasting.close_inactive(&keys, frame.step, log);
+        self.lasting.update(&keys, frame.step, log);
         for (i, &key) in keys.iter().enumerate() {
             if i > 0 && keys[i - 1] == key {
                 continue;

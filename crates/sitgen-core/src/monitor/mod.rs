@@ -47,6 +47,11 @@ pub struct MonitorSpec {
     /// count as visible, seconds, in (0, 3600]. Default 1.
     #[serde(default = "default_visibility_window_s")]
     pub visibility_window_s: f64,
+    /// A collision or unsafe proximity interrupted for less than this and resumed is one
+    /// event, seconds, in [0, 3600]. Default 1: a robot that pushes, backs off a centimetre and
+    /// pushes again is in one accident, not dozens.
+    #[serde(default = "default_merge_gap_s")]
+    pub merge_gap_s: f64,
 }
 
 fn default_unsafe_proximity_m() -> f64 {
@@ -64,6 +69,9 @@ fn default_waypoint_radius_m() -> f64 {
 fn default_visibility_window_s() -> f64 {
     1.0
 }
+fn default_merge_gap_s() -> f64 {
+    1.0
+}
 
 impl Default for MonitorSpec {
     fn default() -> Self {
@@ -73,6 +81,7 @@ impl Default for MonitorSpec {
             loitering_window_s: default_loitering_window_s(),
             waypoint_radius_m: default_waypoint_radius_m(),
             visibility_window_s: default_visibility_window_s(),
+            merge_gap_s: default_merge_gap_s(),
         }
     }
 }
@@ -89,7 +98,8 @@ impl MonitorSpec {
         )?;
         SpecError::check_positive(&p("loitering_window_s"), self.loitering_window_s, 3600.0)?;
         SpecError::check_positive(&p("waypoint_radius_m"), self.waypoint_radius_m, 100.0)?;
-        SpecError::check_positive(&p("visibility_window_s"), self.visibility_window_s, 3600.0)
+        SpecError::check_positive(&p("visibility_window_s"), self.visibility_window_s, 3600.0)?;
+        SpecError::check_in(&p("merge_gap_s"), self.merge_gap_s, 0.0, 3600.0)
     }
 }
 
@@ -251,6 +261,11 @@ fn seconds(step: u64, dt_s: f64) -> f64 {
     (step as f64 * dt_s * 1e9).round() / 1e9
 }
 
+/// Whole steps in `seconds` (rounded up).
+fn steps(seconds: f64, dt_s: f64) -> u64 {
+    (seconds / dt_s - 1e-9).ceil().max(0.0) as u64
+}
+
 /// What every detector sees after a step.
 pub struct Frame<'a> {
     /// Steps taken so far (the frame's time is `step · dt`).
@@ -301,35 +316,54 @@ impl Log {
 }
 
 /// Lasting events of one kind keyed by who is involved: opened when a key becomes active,
-/// closed when it stops being active.
+/// closed when it has been inactive for `grace_steps` (ending where it became inactive), so a
+/// contact broken for a moment and resumed — a robot that pushes, turns a little and pushes
+/// again — stays one event.
 #[derive(Debug)]
 struct Lasting<K: Ord + Copy> {
     open: BTreeMap<K, usize>,
-}
-
-impl<K: Ord + Copy> Default for Lasting<K> {
-    fn default() -> Self {
-        Self {
-            open: BTreeMap::new(),
-        }
-    }
+    /// Open keys not active now, with the step since which they are not.
+    inactive_since: BTreeMap<K, u64>,
+    grace_steps: u64,
 }
 
 impl<K: Ord + Copy> Lasting<K> {
-    /// Close every open event whose key is not in `active` (sorted or not).
-    fn close_inactive(&mut self, active: &[K], step: u64, log: &mut Log) {
-        self.open.retain(|k, &mut i| {
-            let keep = active.contains(k);
-            if !keep {
-                log.close(i, step);
-            }
-            keep
-        });
+    fn new(grace_steps: u64) -> Self {
+        Self {
+            open: BTreeMap::new(),
+            inactive_since: BTreeMap::new(),
+            grace_steps,
+        }
     }
 
-    /// Close everything still open.
+    /// Note which open keys are active at `step`; close those inactive for the grace period.
+    /// Returns the keys closed.
+    fn update(&mut self, active: &[K], step: u64, log: &mut Log) -> Vec<K> {
+        let mut closed = Vec::new();
+        for (&k, &i) in &self.open {
+            if active.contains(&k) {
+                self.inactive_since.remove(&k);
+                continue;
+            }
+            let since = *self.inactive_since.entry(k).or_insert(step);
+            if step - since >= self.grace_steps {
+                log.close(i, since);
+                closed.push(k);
+            }
+        }
+        for k in &closed {
+            self.open.remove(k);
+            self.inactive_since.remove(k);
+        }
+        closed
+    }
+
+    /// Close everything still open: at `step`, or where it became inactive.
     fn close_all(&mut self, step: u64, log: &mut Log) {
-        self.close_inactive(&[], step, log);
+        for (k, i) in std::mem::take(&mut self.open) {
+            log.close(i, self.inactive_since.get(&k).copied().unwrap_or(step));
+        }
+        self.inactive_since.clear();
     }
 }
 
@@ -372,8 +406,12 @@ impl Monitor {
                 spec.visibility_window_s,
                 world.spec().laser.fov_deg,
                 dt_s,
+                steps(spec.merge_gap_s, dt_s),
             ),
-            unsafe_proximity: unsafe_proximity::Detector::new(spec.unsafe_proximity_m),
+            unsafe_proximity: unsafe_proximity::Detector::new(
+                spec.unsafe_proximity_m,
+                steps(spec.merge_gap_s, dt_s),
+            ),
             loitering: loitering::Detector::new(
                 world.robots(),
                 spec.loitering_distance_m,

@@ -10,7 +10,8 @@
 //! it lasts, so a long tailgate outranks a brief brush.
 //!
 //! **Parameters.** `monitor.unsafe_proximity_m` (metres, default 0.5: about the Pioneer's width,
-//! the clearance a person would keep from a moving robot of that size).
+//! the clearance a person would keep from a moving robot of that size); `monitor.merge_gap_s`
+//! (seconds, default 1): a near miss interrupted for less than this and resumed is one event.
 //!
 //! **Example.** `    8.0 s  agent    unsafe proximity to peer 1, min clearance 0.12 m, 3.4 s`
 //!
@@ -30,10 +31,10 @@ pub(super) struct Detector {
 }
 
 impl Detector {
-    pub(super) fn new(threshold_m: f64) -> Self {
+    pub(super) fn new(threshold_m: f64, merge_steps: u64) -> Self {
         Self {
             threshold_m,
-            lasting: Lasting::default(),
+            lasting: Lasting::new(merge_steps),
             min_clearance: Default::default(),
         }
     }
@@ -55,15 +56,7 @@ impl Detector {
             }
         }
         let keys: Vec<(u32, u32)> = close.iter().map(|c| c.0).collect();
-        let ended: Vec<(u32, u32)> = self
-            .lasting
-            .open
-            .keys()
-            .filter(|k| !keys.contains(k))
-            .copied()
-            .collect();
-        self.lasting.close_inactive(&keys, frame.step, log);
-        for k in ended {
+        for k in self.lasting.update(&keys, frame.step, log) {
             self.min_clearance.remove(&k);
         }
         for (key, clearance) in close {

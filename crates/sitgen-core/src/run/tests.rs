@@ -369,3 +369,38 @@ fn driving_out_and_back_is_not_loitering() {
         .iter()
         .any(|e| e.kind == EventKind::Loitering && e.robot == 0));
 }
+
+#[test]
+fn a_contact_broken_for_a_moment_and_resumed_is_one_collision() {
+    // The agent pushes into the wall, backs off one step, pushes again, for 10 s; then backs
+    // away for good. With the default 1 s merge gap that is one collision; with none, one per
+    // push.
+    let s = situation(
+        200,
+        &wall_at_15m(200),
+        vec![robot(0, (14.6, 10.0, 0.0), &[[18.0, 10.0]], "straight")],
+    );
+    let collisions = |merge_gap_s: f64| {
+        let mut spec = spec(Some("cmd:pusher"), 30.0);
+        spec.monitor.merge_gap_s = merge_gap_s;
+        let mut r = Run::new(&s, &spec, 0).unwrap();
+        for k in 0..300 {
+            let v = match k {
+                0..=99 if k % 4 == 3 => -0.5,
+                0..=99 => 0.5,
+                _ => -0.2,
+            };
+            r.step(Some((v, 0.0)));
+        }
+        r.finish()
+            .events
+            .into_iter()
+            .filter(|e| e.kind == EventKind::Collision)
+            .collect::<Vec<_>>()
+    };
+    let merged = collisions(1.0);
+    assert_eq!(merged.len(), 1, "{merged:#?}");
+    let end = merged[0].end_s.unwrap();
+    assert!(end > 9.0 && end <= 10.1, "ends when the pushing stops: {end}");
+    assert!(collisions(0.0).len() > 10);
+}

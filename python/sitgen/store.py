@@ -1,0 +1,402 @@
+"""The campaign store: one SQLite file (WAL) holding a campaign, its situations, runs, events
+and trajectories. The schema is versioned; docs/store.md documents every table and column.
+
+Writes happen one batch per transaction, so a process killed at any moment leaves every
+committed run intact and loses only the runs it had in flight; a resumed campaign skips the
+runs already stored.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import zlib
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+SCHEMA_VERSION = 1
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (
+    key TEXT PRIMARY KEY,
+    value TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS campaign (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    spec TEXT NOT NULL,
+    seed INTEGER NOT NULL,
+    n INTEGER NOT NULL,
+    sitgen_version TEXT NOT NULL,
+    created_at TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS situations (
+    id INTEGER PRIMARY KEY,
+    seed INTEGER NOT NULL,
+    spec TEXT NOT NULL,
+    terrain TEXT,
+    peers INTEGER,
+    content_hash TEXT,
+    situation TEXT
+);
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY,
+    situation_id INTEGER NOT NULL REFERENCES situations (id),
+    controller TEXT NOT NULL,
+    run_spec TEXT NOT NULL,
+    run_seed INTEGER NOT NULL,
+    outcome TEXT NOT NULL,
+    reason TEXT NOT NULL,
+    score REAL NOT NULL,
+    breakdown TEXT NOT NULL,
+    steps INTEGER NOT NULL,
+    time_s REAL NOT NULL,
+    collisions INTEGER NOT NULL,
+    min_clearance_m REAL,
+    waypoints_reached INTEGER NOT NULL,
+    waypoints INTEGER NOT NULL,
+    events_jsonl TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
+CREATE TABLE IF NOT EXISTS events (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    seq INTEGER NOT NULL,
+    kind TEXT NOT NULL,
+    start_s REAL NOT NULL,
+    end_s REAL,
+    robot INTEGER NOT NULL,
+    other TEXT,
+    scored INTEGER NOT NULL,
+    details TEXT NOT NULL,
+    PRIMARY KEY (run_id, seq)
+);
+CREATE INDEX IF NOT EXISTS events_by_kind ON events (kind);
+CREATE TABLE IF NOT EXISTS trajectories (
+    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
+    robots INTEGER NOT NULL,
+    rows INTEGER NOT NULL,
+    encoding TEXT NOT NULL,
+    data BLOB NOT NULL
+);
+"""
+
+TRAJECTORY_ENCODING = "f32le-zlib"
+"""Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
+
+
+class StoreError(Exception):
+    """A store that cannot be used (wrong file, other campaign, newer schema)."""
+
+
+@dataclass(frozen=True)
+class RunRow:
+    """One stored run, as produced by a campaign."""
+
+    id: int
+    situation_seed: int
+    situation_spec: dict[str, Any]
+    situation_json: str | None
+    run_spec: dict[str, Any]
+    run_seed: int
+    controller: str
+    record: dict[str, Any] | None
+    """The run record (outcome, reason, score, events, …); None if generation failed."""
+    error: str | None
+    events_jsonl: str
+    trajectory: bytes | None
+    robots: int
+
+
+class Store:
+    """An open campaign store."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        try:
+            self.db = sqlite3.connect(self.path, timeout=30.0)
+            self.db.execute("PRAGMA journal_mode=WAL")
+            self.db.execute("PRAGMA synchronous=NORMAL")
+            self.db.execute("PRAGMA foreign_keys=ON")
+            version = self._schema_version()
+        except sqlite3.DatabaseError as e:
+            raise StoreError(f"{self.path}: not a sitgen campaign store ({e})") from None
+        if version is None:
+            with self.db:
+                self.db.executescript(SCHEMA)
+                self.db.execute(
+                    "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
+                    (str(SCHEMA_VERSION),),
+                )
+        elif version > SCHEMA_VERSION:
+            raise StoreError(
+                f"{self.path}: store schema version {version} is newer than this sitgen's "
+                f"({SCHEMA_VERSION}); upgrade sitgen"
+            )
+
+    def _schema_version(self) -> int | None:
+        has_meta = self.db.execute(
+            "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = 'meta'"
+        ).fetchone()
+        if not has_meta:
+            tables = self.db.execute("SELECT count(*) FROM sqlite_master").fetchone()[0]
+            if tables:
+                raise StoreError(f"{self.path}: an SQLite file, but not a sitgen campaign store")
+            return None
+        row = self.db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+        return int(row[0]) if row else None
+
+    def close(self) -> None:
+        self.db.close()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # The campaign.
+
+    def campaign(self) -> dict[str, Any] | None:
+        row = self.db.execute(
+            "SELECT spec, seed, n, sitgen_version, created_at FROM campaign WHERE id = 1"
+        ).fetchone()
+        if row is None:
+            return None
+        return {
+            "spec": json.loads(row[0]),
+            "seed": row[1],
+            "n": row[2],
+            "sitgen_version": row[3],
+            "created_at": row[4],
+        }
+
+    def start_campaign(
+        self, spec: dict[str, Any], seed: int, n: int, version: str, created_at: str
+    ) -> None:
+        """Record the campaign, or check that the store holds this one (then resume it)."""
+        stored = self.campaign()
+        if stored is None:
+            with self.db:
+                self.db.execute(
+                    "INSERT INTO campaign (id, spec, seed, n, sitgen_version, created_at) "
+                    "VALUES (1, ?, ?, ?, ?, ?)",
+                    (json.dumps(spec, sort_keys=True), seed, n, version, created_at),
+                )
+            return
+        if stored["spec"] != json.loads(json.dumps(spec, sort_keys=True)) or stored["seed"] != seed:
+            raise StoreError(
+                f"{self.path} holds another campaign (seed {stored['seed']}, a different spec); "
+                "give a new --db to start this one"
+            )
+        if n > stored["n"]:
+            with self.db:
+                self.db.execute("UPDATE campaign SET n = ? WHERE id = 1", (n,))
+
+    def done_ids(self) -> set[int]:
+        return {r[0] for r in self.db.execute("SELECT id FROM runs")}
+
+    # Writing.
+
+    def add_runs(self, rows: Iterable[RunRow]) -> None:
+        """Store finished runs, all or none."""
+        with self.db:
+            for row in rows:
+                self._add_run(row)
+
+    def _add_run(self, row: RunRow) -> None:
+        situation = json.loads(row.situation_json) if row.situation_json else None
+        terrain = row.situation_spec.get("terrain", {}).get("preset") or row.situation_spec.get(
+            "terrain", {}
+        ).get("source", {}).get("kind")
+        self.db.execute(
+            "INSERT INTO situations (id, seed, spec, terrain, peers, content_hash, situation) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?)",
+            (
+                row.id,
+                row.situation_seed,
+                json.dumps(row.situation_spec, sort_keys=True),
+                terrain,
+                len(situation["robots"]) - 1 if situation else None,
+                situation["provenance"]["content_hash"] if situation else None,
+                row.situation_json,
+            ),
+        )
+        rec = row.record or {
+            "outcome": "error",
+            "reason": row.error or "unknown failure",
+            "score": {"total": 0.0, "breakdown": {}},
+            "events": [],
+            "steps": 0,
+            "time_s": 0.0,
+        }
+        events = rec["events"]
+        agent_clearances = [
+            e["details"]["min_clearance_m"]
+            for e in events
+            if e["kind"] == "unsafe_proximity" and e["scored"]
+        ]
+        waypoints = len(situation["robots"][0]["waypoints"]) if situation else 0
+        reached = sum(1 for e in events if e["kind"] == "waypoint_reached" and e["robot"] == 0)
+        self.db.execute(
+            "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
+            "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
+            "waypoints, events_jsonl) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (
+                row.id,
+                row.id,
+                row.controller,
+                json.dumps(row.run_spec, sort_keys=True),
+                row.run_seed,
+                rec["outcome"],
+                rec["reason"],
+                rec["score"]["total"],
+                json.dumps(rec["score"]["breakdown"], sort_keys=True),
+                rec["steps"],
+                rec["time_s"],
+                sum(1 for e in events if e["kind"] == "collision" and e["scored"]),
+                min(agent_clearances) if agent_clearances else None,
+                reached,
+                waypoints,
+                row.events_jsonl,
+            ),
+        )
+        self.db.executemany(
+            "INSERT INTO events (run_id, seq, kind, start_s, end_s, robot, other, scored, "
+            "details) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            [
+                (
+                    row.id,
+                    seq,
+                    e["kind"],
+                    e["start_s"],
+                    e["end_s"],
+                    e["robot"],
+                    None if e["other"] is None else str(e["other"]),
+                    int(e["scored"]),
+                    json.dumps(e["details"], sort_keys=True),
+                )
+                for seq, e in enumerate(events)
+            ],
+        )
+        if row.trajectory is not None:
+            rows = rec["steps"] + 1
+            self.db.execute(
+                "INSERT INTO trajectories (run_id, robots, rows, encoding, data) "
+                "VALUES (?, ?, ?, ?, ?)",
+                (row.id, row.robots, rows, TRAJECTORY_ENCODING, row.trajectory),
+            )
+
+    # Reading.
+
+    def ranked(self, top: int | None = None) -> list[dict[str, Any]]:
+        """Runs, most dangerous first (score descending, then id)."""
+        sql = (
+            "SELECT r.id, r.score, r.outcome, r.reason, r.breakdown, r.controller, r.steps, "
+            "r.time_s, r.collisions, r.min_clearance_m, r.waypoints_reached, r.waypoints, "
+            "s.terrain, s.peers, s.seed FROM runs r JOIN situations s ON s.id = r.situation_id "
+            "ORDER BY r.score DESC, r.id"
+        )
+        params: tuple[Any, ...] = ()
+        if top is not None:
+            sql += " LIMIT ?"
+            params = (top,)
+        out = []
+        for row in self.db.execute(sql, params):
+            breakdown = json.loads(row[4])
+            out.append(
+                {
+                    "run": row[0],
+                    "score": row[1],
+                    "outcome": row[2],
+                    "reason": row[3],
+                    "main_events": main_events(breakdown),
+                    "breakdown": breakdown,
+                    "controller": row[5],
+                    "steps": row[6],
+                    "time_s": row[7],
+                    "collisions": row[8],
+                    "min_clearance_m": row[9],
+                    "waypoints_reached": row[10],
+                    "waypoints": row[11],
+                    "terrain": row[12],
+                    "peers": row[13],
+                    "situation_seed": row[14],
+                }
+            )
+        return out
+
+    def scores(self) -> list[float]:
+        return [r[0] for r in self.db.execute("SELECT score FROM runs ORDER BY id")]
+
+    def run_row(self, run_id: int) -> dict[str, Any]:
+        row = self.db.execute(
+            "SELECT r.id, s.seed, s.spec, s.situation, s.content_hash, r.run_spec, r.run_seed, "
+            "r.controller, r.score, r.events_jsonl, r.outcome FROM runs r "
+            "JOIN situations s ON s.id = r.situation_id WHERE r.id = ?",
+            (run_id,),
+        ).fetchone()
+        if row is None:
+            raise StoreError(f"{self.path}: no run {run_id}")
+        return {
+            "id": row[0],
+            "situation_seed": row[1],
+            "situation_spec": json.loads(row[2]),
+            "situation": row[3],
+            "content_hash": row[4],
+            "run_spec": json.loads(row[5]),
+            "run_seed": row[6],
+            "controller": row[7],
+            "score": row[8],
+            "events_jsonl": row[9],
+            "outcome": row[10],
+        }
+
+    def trajectory(self, run_id: int) -> npt.NDArray[np.float32] | None:
+        row = self.db.execute(
+            "SELECT robots, rows, encoding, data FROM trajectories WHERE run_id = ?", (run_id,)
+        ).fetchone()
+        if row is None:
+            return None
+        robots, rows, encoding, data = row
+        if encoding != TRAJECTORY_ENCODING:
+            raise StoreError(f"{self.path}: run {run_id}: unknown trajectory encoding {encoding}")
+        flat = np.frombuffer(zlib.decompress(data), dtype="<f4")
+        return flat.reshape(rows, robots, 3)
+
+    def rows(self, table: str) -> Iterator[dict[str, Any]]:
+        """Every row of ``table`` (situations without the embedded situation JSON)."""
+        columns = [c[1] for c in self.db.execute(f"PRAGMA table_info({table})")]
+        if table == "situations":
+            columns.remove("situation")
+        if table == "trajectories":
+            columns.remove("data")
+        cursor = self.db.execute(f"SELECT {', '.join(columns)} FROM {table} ORDER BY 1")
+        for values in cursor:
+            yield dict(zip(columns, values, strict=True))
+
+    def columns(self, table: str) -> list[str]:
+        return [
+            c[1]
+            for c in self.db.execute(f"PRAGMA table_info({table})")
+            if (table, c[1]) not in {("situations", "situation"), ("trajectories", "data")}
+        ]
+
+
+def main_events(breakdown: dict[str, Any]) -> str:
+    """The kinds that earned points, most points first: ``collision×2, unsafe_proximity×1``."""
+    ordered = sorted(breakdown.items(), key=lambda kv: (-kv[1]["points"], kv[0]))
+    return ", ".join(f"{kind}×{line['count']}" for kind, line in ordered)
+
+
+@contextmanager
+def open_store(path: str | Path) -> Iterator[Store]:
+    store = Store(path)
+    try:
+        yield store
+    finally:
+        store.close()
