@@ -29,7 +29,7 @@ import time
 import tomllib
 import zlib
 from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from importlib import resources
@@ -261,13 +261,13 @@ def is_user(job: Job) -> bool:
 
 
 class Executor:
-    """Runs batches of jobs and yields (job, result) as batches finish."""
+    """Runs jobs and yields (job, result) as each finishes; ``stop()`` starts no more."""
 
     def __init__(self, workers: int, backend: str = "local", address: str | None = None) -> None:
         self.workers = max(1, workers)
         self.backend = backend
-        self.address = address
-        self._pool: ProcessPoolExecutor | None = None
+        self._stopping = False
+        self._stream: _core.JobStream | None = None
         if backend == "ray":
             try:
                 import ray
@@ -282,41 +282,51 @@ class Executor:
         elif backend != "local":
             raise _core.SpecError(f"--backend: `{backend}` is not one of local, ray")
 
-    def batches(self, jobs: list[Job], batch: int) -> Iterator[list[tuple[Job, dict[str, Any]]]]:
-        chunks = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
+    def results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         if self.backend == "ray":
-            yield from self._ray_batches(chunks)
+            yield from self._ray_results(jobs)
+        elif any(is_user(j) for j in jobs):
+            yield from self._pool_results(jobs)
+        else:
+            # Built-in controllers: Rust threads, each job yielded as soon as it is done.
+            self._stream = _core.JobStream([_core_args(j) for j in jobs], self.workers)
+            for i, result in self._stream:
+                yield jobs[i], result
+
+    def _pool_results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
+        if self.workers == 1:
+            for job in jobs:
+                if self._stopping:
+                    return
+                yield job, run_user_job(job)
             return
-        for chunk in chunks:
-            yield list(zip(chunk, self._local(chunk), strict=True))
+        with ProcessPoolExecutor(self.workers) as pool:
+            futures = {pool.submit(run_user_job, job): job for job in jobs}
+            for future in as_completed(futures):
+                if self._stopping:
+                    for f in futures:
+                        f.cancel()
+                if not future.cancelled():
+                    yield futures[future], future.result()
 
-    def _local(self, chunk: list[Job]) -> list[dict[str, Any]]:
-        if any(is_user(j) for j in chunk):
-            if self.workers == 1:
-                return [run_user_job(j) for j in chunk]
-            if self._pool is None:
-                self._pool = ProcessPoolExecutor(self.workers)
-            return list(self._pool.map(run_user_job, chunk))
-        return list(_core.run_jobs([_core_args(j) for j in chunk], self.workers))
-
-    def _ray_batches(
-        self, chunks: list[list[Job]]
-    ) -> Iterator[list[tuple[Job, dict[str, Any]]]]:
+    def _ray_results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         ray = self._ray
+        batch = 4
+        queue = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
         pending: dict[Any, list[Job]] = {}
-        queue = list(chunks)
-        # Keep a few batches in flight per worker; store each as it comes back.
-        while queue or pending:
-            while queue and len(pending) < 2 * self.workers:
+        # Keep a few batches in flight per worker; yield each as it comes back.
+        while (queue and not self._stopping) or pending:
+            while queue and not self._stopping and len(pending) < 2 * self.workers:
                 chunk = queue.pop(0)
                 pending[self._remote.remote([_core_args(j) for j in chunk])] = chunk
             ready, _ = ray.wait(list(pending), num_returns=1)
             chunk = pending.pop(ready[0])
-            yield list(zip(chunk, ray.get(ready[0]), strict=True))
+            yield from zip(chunk, ray.get(ready[0]), strict=True)
 
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
+    def stop(self) -> None:
+        self._stopping = True
+        if self._stream is not None:
+            self._stream.stop()
 
 
 def _ray_batch(args: list[tuple[str, int, str, int]]) -> list[dict[str, Any]]:
@@ -377,20 +387,16 @@ def run_campaign(
         if on_progress:
             on_progress(n - len(todo), n)
         executor = Executor(workers, backend, address)
-        interrupted = False
         ran = 0
-        try:
-            batch = 4 * executor.workers
-            for finished in executor.batches(todo, batch):
-                store.add_runs(_row(job, result) for job, result in finished)
-                ran += len(finished)
-                if on_progress:
-                    on_progress(n - len(todo) + ran, n)
-                if stop is not None and stop():
-                    interrupted = ran < len(todo)
-                    break
-        finally:
-            executor.close()
+        for job, result in executor.results(todo):
+            # One transaction per run: a kill loses only the runs in flight.
+            store.add_runs([_row(job, result)])
+            ran += 1
+            if on_progress:
+                on_progress(n - len(todo) + ran, n)
+            if stop is not None and stop():
+                executor.stop()
+        interrupted = ran < len(todo)
         total = len(store.done_ids())
     return CampaignResult(
         ran=ran, total=total, interrupted=interrupted, wall_s=time.perf_counter() - started

@@ -1,9 +1,15 @@
 //! Bindings for campaigns: many situations generated and run in Rust, across threads, without
 //! the GIL.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{channel, Receiver};
+use std::sync::{Arc, Mutex};
+
+use pyo3::exceptions::PyStopIteration;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
-use sitgen_core::run::{pack_trajectory, run_batch, Job, RunSpec};
+use rayon::prelude::*;
+use sitgen_core::run::{pack_trajectory, run_batch, run_job, Job, JobResult, RunSpec};
 use sitgen_core::spec;
 
 /// Parse one job; errors name the job and the field.
@@ -42,43 +48,122 @@ fn run_jobs<'py>(
     let results = py.detach(|| {
         run_batch(&good, threads)
             .into_iter()
-            .map(|r| {
-                r.map(|(s, rec)| {
-                    let packed = pack_trajectory(&rec.trajectory);
-                    let record = serde_json::to_string(&rec).expect("records serialize");
-                    (s.to_json(), record, rec.events_jsonl(), packed, rec.robots)
-                })
-            })
+            .map(pack)
             .collect::<Vec<_>>()
     });
     let mut results = results.into_iter();
-    let mut out = Vec::with_capacity(jobs.len());
-    for p in parsed {
-        let d = PyDict::new(py);
-        let result = match p {
-            Err(e) => Err(e),
-            Ok(_) => results.next().expect("one result per good job"),
-        };
-        match result {
-            Ok((situation, record, events, trajectory, robots)) => {
-                d.set_item("ok", true)?;
-                d.set_item("situation", situation)?;
-                d.set_item("record", record)?;
-                d.set_item("events_jsonl", events)?;
-                d.set_item("trajectory", PyBytes::new(py, &trajectory))?;
-                d.set_item("robots", robots)?;
-            }
-            Err(e) => {
-                d.set_item("ok", false)?;
-                d.set_item("error", e)?;
-            }
+    parsed
+        .into_iter()
+        .map(|p| {
+            let result = match p {
+                Err(e) => Err(e),
+                Ok(_) => results.next().expect("one result per good job"),
+            };
+            result_dict(py, result)
+        })
+        .collect()
+}
+
+/// A finished job, serialised off the GIL: (situation, record, events, trajectory, robots).
+type Packed = Result<(String, String, String, Vec<u8>, usize), String>;
+
+fn pack(result: JobResult) -> Packed {
+    result.map(|(s, rec)| {
+        let packed = pack_trajectory(&rec.trajectory);
+        let record = serde_json::to_string(&rec).expect("records serialize");
+        (s.to_json(), record, rec.events_jsonl(), packed, rec.robots)
+    })
+}
+
+fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    match result {
+        Ok((situation, record, events, trajectory, robots)) => {
+            d.set_item("ok", true)?;
+            d.set_item("situation", situation)?;
+            d.set_item("record", record)?;
+            d.set_item("events_jsonl", events)?;
+            d.set_item("trajectory", PyBytes::new(py, &trajectory))?;
+            d.set_item("robots", robots)?;
         }
-        out.push(d);
+        Err(e) => {
+            d.set_item("ok", false)?;
+            d.set_item("error", e)?;
+        }
     }
-    Ok(out)
+    Ok(d)
+}
+
+/// Jobs running on a pool of `threads` threads in the background; iterating yields
+/// (position in `jobs`, result dict) as each job finishes, so a slow job holds up nobody.
+/// `stop()` lets the jobs already started finish and starts no more.
+#[pyclass(name = "JobStream", module = "sitgen._core")]
+pub struct JobStream {
+    results: Mutex<Receiver<(usize, Packed)>>,
+    stop: Arc<AtomicBool>,
+}
+
+#[pymethods]
+impl JobStream {
+    #[new]
+    fn new(jobs: Vec<JobTuple>, threads: usize) -> PyResult<Self> {
+        let parsed: Vec<Result<Job, String>> =
+            jobs.iter().enumerate().map(|(i, j)| job(i, j)).collect();
+        let (tx, rx) = channel();
+        let stop = Arc::new(AtomicBool::new(false));
+        let stopping = Arc::clone(&stop);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+        std::thread::spawn(move || {
+            pool.install(|| {
+                parsed
+                    .into_par_iter()
+                    .enumerate()
+                    // One job per task, so idle threads take the next job, not half a batch.
+                    .with_max_len(1)
+                    .for_each_with(tx, |tx, (i, job)| {
+                        if stopping.load(Ordering::Relaxed) {
+                            return;
+                        }
+                        let result = job.and_then(|j| pack(run_job(&j)));
+                        // The receiver is gone only if Python dropped the stream.
+                        let _ = tx.send((i, result));
+                    })
+            })
+        });
+        Ok(Self {
+            results: Mutex::new(rx),
+            stop,
+        })
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__<'py>(&self, py: Python<'py>) -> PyResult<(usize, Bound<'py, PyDict>)> {
+        let next = py.detach(|| {
+            self.results
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .recv()
+        });
+        match next {
+            Ok((i, result)) => Ok((i, result_dict(py, result)?)),
+            Err(_) => Err(PyStopIteration::new_err(())),
+        }
+    }
+
+    /// Start no more jobs; those running finish and are still yielded.
+    fn stop(&self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run_jobs, m)?)?;
+    m.add_class::<JobStream>()?;
     Ok(())
 }

@@ -111,31 +111,26 @@ impl LaserSpec {
 
 /// Distance along the ray from `(ox, oy)` in unit direction `(dx, dy)` to where it enters the
 /// first occupied cell, or `max` if it meets none within `max` or leaves the map first.
-pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f64) -> f64 {
+///
+/// With `clearance` (each cell centre's distance to the nearest occupied cell centre, metres,
+/// row-major like the grid) the walk leaps across open ground: from a cell whose clearance is
+/// `d`, no occupied square is nearer than `d − res·√2` to any point of the cell, so the ray
+/// jumps that far and the cell walk starts again there. The result is the same crossing the
+/// plain walk finds (the walk resumes before any occupied cell); open maps with 10 m rays cost
+/// a few leaps instead of a hundred cells.
+pub fn ray_to_grid(
+    map: &Map,
+    clearance: Option<&[f32]>,
+    (ox, oy): (f64, f64),
+    (dx, dy): (f64, f64),
+    max: f64,
+) -> f64 {
     let g = &map.grid;
     let res = map.resolution_m;
     let (cols, rows) = (g.cols as i64, g.rows as i64);
-    // Column index from x, and row-from-the-bottom index from y.
-    let (cu, cw) = ((ox / res).floor() as i64, (oy / res).floor() as i64);
-    if cu < 0 || cw < 0 || cu >= cols || cw >= rows {
-        return max;
-    }
-    // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols (row 0
-    // is the top); the cells left to each edge bound the walk.
-    let mut index = ((rows - 1 - cw) * cols + cu) as usize;
-    if g.cells[index] {
-        return 0.0;
-    }
-    let (step_u, mut left_u) = if dx > 0.0 {
-        (1isize, cols - 1 - cu)
-    } else {
-        (-1, cu)
-    };
-    let (step_w, mut left_w) = if dy > 0.0 {
-        (-(cols as isize), rows - 1 - cw)
-    } else {
-        (cols as isize, cw)
-    };
+    // Leaping pays only when it skips a few cells.
+    let leap_min = 3.0 * res;
+    let cell_reach = res * std::f64::consts::SQRT_2;
     let delta_u = if dx != 0.0 {
         res / dx.abs()
     } else {
@@ -146,32 +141,69 @@ pub fn ray_to_grid(map: &Map, (ox, oy): (f64, f64), (dx, dy): (f64, f64), max: f
     } else {
         f64::INFINITY
     };
-    let mut t_u = first_crossing(ox, cu, dx, res);
-    let mut t_w = first_crossing(oy, cw, dy, res);
-    loop {
-        let t;
-        if t_u < t_w {
-            if left_u == 0 {
-                return max;
-            }
-            left_u -= 1;
-            index = index.wrapping_add_signed(step_u);
-            t = t_u;
-            t_u += delta_u;
-        } else {
-            if left_w == 0 {
-                return max;
-            }
-            left_w -= 1;
-            index = index.wrapping_add_signed(step_w);
-            t = t_w;
-            t_w += delta_w;
-        }
-        if t >= max {
+    // Where the current walk starts along the ray.
+    let mut t0 = 0.0;
+    'walk: loop {
+        let (px, py) = (ox + t0 * dx, oy + t0 * dy);
+        // Column index from x, and row-from-the-bottom index from y.
+        let (cu, cw) = ((px / res).floor() as i64, (py / res).floor() as i64);
+        if cu < 0 || cw < 0 || cu >= cols || cw >= rows {
             return max;
         }
+        // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols
+        // (row 0 is the top); the cells left to each edge bound the walk.
+        let mut index = ((rows - 1 - cw) * cols + cu) as usize;
         if g.cells[index] {
-            return t;
+            return t0;
+        }
+        let (step_u, mut left_u) = if dx > 0.0 {
+            (1isize, cols - 1 - cu)
+        } else {
+            (-1, cu)
+        };
+        let (step_w, mut left_w) = if dy > 0.0 {
+            (-(cols as isize), rows - 1 - cw)
+        } else {
+            (cols as isize, cw)
+        };
+        let mut t_u = t0 + first_crossing(px, cu, dx, res);
+        let mut t_w = t0 + first_crossing(py, cw, dy, res);
+        let mut t = t0;
+        loop {
+            if let Some(clear) = clearance {
+                // Less a micrometre, for the f32 rounding of the clearance.
+                let leap = f64::from(clear[index]) - cell_reach - 1e-6;
+                if leap >= leap_min {
+                    t0 = t + leap;
+                    if t0 >= max {
+                        return max;
+                    }
+                    continue 'walk;
+                }
+            }
+            if t_u < t_w {
+                if left_u == 0 {
+                    return max;
+                }
+                left_u -= 1;
+                index = index.wrapping_add_signed(step_u);
+                t = t_u;
+                t_u += delta_u;
+            } else {
+                if left_w == 0 {
+                    return max;
+                }
+                left_w -= 1;
+                index = index.wrapping_add_signed(step_w);
+                t = t_w;
+                t_w += delta_w;
+            }
+            if t >= max {
+                return max;
+            }
+            if g.cells[index] {
+                return t;
+            }
         }
     }
 }
@@ -260,8 +292,11 @@ mod tests {
             grid: g,
             resolution_m: 0.1,
         };
-        let t = ray_to_grid(&map, (0.05, 0.45), (1.0, 0.0), 10.0);
+        let t = ray_to_grid(&map, None, (0.05, 0.45), (1.0, 0.0), 10.0);
         assert!((t - 0.65).abs() < 1e-12, "{t}");
-        assert_eq!(ray_to_grid(&map, (0.05, 0.15), (1.0, 0.0), 10.0), 10.0);
+        assert_eq!(
+            ray_to_grid(&map, None, (0.05, 0.15), (1.0, 0.0), 10.0),
+            10.0
+        );
     }
 }

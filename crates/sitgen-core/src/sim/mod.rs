@@ -488,7 +488,13 @@ impl World {
             .iter()
             .map(|&(cb, sb)| {
                 let dir = (c * cb - s * sb, s * cb + c * sb);
-                let mut t = ray_to_grid(&self.map, origin, dir, laser.range_m);
+                let mut t = ray_to_grid(
+                    &self.map,
+                    Some(&self.clearance_m),
+                    origin,
+                    dir,
+                    laser.range_m,
+                );
                 let mut hit_robot = None;
                 for (id, rect, to, radius) in &others {
                     let along = to.0 * dir.0 + to.1 * dir.1;

@@ -278,6 +278,25 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+    #[test]
+    fn leaping_across_open_ground_finds_the_same_wall(seed in 0u64..1000, walls in 1usize..400) {
+        let mut choices = ChoiceSource::stream(seed, "leap");
+        let occupied: Vec<(usize, usize)> =
+            (0..walls).map(|_| (choices.index(150), choices.index(150))).collect();
+        let w = world(150, &occupied, vec![robot(0, 7.5, 7.5, 0.0)]);
+        for _ in 0..200 {
+            let origin = (choices.uniform(0.0, 15.0), choices.uniform(0.0, 15.0));
+            let a = choices.uniform(-3.2, 3.2);
+            let dir = (a.cos(), a.sin());
+            let plain = laser::ray_to_grid(w.map(), None, origin, dir, 10.0);
+            let leaping = laser::ray_to_grid(w.map(), Some(&w.clearance_m), origin, dir, 10.0);
+            prop_assert!((plain - leaping).abs() < 1e-9, "{:?} {}: {} vs {}", origin, a, plain, leaping);
+        }
+    }
+}
+
 #[test]
 fn same_situation_and_commands_give_identical_trajectories() {
     let run = || {
