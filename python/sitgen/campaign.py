@@ -10,8 +10,9 @@ A campaign spec (TOML) has a base situation spec (``[situation]``), a base run s
   ``situation.terrain.filters.coverage.target`` is the coverage filter's target.
 
 Job ``i`` of a campaign with seed ``S`` draws its values from its own stream (numpy's PCG64
-seeded with (S, i)) and uses situation seed = run seed = 63 bits of sha256("S:i"): every job is a pure function of (spec, S, i), so the results do not depend on
-the worker count, the backend, the order of completion or on interruptions.
+seeded with (S, i)) and uses situation seed = run seed = 63 bits of sha256("S:i"): every job
+is a pure function of (spec, S, i), so the results do not depend on the worker count, the
+backend, the order of completion or on interruptions.
 
 Built-in controllers run in Rust across threads (the GIL released); Python and external
 controllers run in a process pool; ``backend="ray"`` sends the same batches to a Ray cluster.
@@ -180,12 +181,12 @@ def build_job(spec: CampaignSpec, seed: int, index: int) -> Job:
             resolved = True
         section, _, rest = path.partition(".")
         kind, args = next(iter(dist.items()))
+
+        def draw(old: Any, kind: str = kind, args: list[Any] = args) -> Any:
+            return _draw(rng, kind, args, old)
+
         try:
-            _set(
-                situation if section == "situation" else run,
-                rest,
-                lambda old, kind=kind, args=args: _draw(rng, kind, args, old),
-            )
+            _set(situation if section == "situation" else run, rest, draw)
         except ValueError as e:
             raise _core.SpecError(f"vary.{path!r}: {e}") from None
     situation = _resolve(situation, index)

@@ -18,6 +18,7 @@ from rich.table import Table
 from sitgen import _core
 from sitgen.config import preset_names, preset_spec
 from sitgen.situation import Situation, generate_situation
+from sitgen.store import StoreError
 from sitgen.terrain import Grid, generate_terrain
 
 app = typer.Typer(
@@ -150,20 +151,47 @@ def show(
 
 @app.command()
 def export(
-    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    source: Annotated[Path, typer.Argument(help="Situation file (JSON) or campaign store (.db).")],
     format: Annotated[
         str,
-        typer.Option("--format", "-f", help="stage (Player/Stage world) or ros (map YAML+PGM)."),
+        typer.Option(
+            "--format",
+            "-f",
+            help="Situation: stage (Player/Stage world) or ros (map YAML+PGM). "
+            "Campaign: parquet or csv (one file per table).",
+        ),
     ] = "stage",
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
         "export"
     ),
 ) -> None:
-    """Export a situation for Player/Stage or ROS."""
+    """Export a situation for Player/Stage or ROS, or a campaign's tables for analysis
+    (pandas, polars, DuckDB)."""
+    if _is_store(source):
+        from sitgen.rank import export_tables
+
+        if format == "stage":
+            format = "parquet"
+        if format not in ("parquet", "csv"):
+            raise UsageError(f"--format: `{format}` is not one of parquet, csv for a campaign")
+        for path in export_tables(source, output, format):
+            typer.echo(f"wrote {path}")
+        return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")
-    for path in Situation.load(situation).export(output, format):
+    for path in Situation.load(source).export(output, format):
         typer.echo(f"wrote {path}")
+
+
+def _is_store(path: Path) -> bool:
+    """Whether ``path`` is an SQLite file (a campaign store) rather than a situation."""
+    if path.suffix == ".db":
+        return True
+    try:
+        with path.open("rb") as f:
+            return f.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
 
 
 def _read_run_spec(path: Path | None) -> dict[str, Any]:
@@ -268,6 +296,155 @@ def check_controller_command(
 
 
 @app.command()
+def campaign(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML). Omit for the paper's experiment."),
+    ] = None,
+    n: Annotated[
+        int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)] = 0,
+    db: Annotated[Path, typer.Option("--db", help="Campaign store (SQLite).")] = Path(
+        "campaign.db"
+    ),
+    workers: Annotated[
+        int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
+    ] = None,
+    backend: Annotated[str, typer.Option("--backend", help="local or ray.")] = "local",
+    address: Annotated[
+        str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
+    ] = None,
+    top: Annotated[int, typer.Option("--top", help="Top runs in the summary.")] = 5,
+) -> None:
+    """Generate N randomised situations, run them all, store everything, rank the runs.
+    Ctrl-C stops after the runs in flight; the same command again resumes."""
+    import os
+    import time
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign, summary
+    from sitgen.store import Store, StoreError
+
+    text = None
+    if spec is not None:
+        try:
+            text = spec.read_text()
+        except OSError as e:
+            raise UsageError(f"{spec}: cannot read the campaign spec: {e.strerror}") from None
+    parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
+    total_n = parsed.n if n is None else n
+    started = time.perf_counter()
+    with (
+        Progress(
+            TextColumn("[bold]campaign"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[rate]}"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+            disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
+        ) as progress,
+        StopOnInterrupt() as stop,
+    ):
+        task = progress.add_task("runs", total=total_n, rate="")
+        first: list[int] = []
+
+        def on_progress(done: int, total: int) -> None:
+            if not first:
+                first.append(done)
+            elapsed = time.perf_counter() - started
+            rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
+            progress.update(task, completed=done, total=total, rate=f"{rate:.1f} runs/s")
+
+        try:
+            result = run_campaign(
+                parsed,
+                db,
+                seed=seed,
+                n=n,
+                workers=workers,
+                backend=backend,
+                address=address,
+                on_progress=on_progress,
+                stop=stop,
+            )
+        except StoreError as e:
+            raise UsageError(str(e)) from None
+    rate = result.ran / result.wall_s if result.wall_s > 0 else 0.0
+    typer.echo(
+        f"{db}: {result.ran} runs in {result.wall_s:.1f} s ({rate:.1f} runs/s), "
+        f"{result.total} of {total_n} stored"
+    )
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+    with Store(db) as store:
+        s = summary(store, top)
+    typer.echo(
+        f"runs {s['runs']}, mean score {s['mean_score']:.1f}, median {s['median_score']:.1f}, "
+        f"{100 * s['share_under_10']:.0f}% under 10 points; outcomes "
+        + ", ".join(f"{k} {v}" for k, v in sorted(s["outcomes"].items()))
+    )
+    for r in s["top"]:
+        typer.echo(f"  run {r['run']:>5}  score {r['score']:>10.1f}  {r['main_events']}")
+    if result.interrupted:
+        raise typer.Exit(130)
+
+
+@app.command()
+def rank(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    top: Annotated[int, typer.Option("--top", help="How many runs.")] = 20,
+    format: Annotated[str, typer.Option("--format", "-f", help="table, csv or json.")] = "table",
+) -> None:
+    """The runs of a campaign, most dangerous first."""
+    from sitgen.rank import ranked_rows, write_ranking
+
+    if format not in ("table", "csv", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, csv, json")
+    rows = ranked_rows(db, top)
+    if format == "table":
+        table = Table(title=f"{db}: top {len(rows)} runs")
+        for column in ("rank", "run", "score", "outcome", "main events", "terrain", "peers"):
+            table.add_column(
+                column, justify="right" if column in ("rank", "run", "score") else "left"
+            )
+        for r in rows:
+            table.add_row(
+                str(r["rank"]), str(r["run"]), f"{r['score']:.1f}", r["outcome"],
+                r["main_events"], str(r["terrain"]), str(r["peers"]),
+            )  # fmt: skip
+        Console(width=160).print(table)
+    else:
+        write_ranking(rows, format, sys.stdout)
+
+
+@app.command()
+def rerun(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    run_id: Annotated[int, typer.Argument(help="Run id (see `sitgen rank`).")],
+) -> None:
+    """Regenerate a run's situation from its spec and seed, run it again, and confirm the
+    identical situation, event log and score. Exits 1 if anything differs."""
+    from sitgen.rank import rerun as rerun_run
+
+    check = rerun_run(db, run_id)
+    for line in check.lines:
+        typer.echo(line)
+    if not check.identical:
+        raise typer.Exit(EXIT_FAILED)
+
+
+@app.command()
 def demo(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the maps.")] = Path(
         "demo"
@@ -336,7 +513,7 @@ def main() -> None:
     except (_core.SpecError, UsageError) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
-    except (_core.GenerationFailed, OSError) as e:
+    except (_core.GenerationFailed, OSError, StoreError) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(EXIT_FAILED)
 

@@ -188,10 +188,12 @@ class Store:
                     (json.dumps(spec, sort_keys=True), seed, n, version, created_at),
                 )
             return
-        if stored["spec"] != json.loads(json.dumps(spec, sort_keys=True)) or stored["seed"] != seed:
+        same_spec = stored["spec"] == json.loads(json.dumps(spec, sort_keys=True))
+        if not same_spec or stored["seed"] != seed:
+            differs = "its spec differs" if not same_spec else f"its seed is {stored['seed']}"
             raise StoreError(
-                f"{self.path} holds another campaign (seed {stored['seed']}, a different spec); "
-                "give a new --db to start this one"
+                f"{self.path} holds another campaign ({differs}); give a new --db to start "
+                "this one, or the same spec and seed to resume it"
             )
         if n > stored["n"]:
             with self.db:

@@ -1,6 +1,7 @@
 """A controller program that misbehaves on purpose, as its argument says: `crash` exits after a
 few steps, `hang` stops replying, `garbage` replies with text that is not JSON, `noreply` sends
-an object without a command, `nan` sends NaN; `good` drives straight at 0.3 m/s."""
+an object without a command, `nan` sends NaN; `sometimes` crashes in runs whose start x is in
+an even metre; `good` drives straight at 0.3 m/s."""
 
 import json
 import sys
@@ -12,6 +13,8 @@ for step, line in enumerate(sys.stdin):
     if message["type"] == "end":
         break
     if message["type"] == "reset":
+        if mode == "sometimes" and int(message["start"][0]) % 2 == 0:
+            sys.exit(4)
         reply = '{"ready": true}'
     elif step >= 5 and mode == "crash":
         print("simulated failure in the planner", file=sys.stderr)

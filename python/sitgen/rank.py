@@ -1,0 +1,124 @@
+"""Reading a campaign back: the ranking, exports for analysis, and reruns that confirm a stored
+run is reproduced bit for bit."""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from sitgen import _core
+from sitgen.store import Store
+
+RANK_COLUMNS = (
+    "rank",
+    "run",
+    "score",
+    "outcome",
+    "main_events",
+    "terrain",
+    "peers",
+    "collisions",
+    "min_clearance_m",
+    "waypoints_reached",
+    "waypoints",
+    "time_s",
+    "controller",
+    "situation_seed",
+    "reason",
+)
+
+TABLES = ("campaign", "situations", "runs", "events", "trajectories")
+
+
+def ranked_rows(db: str | Path, top: int | None = None) -> list[dict[str, Any]]:
+    """The top runs, most dangerous first, with their rank (1 = highest score)."""
+    with Store(db) as store:
+        rows = store.ranked(top)
+    return [{"rank": i + 1, **r} for i, r in enumerate(rows)]
+
+
+def write_ranking(rows: list[dict[str, Any]], format: str, out: TextIO) -> None:
+    """Write the ranking as ``csv`` or ``json``."""
+    if format == "json":
+        json.dump(rows, out, indent=2)
+        out.write("\n")
+        return
+    writer = csv.DictWriter(out, fieldnames=list(RANK_COLUMNS), extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+
+
+def export_tables(db: str | Path, directory: Path, format: str) -> list[Path]:
+    """Write every table of the store (the situations without their embedded JSON, the
+    trajectories without their data) as Parquet or CSV files in ``directory``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    written = []
+    with Store(db) as store:
+        for table in TABLES:
+            columns = store.columns(table)
+            rows = list(store.rows(table))
+            path = directory / f"{table}.{format}"
+            if format == "csv":
+                with path.open("w", newline="") as f:
+                    writer = csv.DictWriter(f, fieldnames=columns)
+                    writer.writeheader()
+                    writer.writerows(rows)
+            else:
+                try:
+                    import pyarrow as pa
+                    import pyarrow.parquet as pq
+                except ImportError:
+                    raise _core.SpecError(
+                        "--format: parquet needs pyarrow; pip install 'sitgen[analysis]' or use csv"
+                    ) from None
+                arrays = {c: [r[c] for r in rows] for c in columns}
+                pq.write_table(pa.table(arrays), path)
+            written.append(path)
+    return written
+
+
+@dataclass(frozen=True)
+class Rerun:
+    """What a rerun found."""
+
+    identical: bool
+    lines: list[str]
+
+
+def rerun(db: str | Path, run_id: int) -> Rerun:
+    """Regenerate run ``run_id``'s situation from its spec and seed, run it again, and compare
+    the situation's content hash, the event log (bytes) and the score with what is stored."""
+    from sitgen.run import run
+    from sitgen.situation import generate_situation
+
+    with Store(db) as store:
+        stored = store.run_row(run_id)
+    lines = [f"run {run_id}: situation seed {stored['situation_seed']}, {stored['controller']}"]
+    try:
+        situation = generate_situation(stored["situation_spec"], seed=stored["situation_seed"])
+    except _core.GenerationFailed as e:
+        same = stored["content_hash"] is None
+        lines.append(f"generation fails again: {e}" if same else f"generation now fails: {e}")
+        return Rerun(same, lines)
+    same_situation = situation.content_hash == stored["content_hash"]
+    lines.append(
+        f"situation {'identical' if same_situation else 'DIFFERS'}: {situation.content_hash}"
+    )
+    record = run(
+        situation,
+        controller=stored["controller"],
+        seed=stored["run_seed"],
+        spec=stored["run_spec"],
+    )
+    same_log = record.events_jsonl == stored["events_jsonl"]
+    events = len(stored["events_jsonl"].splitlines())
+    lines.append(f"event log {'identical' if same_log else 'DIFFERS'} ({events} events)")
+    same_score = record.score == stored["score"]
+    lines.append(
+        f"score {'identical' if same_score else 'DIFFERS'}: {record.score:g}"
+        + ("" if same_score else f" (stored {stored['score']:g})")
+    )
+    return Rerun(same_situation and same_log and same_score, lines)
