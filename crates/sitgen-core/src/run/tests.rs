@@ -401,6 +401,9 @@ fn a_contact_broken_for_a_moment_and_resumed_is_one_collision() {
     let merged = collisions(1.0);
     assert_eq!(merged.len(), 1, "{merged:#?}");
     let end = merged[0].end_s.unwrap();
-    assert!(end > 9.0 && end <= 10.1, "ends when the pushing stops: {end}");
+    assert!(
+        end > 9.0 && end <= 10.1,
+        "ends when the pushing stops: {end}"
+    );
     assert!(collisions(0.0).len() > 10);
 }
