@@ -2,15 +2,27 @@
 //! own pose and velocity, stall flag, time, and the robots its laser sees) plus its own route,
 //! given at reset; it returns a command (v m/s, ω rad/s). It never sees the map.
 //!
-//! Built in so far: `straight` (the peers'). The agent's controllers (`snd_follow`, `follow`,
-//! `vo`, `dwa`) and user controllers come next.
+//! Built in: `straight` (the peers'), `snd` (Smoothed Nearness-Diagram to the last waypoint),
+//! `snd_follow` (the paper's agent: a route follower driving SND), and the baselines `follow`
+//! (pure pursuit), `vo` (Velocity Obstacles) and `dwa` (Dynamic Window Approach). User
+//! controllers (`python:`, `cmd:`) are driven from the Python layer (`sitgen.run`).
 
+mod dwa;
+mod follow;
 pub mod route;
+pub mod snd;
+mod snd_follow;
 mod straight;
+mod vo;
 
 use std::collections::BTreeMap;
 
+pub use dwa::Dwa;
+pub use follow::Follow;
+pub use snd::Snd;
+pub use snd_follow::SndFollow;
 pub use straight::Straight;
+pub use vo::Vo;
 
 use crate::mission::ControllerSpec;
 use crate::sim::Observation;
@@ -29,13 +41,21 @@ pub trait Controller: Send {
 }
 
 /// Names of the built-in controllers.
-pub const BUILT_IN: &[&str] = &["straight"];
+pub const BUILT_IN: &[&str] = &["straight", "snd", "snd_follow", "follow", "vo", "dwa"];
 
 /// The built-in controller a spec names; `path` names the spec in errors.
 pub fn build(spec: &ControllerSpec, path: &str) -> Result<Box<dyn Controller>, SpecError> {
     let params_path = join(path, "params");
     match spec.name.as_str() {
         "straight" => Ok(Box::new(Straight::from_params(&spec.params, &params_path)?)),
+        "snd" => Ok(Box::new(Snd::from_params(&spec.params, &params_path)?)),
+        "snd_follow" => Ok(Box::new(SndFollow::from_params(
+            &spec.params,
+            &params_path,
+        )?)),
+        "follow" => Ok(Box::new(Follow::from_params(&spec.params, &params_path)?)),
+        "vo" => Ok(Box::new(Vo::from_params(&spec.params, &params_path)?)),
+        "dwa" => Ok(Box::new(Dwa::from_params(&spec.params, &params_path)?)),
         other => Err(SpecError::new(
             join(path, "name"),
             format!(
