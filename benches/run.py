@@ -1,8 +1,9 @@
 """sitgen benchmarks: prints a table of medians with their spread, and writes JSON.
 
-Run with ``make bench`` (or ``python benches/run.py``). Figures are wall-clock times on this
-machine; compare runs on the same machine only. Nothing here is asserted: speed is measured,
-not tested.
+Run with ``make bench`` (or ``python benches/run.py``; ``SITGEN_BENCH_CAMPAIGN_N=0`` skips the
+campaign, which takes a few minutes). Figures are wall-clock times on this machine; compare runs
+on the same machine only. Nothing here is asserted: speed is measured, not tested.
+``make bench-irsim`` compares the simulator with IR-SIM (benches/irsim_compare.py).
 """
 
 from __future__ import annotations
@@ -11,6 +12,9 @@ import json
 import os
 import platform
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -65,9 +69,9 @@ def measure(run: Callable[[int], object], repeats: int) -> dict[str, float]:
 
 def bench_reference_scene(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
     """Steps per second on the reference scene: 40 × 40 m caves at 0.1 m, the agent scanning
-    its 181-beam laser every step, five peers; one core (the simulator is single-threaded)."""
-    spec = {"terrain": {"preset": "caves"}, "mission": {"peers_min": 5, "peers_max": 5}}
-    situation = sitgen.generate_situation(spec, seed=1)
+    its 181-beam laser every step, five peers on latched commands; one core (the simulator is
+    single-threaded). `bench_controllers` adds the controllers and the monitor."""
+    situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
     steps = 20_000
 
     def run(_: int) -> None:
@@ -83,6 +87,99 @@ def bench_reference_scene(rows: list[tuple[str, dict[str, float]]]) -> dict[str,
         f"(spread {steps / m['max_s']:,.0f}-{steps / m['min_s']:,.0f} steps/s)"
     )
     return {"steps": steps, "steps_per_s": steps_per_s, "real_time_factor": steps_per_s * 0.1, **m}
+
+
+REFERENCE_SCENE = {"terrain": {"preset": "caves"}, "mission": {"peers_min": 5, "peers_max": 5}}
+"""40 × 40 m caves at 0.1 m, one agent, five peers."""
+
+
+def bench_laser(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """Rays per second: the agent's 181-beam scan, repeated from its start on the reference
+    scene (walls and the five peers' bodies), one core."""
+    situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
+    world = sitgen.World(situation)
+    beams = len(world.observe(0).ranges)
+    scans = 20_000
+    m = measure(lambda _: world._world.scan_repeatedly(scans), repeats=5)
+    rays_per_s = scans * beams / m["median_s"]
+    rows.append((f"laser: {scans} scans of {beams} beams", m))
+    print(f"laser: {rays_per_s / 1e6:.2f} M rays/s ({beams} beams, reference scene, one core)")
+    return {"scans": scans, "beams": beams, "rays_per_s": rays_per_s, **m}
+
+
+def bench_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """Whole runs of the reference scene (observe, act, step, monitor, trajectory), one core,
+    with each built-in agent controller and `straight` peers; the controller's cost per step
+    is its time per step less that of `straight` (no avoidance, a few arithmetic operations)."""
+    situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
+    out: dict[str, Any] = {}
+    for name in ("straight", "snd_follow", "follow", "vo", "dwa"):
+        spec = json.dumps({"controller": {"name": name}, "time_limit_s": 600.0})
+        steps: list[int] = []
+
+        def run(_: int, spec: str = spec, steps: list[int] = steps) -> None:
+            r = _core.Run(situation.to_json(), spec, 0)
+            r.run_to_end()
+            steps.append(json.loads(r.finish()["record"])["steps"])
+
+        m = measure(run, repeats=3)
+        per_step_us = m["median_s"] / steps[-1] * 1e6
+        out[name] = {"steps": steps[-1], "us_per_step": per_step_us, **m}
+        rows.append((f"run reference scene, agent {name}: {steps[-1]} steps", m))
+    base = out["straight"]["us_per_step"]
+    for name, r in out.items():
+        r["controller_us_per_step"] = r["us_per_step"] - base
+        print(
+            f"run with {name:10}: {1e6 / r['us_per_step']:8,.0f} steps/s, "
+            f"{r['us_per_step']:6.1f} µs/step, controller ≈ {r['controller_us_per_step']:+.1f} µs"
+        )
+    return out
+
+
+PAPER_S = 17 * 3600.0
+"""The paper's 500-situation campaign: about 17 hours (§4.2)."""
+
+
+def bench_campaign(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """The default campaign (the paper's experiment, 500 situations) with 1 and 2 workers, each
+    in its own process, timed by wall clock; peak resident memory of that process."""
+    n = int(os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500"))
+    out: dict[str, Any] = {"n": n}
+    for workers in (1, 2):
+        with tempfile.TemporaryDirectory() as tmp:
+            db = Path(tmp) / "bench.db"
+            command = [
+                sys.executable, "-m", "sitgen.cli", "campaign", "--n", str(n), "--seed", "0",
+                "--db", str(db), "--workers", str(workers),
+            ]  # fmt: skip
+            start = time.perf_counter()
+            proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+            _, status, usage = os.wait4(proc.pid, 0)
+            wall = time.perf_counter() - start
+            assert proc.stdout is not None
+            summary = proc.stdout.read().decode()
+            if status != 0:
+                raise SystemExit(
+                    f"campaign failed: {proc.stderr.read().decode() if proc.stderr else ''}"
+                )
+        peak_mib = usage.ru_maxrss / 1024
+        out[f"workers_{workers}"] = {
+            "wall_s": wall,
+            "runs_per_s": n / wall,
+            "speedup_vs_paper": PAPER_S * n / 500 / wall,
+            "peak_rss_mib": peak_mib,
+        }
+        rows.append(
+            (f"campaign {n} situations, {workers} worker(s)", {
+                "median_s": wall, "min_s": wall, "max_s": wall, "repeats": 1,
+            })
+        )  # fmt: skip
+        print(
+            f"campaign {n} runs, {workers} worker(s): {wall:.1f} s, {n / wall:.1f} runs/s, "
+            f"{PAPER_S * n / 500 / wall:,.0f}× the paper's ~17 h, peak memory {peak_mib:.0f} MiB"
+        )
+        out[f"workers_{workers}"]["summary"] = summary.strip().splitlines()[1:2]
+    return out
 
 
 def machine() -> dict[str, Any]:
@@ -125,6 +222,10 @@ def main() -> None:
         results.setdefault("situation", {})[f"preset_{name}"] = m
 
     results["sim"] = bench_reference_scene(rows)
+    results["laser"] = bench_laser(rows)
+    results["controllers"] = bench_controllers(rows)
+    if os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500") != "0":
+        results["campaign"] = bench_campaign(rows)
 
     scen = SHARED / "movingai" / "scenarios" / (ASTAR_MAP + ".scen")
     if scen.is_file():
