@@ -135,18 +135,58 @@ def generate(
 
 @app.command()
 def show(
-    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    source: Annotated[
+        Path, typer.Argument(help="Situation file (JSON), or a campaign store with --run.")
+    ],
+    run_id: Annotated[
+        int | None,
+        typer.Option("--run", help="Draw this run of the campaign store: paths and events."),
+    ] = None,
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure to write (PNG).")] = Path(
         "situation.png"
     ),
 ) -> None:
-    """Draw a situation in the paper's style: map, routes, starts and goals, scale bar."""
+    """Draw a situation in the paper's style: map, routes, starts and goals, scale bar; with
+    --run, also the paths driven and where the agent's scored events began."""
     from sitgen.figure import save_situation_figure
 
-    loaded = Situation.load(situation)
     output.parent.mkdir(parents=True, exist_ok=True)
-    save_situation_figure(loaded, output)
+    if run_id is None:
+        if _is_store(source):
+            raise UsageError(f"{source} is a campaign store: give --run RUN_ID")
+        save_situation_figure(Situation.load(source), output)
+    else:
+        from sitgen.store import Store
+
+        if not _is_store(source):
+            raise UsageError("--run needs a campaign store (.db), not a situation file")
+        with Store(source) as store:
+            row = store.run_row(run_id)
+            trajectory = store.trajectory(run_id)
+        if row["situation"] is None:
+            raise UsageError(f"run {run_id} has no situation (generation failed)")
+        events = [json.loads(line) for line in row["events_jsonl"].splitlines()]
+        dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
+        save_situation_figure(Situation(row["situation"]), output, trajectory, events, dt_s)
     typer.echo(f"wrote {output}")
+
+
+@app.command()
+def report(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the site.")] = Path(
+        "report"
+    ),
+    top: Annotated[int, typer.Option("--top", min=0, help="Runs that get a page.")] = 50,
+) -> None:
+    """Write an HTML triage report of a campaign: ranked runs, score distribution, and for the
+    top runs a page with the figure, timeline, score breakdown and a replay. Opens from disk."""
+    from sitgen.report import write_report
+
+    if not db.is_file():
+        raise UsageError(f"{db}: no such campaign store")
+    pages = write_report(db, output, top)
+    typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
 
 @app.command()

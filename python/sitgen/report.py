@@ -1,0 +1,487 @@
+"""The report: a static, self-contained HTML triage view of a campaign.
+
+``sitgen report campaign.db -o report/`` writes ``index.html`` (campaign facts, the score
+distribution on a log scale, events by kind, every run ranked in a table that sorts and filters)
+and, for the top runs, ``run-<id>.html`` with the situation figure (map, routes, driven paths,
+event markers), the event timeline, the score breakdown, a replay (play, pause, scrub, speed;
+every robot's footprint and the agent's laser rays) and the command that reruns it. No network:
+styles and scripts are inline, each run's data sits beside its page as a script (``run-<id>.js``,
+trajectories as base64 float32) so pages open from the file system and stay small for 600 s
+runs. The replay's laser rays are cast in the page from the map and the poses with the
+simulator's geometry (grid walk to the first occupied cell, robot rectangles).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sitgen.figure import EVENT_COLOURS, save_situation_figure
+from sitgen.situation import Situation
+from sitgen.store import Store, main_events
+
+STYLE = """
+body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; color: #222; max-width: 1200px; }
+h1 { font-size: 1.5em; } h2 { font-size: 1.15em; margin-top: 1.6em; }
+table { border-collapse: collapse; } td, th { padding: 3px 8px; border-bottom: 1px solid #ddd; }
+th { text-align: left; background: #f3f3f3; } th.sortable { cursor: pointer; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; }
+.facts td:first-child { color: #666; } code { background: #f3f3f3; padding: 2px 4px; }
+.controls button, .controls select { margin-right: .5em; } #scrub { width: 60%; }
+canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
+.figure { max-width: 100%; border: 1px solid #ccc; }
+"""
+
+
+def _page(title: str, body: str, scripts: str = "") -> str:
+    return (
+        "<!DOCTYPE html>\n<html lang='en'><head><meta charset='utf-8'>"
+        f"<title>{html.escape(title)}</title><style>{STYLE}</style></head>"
+        f"<body>{body}{scripts}</body></html>\n"
+    )
+
+
+def _histogram_svg(scores: list[float]) -> str:
+    """Runs per score bin on a log scale (scores are heavy-tailed): bin 0 holds scores below
+    1, then one bin per power of 10 split in halves."""
+    if not scores:
+        return "<p>No runs.</p>"
+    edges = [0.0, 1.0]
+    top = max(scores)
+    while edges[-1] <= top:
+        edges.append(edges[-1] * math.sqrt(10))
+    counts = [0] * (len(edges) - 1)
+    for s in scores:
+        i = 0 if s < 1 else min(len(counts) - 1, 1 + int(2 * math.log10(s)))
+        counts[i] += 1
+    width, height, pad = 640, 200, 30
+    bar = (width - 2 * pad) / len(counts)
+    peak = max(counts)
+    parts = [f"<svg id='histogram' width='{width}' height='{height + 40}' role='img'>"]
+    for i, c in enumerate(counts):
+        h = (height - pad) * c / peak
+        x = pad + i * bar
+        label = "<1" if i == 0 else f"≥{edges[i]:,.3g}"
+        parts.append(
+            f"<rect x='{x:.1f}' y='{height - h:.1f}' width='{bar - 2:.1f}' height='{h:.1f}' "
+            f"fill='#c0392b'><title>{label}: {c} runs</title></rect>"
+            f"<text x='{x + bar / 2:.1f}' y='{height - h - 3:.1f}' font-size='11' "
+            f"text-anchor='middle'>{c}</text>"
+            f"<text x='{x + bar / 2:.1f}' y='{height + 14}' font-size='10' "
+            f"text-anchor='middle'>{label}</text>"
+        )
+    parts.append(
+        f"<text x='{width / 2}' y='{height + 34}' font-size='12' text-anchor='middle'>"
+        "score (log scale, bins of half a decade)</text></svg>"
+    )
+    return "".join(parts)
+
+
+INDEX_SCRIPT = """
+<script>
+(function () {
+  const table = document.getElementById('runs');
+  const body = table.tBodies[0];
+  const filter = document.getElementById('filter');
+  let order = {column: 'score', descending: true};
+  function key(row, column) {
+    const v = row.dataset[column];
+    const n = Number(v);
+    return v !== '' && !Number.isNaN(n) ? n : v;
+  }
+  function sortBy(column) {
+    order = {column, descending: order.column === column ? !order.descending : column === 'score'};
+    const rows = Array.from(body.rows);
+    rows.sort((a, b) => {
+      const x = key(a, column), y = key(b, column);
+      const c = x < y ? -1 : x > y ? 1 : Number(a.dataset.run) - Number(b.dataset.run);
+      return order.descending ? -c : c;
+    });
+    rows.forEach(r => body.appendChild(r));
+  }
+  table.querySelectorAll('th.sortable').forEach(th =>
+    th.addEventListener('click', () => sortBy(th.dataset.column)));
+  filter.addEventListener('change', () => {
+    const kind = filter.value;
+    let shown = 0;
+    Array.from(body.rows).forEach(r => {
+      const visible = !kind || r.dataset.kinds.split(' ').includes(kind);
+      r.hidden = !visible;
+      if (visible) shown += 1;
+    });
+    document.getElementById('shown').textContent = shown;
+  });
+  window.sitgenIndex = {sortBy};
+})();
+</script>
+"""
+
+
+def _index(store: Store, top_pages: set[int]) -> str:
+    campaign = store.campaign() or {}
+    rows = store.ranked()
+    scores = [r["score"] for r in rows]
+    kinds: dict[str, list[int]] = {}
+    for kind, count, runs in store.db.execute(
+        "SELECT kind, count(*), count(DISTINCT run_id) FROM events WHERE scored = 1 "
+        "GROUP BY kind ORDER BY kind"
+    ):
+        kinds[kind] = [count, runs]
+    run_kinds: dict[int, set[str]] = {}
+    for run_id, kind in store.db.execute(
+        "SELECT DISTINCT run_id, kind FROM events WHERE scored = 1"
+    ):
+        run_kinds.setdefault(run_id, set()).add(kind)
+    outcomes: dict[str, int] = {}
+    for r in rows:
+        outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+    mean = sum(scores) / len(scores) if scores else 0.0
+    median = float(np.median(scores)) if scores else 0.0
+    facts = [
+        ("runs", f"{len(rows)} of {campaign.get('n', 0)}"),
+        ("seed", campaign.get("seed", "")),
+        ("sitgen", campaign.get("sitgen_version", "")),
+        ("started", campaign.get("created_at", "")),
+        ("outcomes", ", ".join(f"{k} {v}" for k, v in sorted(outcomes.items())) or "none"),
+        ("mean score", f"{mean:.1f}"),
+        ("median score", f"{median:.1f}"),
+        (
+            "under 10 points",
+            f"{100 * sum(s < 10 for s in scores) / len(scores):.0f}%" if scores else "n/a",
+        ),
+    ]
+    spec = json.dumps(campaign.get("spec", {}), indent=2, sort_keys=True)
+    body = ["<h1>sitgen campaign report</h1><table class='facts'>"]
+    body += [f"<tr><td>{k}</td><td>{html.escape(str(v))}</td></tr>" for k, v in facts]
+    body.append("</table><details><summary>campaign spec</summary><pre>")
+    body.append(html.escape(spec) + "</pre></details>")
+    body.append("<h2>Score distribution</h2>" + _histogram_svg(scores))
+    body.append("<h2>Events by kind (scored)</h2><table id='kinds'>")
+    body.append("<tr><th>kind</th><th>events</th><th>runs</th></tr>")
+    for kind, (count, runs) in kinds.items():
+        body.append(
+            f"<tr><td>{kind}</td><td class='num'>{count}</td><td class='num'>{runs}</td></tr>"
+        )
+    body.append("</table><h2>Runs, most dangerous first</h2><p class='controls'>")
+    body.append("Show runs with <select id='filter'><option value=''>any event</option>")
+    body += [f"<option value='{k}'>{k}</option>" for k in kinds]
+    body.append(f"</select> <span id='shown'>{len(rows)}</span> shown. Click a heading to sort.")
+    body.append("</p><table id='runs'><thead><tr>")
+    columns = [
+        ("rank", "rank"),
+        ("run", "run"),
+        ("score", "score"),
+        ("outcome", "outcome"),
+        ("events", "main events"),
+        ("terrain", "terrain"),
+        ("peers", "peers"),
+    ]
+    body += [f"<th class='sortable' data-column='{c}'>{label}</th>" for c, label in columns]
+    body.append("</tr></thead><tbody>")
+    for rank, r in enumerate(rows, 1):
+        run_id = r["run"]
+        link = f"<a href='run-{run_id}.html'>{run_id}</a>" if run_id in top_pages else str(run_id)
+        events = html.escape(r["main_events"])
+        body.append(
+            f"<tr data-rank='{rank}' data-run='{run_id}' data-score='{r['score']}' "
+            f"data-outcome='{r['outcome']}' data-events='{events}' "
+            f"data-terrain='{html.escape(str(r['terrain']))}' data-peers='{r['peers'] or 0}' "
+            f"data-kinds='{' '.join(sorted(run_kinds.get(run_id, ())))}'>"
+            f"<td class='num'>{rank}</td><td class='num'>{link}</td>"
+            f"<td class='num'>{r['score']:.1f}</td><td>{r['outcome']}</td><td>{events}</td>"
+            f"<td>{html.escape(str(r['terrain']))}</td><td class='num'>{r['peers']}</td></tr>"
+        )
+    body.append("</tbody></table>")
+    return _page("sitgen campaign report", "".join(body), INDEX_SCRIPT)
+
+
+RUN_SCRIPT = """
+<script>
+(function () {
+  const d = window.SITGEN_RUN;
+  const canvas = document.getElementById('replay');
+  const ctx = canvas.getContext('2d');
+  const bytes = Uint8Array.from(atob(d.trajectory), c => c.charCodeAt(0));
+  const poses = new Float32Array(bytes.buffer);
+  const n = d.robots.length, frames = poses.length / (n * 3);
+  const cells = Uint8Array.from(atob(d.map.cells), c => c.charCodeAt(0));
+  const {rows, cols, res} = d.map;
+  const scale = Math.max(1, Math.floor(800 / Math.max(rows, cols)));
+  canvas.width = cols * scale; canvas.height = rows * scale;
+  const background = document.createElement('canvas');
+  background.width = cols; background.height = rows;
+  const bctx = background.getContext('2d');
+  const image = bctx.createImageData(cols, rows);
+  for (let i = 0; i < rows * cols; i++) {
+    const v = cells[i] ? 60 : 250;
+    image.data.set([v, v, v, 255], 4 * i);
+  }
+  bctx.putImageData(image, 0, 0);
+  const occupied = (c, r) => c < 0 || r < 0 || c >= cols || r >= rows || cells[r * cols + c] === 1;
+  const px = (x, y) => [x / res * scale, (rows - y / res) * scale];
+  function pose(f, i) { const k = (f * n + i) * 3; return [poses[k], poses[k + 1], poses[k + 2]]; }
+  function rect(i, p) {
+    const b = d.robots[i].body, c = Math.cos(p[2]), s = Math.sin(p[2]);
+    return {cx: p[0] + c * b.origin_x_m, cy: p[1] + s * b.origin_x_m, c, s,
+            hl: b.length_m / 2, hw: b.width_m / 2};
+  }
+  function rayGrid(ox, oy, dx, dy, max) {
+    // The simulator's walk: cell by cell to the first occupied cell.
+    let cu = Math.floor(ox / res), cw = Math.floor(oy / res);
+    if (occupied(cu, rows - 1 - cw)) return 0;
+    const su = dx > 0 ? 1 : -1, sw = dy > 0 ? 1 : -1;
+    const du = dx !== 0 ? res / Math.abs(dx) : Infinity;
+    const dw = dy !== 0 ? res / Math.abs(dy) : Infinity;
+    let tu = dx > 0 ? ((cu + 1) * res - ox) / dx : dx < 0 ? (ox - cu * res) / -dx : Infinity;
+    let tw = dy > 0 ? ((cw + 1) * res - oy) / dy : dy < 0 ? (oy - cw * res) / -dy : Infinity;
+    for (;;) {
+      let t;
+      if (tu < tw) { cu += su; t = tu; tu += du; } else { cw += sw; t = tw; tw += dw; }
+      if (t >= max) return max;
+      if (cu < 0 || cw < 0 || cu >= cols || cw >= rows) return max;
+      if (occupied(cu, rows - 1 - cw)) return t;
+    }
+  }
+  function rayRect(q, ox, oy, dx, dy, max) {
+    // Slab test in the rectangle's frame.
+    const rx = ox - q.cx, ry = oy - q.cy;
+    const lo = [rx * q.c + ry * q.s, -rx * q.s + ry * q.c];
+    const ld = [dx * q.c + dy * q.s, -dx * q.s + dy * q.c];
+    const h = [q.hl, q.hw];
+    let t0 = 0, t1 = max;
+    for (let a = 0; a < 2; a++) {
+      if (Math.abs(ld[a]) < 1e-12) { if (Math.abs(lo[a]) > h[a]) return max; continue; }
+      let ta = (-h[a] - lo[a]) / ld[a], tb = (h[a] - lo[a]) / ld[a];
+      if (ta > tb) [ta, tb] = [tb, ta];
+      t0 = Math.max(t0, ta); t1 = Math.min(t1, tb);
+      if (t0 > t1) return max;
+    }
+    return t0;
+  }
+  const state = {frame: 0, playing: false, speed: 1};
+  function draw() {
+    const f = state.frame;
+    ctx.drawImage(background, 0, 0, canvas.width, canvas.height);
+    const agent = pose(f, 0);
+    const laser = d.laser, others = [];
+    for (let i = 1; i < n; i++) others.push(rect(i, pose(f, i)));
+    ctx.strokeStyle = 'rgba(230, 60, 60, 0.35)'; ctx.lineWidth = 1;
+    const fov = laser.fov_deg * Math.PI / 180, beams = laser.beams;
+    const ox = agent[0] + Math.cos(agent[2]) * laser.offset_x_m;
+    const oy = agent[1] + Math.sin(agent[2]) * laser.offset_x_m;
+    ctx.beginPath();
+    for (let b = 0; b < beams; b++) {
+      const a = agent[2] - fov / 2 + (beams > 1 ? b * fov / (beams - 1) : fov / 2);
+      const dx = Math.cos(a), dy = Math.sin(a);
+      let t = rayGrid(ox, oy, dx, dy, laser.range_m);
+      for (const q of others) t = Math.min(t, rayRect(q, ox, oy, dx, dy, t));
+      const [x0, y0] = px(ox, oy), [x1, y1] = px(ox + t * dx, oy + t * dy);
+      ctx.moveTo(x0, y0); ctx.lineTo(x1, y1);
+    }
+    ctx.stroke();
+    for (let i = n - 1; i >= 0; i--) {
+      const q = rect(i, pose(f, i));
+      const corners = [[1, 1], [1, -1], [-1, -1], [-1, 1]].map(([a, b]) =>
+        px(q.cx + a * q.hl * q.c - b * q.hw * q.s, q.cy + a * q.hl * q.s + b * q.hw * q.c));
+      ctx.beginPath(); corners.forEach(([x, y], k) => k ? ctx.lineTo(x, y) : ctx.moveTo(x, y));
+      ctx.closePath();
+      ctx.fillStyle = i === 0 ? 'rgba(200, 30, 30, 0.85)' : 'rgba(30, 80, 200, 0.6)';
+      ctx.fill();
+    }
+    const t = f * d.dt_s;
+    document.getElementById('time').textContent = t.toFixed(1) + ' s';
+    document.getElementById('scrub').value = f;
+    canvas.dataset.frame = f;
+    canvas.dataset.agent = agent[0].toFixed(3) + ',' + agent[1].toFixed(3);
+  }
+  let last = null;
+  function tick(now) {
+    if (!state.playing) { last = null; return; }
+    if (last !== null) {
+      const advance = Math.floor((now - last) / 1000 / d.dt_s * state.speed);
+      if (advance > 0) {
+        state.frame = Math.min(frames - 1, state.frame + advance); last = now; draw();
+      }
+    } else { last = now; }
+    if (state.frame >= frames - 1) { state.playing = false; updateButton(); return; }
+    requestAnimationFrame(tick);
+  }
+  const button = document.getElementById('play');
+  function updateButton() { button.textContent = state.playing ? 'pause' : 'play'; }
+  button.addEventListener('click', () => {
+    if (state.frame >= frames - 1) state.frame = 0;
+    state.playing = !state.playing; updateButton();
+    if (state.playing) requestAnimationFrame(tick);
+  });
+  const scrub = document.getElementById('scrub');
+  scrub.max = frames - 1;
+  scrub.addEventListener('input', () => { state.frame = Number(scrub.value); draw(); });
+  document.getElementById('speed').addEventListener('change', e => {
+    state.speed = Number(e.target.value);
+  });
+  document.querySelectorAll('[data-seek]').forEach(el => el.addEventListener('click', () => {
+    state.frame = Math.min(frames - 1, Math.round(Number(el.dataset.seek) / d.dt_s)); draw();
+  }));
+  window.sitgenReplay = {state, draw, frames};
+  draw();
+})();
+</script>
+"""
+
+
+def _timeline_svg(events: list[dict[str, Any]], end_s: float) -> str:
+    """One lane per event kind: lasting events as bars, instant ones as ticks; click to seek."""
+    kinds = [k for k in EVENT_COLOURS if any(e["kind"] == k for e in events)]
+    kinds += sorted({e["kind"] for e in events} - set(kinds))
+    width, lane, left = 900, 22, 130
+    height = lane * max(1, len(kinds)) + 30
+    span = max(end_s, 1e-9)
+    scale = (width - left - 10) / span
+    parts = [f"<svg id='timeline' width='{width}' height='{height}' role='img'>"]
+    for j, kind in enumerate(kinds):
+        y = j * lane + 4
+        parts.append(f"<text x='0' y='{y + 13}' font-size='12'>{kind}</text>")
+        colour = f"rgb{EVENT_COLOURS.get(kind, (40, 140, 60))}"
+        for e in (e for e in events if e["kind"] == kind):
+            x = left + e["start_s"] * scale
+            w = max(2.0, ((e["end_s"] or e["start_s"]) - e["start_s"]) * scale)
+            opacity = 1.0 if e["scored"] else 0.35
+            tip = html.escape(f"{e['start_s']:.1f} s, robot {e['robot']}, {kind}")
+            parts.append(
+                f"<rect x='{x:.1f}' y='{y}' width='{w:.1f}' height='{lane - 6}' fill='{colour}' "
+                f"opacity='{opacity}' data-seek='{e['start_s']}' style='cursor:pointer'>"
+                f"<title>{tip}</title></rect>"
+            )
+    axis_y = height - 12
+    parts.append(f"<line x1='{left}' y1='{axis_y}' x2='{width - 10}' y2='{axis_y}' stroke='#999'/>")
+    for k in range(6):
+        t = span * k / 5
+        parts.append(
+            f"<text x='{left + t * scale:.1f}' y='{axis_y + 11}' font-size='10' "
+            f"text-anchor='middle'>{t:.0f} s</text>"
+        )
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def _run_page(
+    store: Store, run_id: int, rank: int, out: Path, db_name: str
+) -> tuple[str, str] | None:
+    """The page and its data script for one run; None if the run has no situation."""
+    row = store.run_row(run_id)
+    if row["situation"] is None:
+        return None
+    situation = Situation(row["situation"])
+    trajectory = store.trajectory(run_id)
+    if trajectory is None:
+        return None
+    events = [json.loads(line) for line in row["events_jsonl"].splitlines()]
+    breakdown = json.loads(
+        store.db.execute("SELECT breakdown FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
+    )
+    reason = store.db.execute("SELECT reason FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
+    sim = row["run_spec"].get("sim", {})
+    dt_s = float(sim.get("dt_s", 0.1))
+    laser = {"fov_deg": 180.0, "beams": 181, "range_m": 10.0, "offset_x_m": 0.0}
+    laser.update({k: v for k, v in sim.get("laser", {}).items() if k in laser})
+    save_situation_figure(situation, out / f"run-{run_id}.png", trajectory, events, dt_s)
+    grid = situation.grid
+    data = {
+        "run": run_id,
+        "dt_s": dt_s,
+        "map": {
+            "rows": int(grid.occupied.shape[0]),
+            "cols": int(grid.occupied.shape[1]),
+            "res": grid.resolution,
+            "cells": base64.b64encode(grid.occupied.astype(np.uint8).tobytes()).decode(),
+        },
+        "robots": [{"id": r.id, "role": r.role, "body": r.body} for r in situation.robots],
+        "laser": laser,
+        "trajectory": base64.b64encode(trajectory.astype("<f4").tobytes()).decode(),
+    }
+    script = "window.SITGEN_RUN = " + json.dumps(data, separators=(",", ":")) + ";\n"
+    end_s = (len(trajectory) - 1) * dt_s
+    body = [f"<p><a href='index.html'>← all runs</a></p><h1>Run {run_id} (rank {rank})</h1>"]
+    body.append(
+        f"<p>score <b>{row['score']:.1f}</b>, outcome <b>{row['outcome']}</b> "
+        f"({html.escape(reason)}),"
+        f" {end_s:.1f} s, controller <code>{html.escape(row['controller'])}</code>,"
+        f" {len(situation.robots) - 1} peers, situation seed {row['situation_seed']}</p>"
+    )
+    body.append("<h2>Why this rank</h2><table id='breakdown'>")
+    body.append("<tr><th>event</th><th>count</th><th>seconds</th><th>points</th></tr>")
+    ordered = sorted(breakdown.items(), key=lambda kv: -kv[1]["points"])
+    for kind, line in ordered:
+        body.append(
+            f"<tr><td>{kind}</td><td class='num'>{line['count']}</td>"
+            f"<td class='num'>{line['seconds']:.1f}</td>"
+            f"<td class='num'>{line['points']:.1f}</td></tr>"
+        )
+    body.append(f"</table><p>{html.escape(main_events(breakdown)) or 'no scored events'}</p>")
+    body.append("<h2>Replay</h2><p class='controls'><button id='play'>play</button>")
+    body.append("speed <select id='speed'>")
+    body += [
+        f"<option value='{s}'{' selected' if s == 1 else ''}>{s}×</option>"
+        for s in (1, 2, 5, 10, 20, 50)
+    ]
+    body.append(
+        "</select><input id='scrub' type='range' min='0' value='0' step='1'> "
+        "<span id='time'>0.0 s</span></p><canvas id='replay'></canvas>"
+    )
+    body.append(
+        "<p>Agent red, peers blue; the agent's laser rays drawn from the map and poses.</p>"
+    )
+    body.append("<h2>Timeline</h2>" + _timeline_svg(events, end_s))
+    body.append("<h2>Situation</h2>")
+    body.append(
+        f"<img class='figure' src='run-{run_id}.png' alt='situation figure of run {run_id}'>"
+    )
+    body.append(
+        "<p>Starts are squares, goals circles, the agent filled, peers hollow; thin lines the "
+        "driven paths; ✕ collision, ○ unsafe proximity, ◇ loitering, ■ timeout.</p>"
+    )
+    body.append("<h2>Event log</h2><pre id='events'>")
+    body.append(html.escape("\n".join(_event_line(e) for e in events)) + "</pre>")
+    body.append(
+        f"<h2>Rerun</h2><p><code>sitgen rerun {html.escape(db_name)} {run_id}</code> regenerates "
+        "the situation from its spec and seed, runs it again and confirms the same event log."
+        "</p>"
+    )
+    scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
+    return _page(f"sitgen run {run_id}", "".join(body), scripts), script
+
+
+def _event_line(e: dict[str, Any]) -> str:
+    end = f"–{e['end_s']:.1f}" if e["end_s"] is not None else ""
+    other = f" with {e['other']}" if e["other"] is not None else ""
+    scored = "" if e["scored"] else " (not scored)"
+    return f"{e['start_s']:7.1f}{end} s  robot {e['robot']}  {e['kind']}{other}{scored}"
+
+
+def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
+    """Write the report of campaign store ``db`` into ``out``; returns the pages written."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    with Store(db) as store:
+        ranked = store.ranked(top)
+        pages: set[int] = set()
+        for rank, r in enumerate(ranked, 1):
+            made = _run_page(store, r["run"], rank, out, Path(db).name)
+            if made is None:
+                continue
+            page, script = made
+            (out / f"run-{r['run']}.js").write_text(script)
+            path = out / f"run-{r['run']}.html"
+            path.write_text(page)
+            pages.add(r["run"])
+            written.append(path)
+        index = out / "index.html"
+        index.write_text(_index(store, pages))
+    return [index, *written]
