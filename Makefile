@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -35,3 +35,15 @@ test: install-test lint rust-test py-test
 
 bench: install-test
 	$(BIN)/python benches/run.py
+
+# IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
+# with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).
+IRSIM_VENV := benches/.venv-irsim
+
+$(IRSIM_VENV)/bin/python:
+	$(PYTHON) -m venv $(IRSIM_VENV)
+	$(IRSIM_VENV)/bin/python -m pip install -q --upgrade pip
+
+bench-irsim: $(IRSIM_VENV)/bin/python
+	$(IRSIM_VENV)/bin/pip install -q 'ir-sim>=2.12,<3' .
+	$(IRSIM_VENV)/bin/python benches/irsim_compare.py

@@ -596,14 +596,7 @@ mod tests {
 
     /// The error building `dwa` with `params`, as text.
     fn build_error(params: &[(&str, f64)]) -> String {
-        let spec = ControllerSpec {
-            name: "dwa".into(),
-            params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
-        };
-        crate::control::build(&spec, "c")
-            .err()
-            .expect("the parameters are bad")
-            .to_string()
+        crate::control::tests::build_error("dwa", params, "c")
     }
 
     #[test]

@@ -32,6 +32,7 @@
 //! pursuit's own progress along the path (it cuts corners, so it may never come within
 //! `switch_m` of one).
 
+use crate::geometry::segment::nearest_point;
 use std::collections::BTreeMap;
 
 use super::route::RouteFollower;
@@ -86,21 +87,9 @@ fn point_after(route: &RouteFollower, next: Point) -> Option<Point> {
     route.clone().target(next)
 }
 
-/// The point of the segment a–b nearest `p`.
-fn nearest_on_leg(p: Point, a: Point, b: Point) -> Point {
-    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (a.0 + t * dx, a.1 + t * dy)
-}
-
 /// Distance from `p` to the segment a–b.
 fn distance_to_leg(p: Point, a: Point, b: Point) -> f64 {
-    let q = nearest_on_leg(p, a, b);
+    let q = nearest_point(p, a, b);
     (q.0 - p.0).hypot(q.1 - p.1)
 }
 
@@ -140,7 +129,7 @@ fn lookahead_point(p: Point, legs: &[(Point, Point)], l: f64) -> Point {
     if (end.0 - p.0).hypot(end.1 - p.1) <= l {
         return end;
     }
-    nearest_on_leg(p, legs[0].0, legs[0].1)
+    nearest_point(p, legs[0].0, legs[0].1)
 }
 
 impl Follow {
@@ -267,14 +256,7 @@ mod tests {
 
     /// The error building `follow` with `params`, as text.
     fn build_error(params: &[(&str, f64)]) -> String {
-        let spec = ControllerSpec {
-            name: "follow".into(),
-            params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
-        };
-        crate::control::build(&spec, "c")
-            .err()
-            .expect("the parameters are bad")
-            .to_string()
+        crate::control::tests::build_error("follow", params, "c")
     }
 
     #[test]

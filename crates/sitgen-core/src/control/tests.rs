@@ -78,7 +78,7 @@ fn straight_peers_drive_their_clear_routes_to_the_end_and_stop() {
 }
 
 /// The error building controller `name` with `params` gives, as text.
-fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> String {
+pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> String {
     let spec = ControllerSpec {
         name: name.into(),
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),

@@ -321,45 +321,23 @@ impl Controller for Vo {
 mod tests {
     use super::*;
     use crate::control::tests::run_situation;
-    use crate::geometry::Body;
-    use crate::grid::{Map, OccupancyGrid};
-    use crate::mission::{AtEnd, ControllerSpec};
+    use crate::mission::ControllerSpec;
     use crate::sim::{Contact, Track, World};
-    use crate::situation::{Pose, Role, Situation};
-    use crate::spec::SituationSpec;
+    use crate::situation::{Pose, Situation};
 
     fn robot(id: u32, start: (f64, f64, f64), goal: [f64; 2]) -> Robot {
-        Robot {
-            id,
-            role: if id == 0 { Role::Agent } else { Role::Peer },
-            body: Body::default(),
-            start: Pose {
-                x_m: start.0,
-                y_m: start.1,
-                heading_rad: start.2,
-            },
-            waypoints: vec![goal],
-            controller: ControllerSpec {
-                name: "straight".into(),
-                params: Default::default(),
-            },
-            at_end: AtEnd::Stop,
-        }
+        crate::test_data::robot(id, start, &[goal], "straight")
     }
 
     /// A 20 m × 20 m open field: the agent drives east from (4, 10) to (16, 10); a `straight`
     /// peer drives north from (10, 4) to (10, 16) at the same speed, so both reach (10, 10)
     /// together.
     fn crossing() -> Situation {
-        let map = Map {
-            grid: OccupancyGrid::filled(200, 200, false),
-            resolution_m: 0.1,
-        };
         let robots = vec![
             robot(0, (4.0, 10.0, 0.0), [16.0, 10.0]),
             robot(1, (10.0, 4.0, std::f64::consts::FRAC_PI_2), [10.0, 16.0]),
         ];
-        Situation::new(&map, robots, SituationSpec::default(), 0)
+        crate::test_data::situation(200, &[], robots)
     }
 
     fn named(name: &str) -> ControllerSpec {
@@ -371,14 +349,7 @@ mod tests {
 
     /// The error building `vo` with `params`, as text.
     fn build_error(params: &[(&str, f64)]) -> String {
-        let spec = ControllerSpec {
-            name: "vo".into(),
-            params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
-        };
-        crate::control::build(&spec, "c")
-            .err()
-            .expect("the parameters are bad")
-            .to_string()
+        crate::control::tests::build_error("vo", params, "c")
     }
 
     #[test]

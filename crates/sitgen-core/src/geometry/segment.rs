@@ -5,6 +5,18 @@
 //! exactly through a cell corner both side cells are visited too (a supercover), so a segment
 //! that is "clear" never squeezes between two diagonal obstacles.
 
+/// The point of the segment `a`–`b` nearest `p` (`a` when the segment is a point).
+pub fn nearest_point(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a.0 + t * dx, a.1 + t * dy)
+}
+
 /// Visit every cell (column, row) that the segment from `a` to `b` touches; coordinates are in
 /// cells: u along columns, v along rows (downward). Stops early and returns false when `visit`
 /// does.

@@ -106,14 +106,8 @@ impl Rect {
 
 /// Distance from point `p` to the segment `a`–`b`.
 fn point_segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
-    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (p.0 - a.0 - t * dx).hypot(p.1 - a.1 - t * dy)
+    let q = crate::geometry::segment::nearest_point(p, a, b);
+    (p.0 - q.0).hypot(p.1 - q.1)
 }
 
 #[cfg(test)]
