@@ -130,9 +130,15 @@ def bench_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any
     for name, r in out.items():
         r["controller_us_per_step"] = r["us_per_step"] - base
         print(
-            f"run with {name:10}: {1e6 / r['us_per_step']:8,.0f} steps/s, "
-            f"{r['us_per_step']:6.1f} µs/step, controller ≈ {r['controller_us_per_step']:+.1f} µs"
+            f"run with {name:10}: {1e6 / r['us_per_step']:8,.0f} steps/s "
+            f"({1e5 / r['us_per_step']:,.0f}x real time), {r['us_per_step']:6.1f} µs/step, "
+            f"controller ≈ {r['controller_us_per_step']:+.1f} µs"
         )
+    print(
+        "reference scene as the benchmark issue defines it (snd_follow agent, five straight "
+        f"peers, monitor on): {1e5 / out['snd_follow']['us_per_step']:,.0f}x real time "
+        "(target 5,000x)"
+    )
     return out
 
 

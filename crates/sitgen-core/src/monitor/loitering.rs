@@ -71,7 +71,7 @@ impl Window {
     fn extent(&mut self, step: u64, (x, y): (f64, f64), oldest: u64) -> f64 {
         let w = self.max_x.push(step, x, oldest, greater) - self.min_x.push(step, x, oldest, less);
         let h = self.max_y.push(step, y, oldest, greater) - self.min_y.push(step, y, oldest, less);
-        w.hypot(h)
+        (w * w + h * h).sqrt()
     }
 }
 

@@ -409,6 +409,7 @@ impl Monitor {
                 steps(spec.merge_gap_s, dt_s),
             ),
             unsafe_proximity: unsafe_proximity::Detector::new(
+                world.robots(),
                 spec.unsafe_proximity_m,
                 steps(spec.merge_gap_s, dt_s),
             ),

@@ -21,19 +21,23 @@
 use serde_json::json;
 
 use super::{details, party_name, Event, EventKind, Frame, Lasting, Log, Party};
+use crate::sim::RobotState;
 
 #[derive(Debug)]
 pub(super) struct Detector {
     threshold_m: f64,
+    /// Each robot's enclosing radius, metres (fixed for the run).
+    reach: Vec<f64>,
     lasting: Lasting<(u32, u32)>,
     /// Smallest clearance so far of each open pair.
     min_clearance: std::collections::BTreeMap<(u32, u32), f64>,
 }
 
 impl Detector {
-    pub(super) fn new(threshold_m: f64, merge_steps: u64) -> Self {
+    pub(super) fn new(robots: &[RobotState], threshold_m: f64, merge_steps: u64) -> Self {
         Self {
             threshold_m,
+            reach: robots.iter().map(|r| r.body.enclosing_radius()).collect(),
             lasting: Lasting::new(merge_steps),
             min_clearance: Default::default(),
         }
@@ -44,9 +48,10 @@ impl Detector {
         for (i, a) in frame.robots.iter().enumerate() {
             for b in &frame.robots[i + 1..] {
                 // Enclosing circles farther apart than the threshold settle most pairs.
-                let centres = (a.pose.x_m - b.pose.x_m).hypot(a.pose.y_m - b.pose.y_m);
-                let reach = a.body.enclosing_radius() + b.body.enclosing_radius();
-                if centres - reach >= self.threshold_m {
+                let (dx, dy) = (a.pose.x_m - b.pose.x_m, a.pose.y_m - b.pose.y_m);
+                let apart =
+                    self.reach[a.id as usize] + self.reach[b.id as usize] + self.threshold_m;
+                if dx * dx + dy * dy >= apart * apart {
                     continue;
                 }
                 let clearance = a.footprint().distance(&b.footprint());

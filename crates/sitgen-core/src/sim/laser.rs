@@ -145,9 +145,15 @@ pub fn ray_to_grid(
     let mut t0 = 0.0;
     'walk: loop {
         let (px, py) = (ox + t0 * dx, oy + t0 * dy);
-        // Column index from x, and row-from-the-bottom index from y.
-        let (cu, cw) = ((px / res).floor() as i64, (py / res).floor() as i64);
-        if cu < 0 || cw < 0 || cu >= cols || cw >= rows {
+        // Column index from x, and row-from-the-bottom index from y; off the map to the left
+        // or below reads `max`, and for the rest truncation is the floor (without a libm call
+        // on baseline x86-64).
+        let (u, w) = (px / res, py / res);
+        if u < 0.0 || w < 0.0 {
+            return max;
+        }
+        let (cu, cw) = (u as i64, w as i64);
+        if cu >= cols || cw >= rows {
             return max;
         }
         // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols
