@@ -337,15 +337,6 @@ def _ray_batch(args: list[tuple[str, int, str, int]]) -> list[dict[str, Any]]:
     return [dict(r) for r in core.run_jobs(args, 1)]
 
 
-@dataclass
-class Progress:
-    """What a campaign reports while it runs."""
-
-    done: int
-    total: int
-    started: float
-
-
 @dataclass(frozen=True)
 class CampaignResult:
     """What a campaign did."""

@@ -18,7 +18,6 @@ import contextlib
 import importlib
 import importlib.util
 import json
-import math
 import os
 import selectors
 import shlex
@@ -317,8 +316,3 @@ def load_controller(name: str | Any, step_timeout_s: float = STEP_TIMEOUT_S) -> 
 def is_user_controller(name: Any) -> bool:
     """Whether ``name`` is run by Python (``python:``, ``cmd:``, or an object)."""
     return not isinstance(name, str) or name.startswith(("python:", "cmd:"))
-
-
-def finite(command: tuple[float, float]) -> bool:
-    """Whether both parts of a command are finite numbers."""
-    return all(math.isfinite(x) for x in command)

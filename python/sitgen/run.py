@@ -27,9 +27,6 @@ from sitgen.controllers import (
 )
 from sitgen.situation import Situation
 
-BUILT_IN_CONTROLLERS = ("snd_follow", "snd", "follow", "vo", "dwa", "straight")
-"""Controllers that run in the core."""
-
 
 @dataclass(frozen=True)
 class RunRecord:

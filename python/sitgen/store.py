@@ -12,7 +12,6 @@ import json
 import sqlite3
 import zlib
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -393,12 +392,3 @@ def main_events(breakdown: dict[str, Any]) -> str:
     """The kinds that earned points, most points first: ``collision×2, unsafe_proximity×1``."""
     ordered = sorted(breakdown.items(), key=lambda kv: (-kv[1]["points"], kv[0]))
     return ", ".join(f"{kind}×{line['count']}" for kind, line in ordered)
-
-
-@contextmanager
-def open_store(path: str | Path) -> Iterator[Store]:
-    store = Store(path)
-    try:
-        yield store
-    finally:
-        store.close()
