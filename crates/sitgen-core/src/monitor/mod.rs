@@ -433,8 +433,8 @@ impl Monitor {
         self.collision.observe(frame, &mut self.log);
         self.unsafe_proximity.observe(frame, &mut self.log);
         self.waypoints.observe(frame, &mut self.log);
-        let done = self.waypoints.done();
-        self.loitering.observe(frame, &done, &mut self.log);
+        self.loitering
+            .observe(frame, self.waypoints.done(), &mut self.log);
     }
 
     /// How many waypoints of its route robot `id` has reached, in order.

@@ -32,6 +32,8 @@ pub(super) struct Detector {
     completed: Vec<bool>,
     /// Whether the robot is meant to stay at its last waypoint once there.
     stops: Vec<bool>,
+    /// Completed and meant to stay there: done.
+    done: Vec<bool>,
     driven_m: Vec<f64>,
     last: Vec<(f64, f64)>,
 }
@@ -65,6 +67,11 @@ impl Detector {
                 .robots
                 .iter()
                 .map(|r| r.at_end == AtEnd::Stop)
+                .collect(),
+            done: situation
+                .robots
+                .iter()
+                .map(|r| r.waypoints.is_empty() && r.at_end == AtEnd::Stop)
                 .collect(),
             driven_m: vec![0.0; situation.robots.len()],
             last: situation
@@ -112,6 +119,7 @@ impl Detector {
             }
             if self.routes[i].finished() {
                 self.completed[i] = true;
+                self.done[i] = self.stops[i];
                 route_completed::record(log, frame.step, r.id, of, self.driven_m[i]);
             }
         }
@@ -123,12 +131,8 @@ impl Detector {
     }
 
     /// Whether each robot is done: its route driven, and it is meant to stop there.
-    pub(super) fn done(&self) -> Vec<bool> {
-        self.completed
-            .iter()
-            .zip(&self.stops)
-            .map(|(&c, &s)| c && s)
-            .collect()
+    pub(super) fn done(&self) -> &[bool] {
+        &self.done
     }
 
     /// Waypoints robot `id` has reached.
