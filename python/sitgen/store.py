@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -59,9 +59,12 @@ CREATE TABLE IF NOT EXISTS runs (
     min_clearance_m REAL,
     waypoints_reached INTEGER NOT NULL,
     waypoints INTEGER NOT NULL,
-    events_jsonl TEXT NOT NULL
+    events_jsonl TEXT NOT NULL,
+    failure_class TEXT,
+    failure TEXT
 );
 CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
+CREATE INDEX IF NOT EXISTS runs_by_failure_class ON runs (failure_class, score DESC, id);
 CREATE TABLE IF NOT EXISTS events (
     run_id INTEGER NOT NULL REFERENCES runs (id),
     seq INTEGER NOT NULL,
@@ -135,6 +138,34 @@ class Store:
             raise StoreError(
                 f"{self.path}: store schema version {version} is newer than this sitgen's "
                 f"({SCHEMA_VERSION}); upgrade sitgen"
+            )
+        elif version < SCHEMA_VERSION:
+            self._upgrade(version)
+
+    def _upgrade(self, version: int) -> None:
+        """Bring a store written by an older sitgen up to this schema in one transaction:
+        columns are added, never dropped, so nothing stored is lost."""
+        from sitgen import _core
+
+        with self.db:
+            if version < 2:
+                # Version 2 adds each run's failure class, classified from its stored log (logs
+                # written before attribution classify by whose move was refused).
+                self.db.execute("ALTER TABLE runs ADD COLUMN failure_class TEXT")
+                self.db.execute("ALTER TABLE runs ADD COLUMN failure TEXT")
+                runs = self.db.execute("SELECT id, events_jsonl FROM runs").fetchall()
+                for run_id, events in runs:
+                    failure = _core.classify_events(events, 0)
+                    self.db.execute(
+                        "UPDATE runs SET failure_class = ?, failure = ? WHERE id = ?",
+                        (json.loads(failure)["class"] if failure else None, failure, run_id),
+                    )
+                self.db.executescript(
+                    "CREATE INDEX IF NOT EXISTS runs_by_failure_class "
+                    "ON runs (failure_class, score DESC, id)"
+                )
+            self.db.execute(
+                "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
 
     def _schema_version(self) -> int | None:
@@ -242,11 +273,13 @@ class Store:
             if e["kind"] == "unsafe_proximity" and e["scored"]
         ]
         waypoints = len(situation["robots"][0]["waypoints"]) if situation else 0
+        failure = rec.get("failure")
         reached = sum(1 for e in events if e["kind"] == "waypoint_reached" and e["robot"] == 0)
         self.db.execute(
             "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
             "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
-            "waypoints, events_jsonl) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "waypoints, events_jsonl, failure_class, failure) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 row.id,
                 row.id,
@@ -264,6 +297,8 @@ class Store:
                 reached,
                 waypoints,
                 row.events_jsonl,
+                failure["class"] if failure else None,
+                json.dumps(failure, sort_keys=True) if failure else None,
             ),
         )
         self.db.executemany(
@@ -294,21 +329,29 @@ class Store:
 
     # Reading.
 
-    def ranked(self, top: int | None = None) -> list[dict[str, Any]]:
-        """Runs, most dangerous first (score descending, then id)."""
+    def ranked(
+        self, top: int | None = None, failure_class: str | None = None
+    ) -> list[dict[str, Any]]:
+        """Runs, most dangerous first (score descending, then id), optionally only those of
+        one failure class."""
         sql = (
             "SELECT r.id, r.score, r.outcome, r.reason, r.breakdown, r.controller, r.steps, "
             "r.time_s, r.collisions, r.min_clearance_m, r.waypoints_reached, r.waypoints, "
-            "s.terrain, s.peers, s.seed FROM runs r JOIN situations s ON s.id = r.situation_id "
-            "ORDER BY r.score DESC, r.id"
+            "s.terrain, s.peers, s.seed, r.failure_class, r.failure "
+            "FROM runs r JOIN situations s ON s.id = r.situation_id"
         )
         params: tuple[Any, ...] = ()
+        if failure_class is not None:
+            sql += " WHERE r.failure_class = ?"
+            params = (failure_class,)
+        sql += " ORDER BY r.score DESC, r.id"
         if top is not None:
             sql += " LIMIT ?"
-            params = (top,)
+            params = (*params, top)
         out = []
         for row in self.db.execute(sql, params):
             breakdown = json.loads(row[4])
+            failure = json.loads(row[16]) if row[16] else None
             out.append(
                 {
                     "run": row[0],
@@ -327,6 +370,10 @@ class Store:
                     "terrain": row[12],
                     "peers": row[13],
                     "situation_seed": row[14],
+                    "failure_class": row[15],
+                    "failure": failure["description"] if failure else None,
+                    "failure_features": failure["features"] if failure else {},
+                    "failure_events": failure["events"] if failure else [],
                 }
             )
         return out
@@ -337,7 +384,7 @@ class Store:
     def run_row(self, run_id: int) -> dict[str, Any]:
         row = self.db.execute(
             "SELECT r.id, s.seed, s.spec, s.situation, s.content_hash, r.run_spec, r.run_seed, "
-            "r.controller, r.score, r.events_jsonl, r.outcome FROM runs r "
+            "r.controller, r.score, r.events_jsonl, r.outcome, r.failure FROM runs r "
             "JOIN situations s ON s.id = r.situation_id WHERE r.id = ?",
             (run_id,),
         ).fetchone()
@@ -355,6 +402,7 @@ class Store:
             "score": row[8],
             "events_jsonl": row[9],
             "outcome": row[10],
+            "failure": json.loads(row[11]) if row[11] else None,
         }
 
     def trajectory(self, run_id: int) -> npt.NDArray[np.float32] | None:

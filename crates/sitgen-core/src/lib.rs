@@ -9,10 +9,11 @@
 //! [`rng`] (named seed streams, recordable choices), [`grid`] (scalar fields and occupancy
 //! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out),
 //! [`mission`] (placement and routes), [`situation`] (the situation file), [`sim`] (the
-//! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties), and
-//! [`run`] (one situation driven to its end).
+//! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties),
+//! [`failure`] (failure classes) and [`run`] (one situation driven to its end).
 
 pub mod control;
+pub mod failure;
 pub mod geometry;
 pub mod grid;
 pub mod interchange;

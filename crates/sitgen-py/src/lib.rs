@@ -2,6 +2,7 @@
 //! modules; long calls release the GIL.
 
 mod campaign;
+mod failure;
 mod interchange;
 mod mission;
 mod run;
@@ -38,5 +39,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     sim::register(m)?;
     run::register(m)?;
     campaign::register(m)?;
+    failure::register(m)?;
     Ok(())
 }

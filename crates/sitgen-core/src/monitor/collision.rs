@@ -12,7 +12,11 @@
 //!   `visibility_window_s` before contact (for pairs with the agent: the other robot was among
 //!   the robots some beam hit first; for the agent against a wall: the agent was moving in a
 //!   direction its laser covers, since walls do not move — so backing or turning on the spot
-//!   into a wall with a 180° laser is not visible); `null` where the agent is not involved.
+//!   into a wall with a 180° laser is not visible); `null` where the agent is not involved;
+//! - where the agent is involved, the [`super::attribution`] facts at contact: `initiator`
+//!   (whether the agent drove into the other party or was struck), `agent_mean_speed_m_s` over
+//!   the second before, and for a robot `bearing`, `closing_speed_m_s`, approach speeds and
+//!   `seen` / `seen_before_s` / `last_seen_before_s`.
 //!
 //! **Why it matters.** Contact is the accident sitgen exists to find. Whether the agent could
 //! have seen the other party separates perception faults (the paper's run 207: a robot
@@ -29,6 +33,7 @@
 
 use serde_json::{json, Value};
 
+use super::attribution::Attribution;
 use super::{details, party_name, Event, EventKind, Frame, Lasting, Log, Party};
 use crate::sim::Contact;
 
@@ -38,8 +43,6 @@ type Key = (u32, Party);
 #[derive(Debug)]
 pub(super) struct Detector {
     agent: u32,
-    /// The last step at which the agent's laser saw each robot.
-    last_seen: Vec<Option<u64>>,
     window_steps: u64,
     window_s: f64,
     /// Whether the laser covers the direction behind the robot (a 360° laser).
@@ -49,7 +52,6 @@ pub(super) struct Detector {
 
 impl Detector {
     pub(super) fn new(
-        robots: usize,
         agent: u32,
         window_s: f64,
         fov_deg: f64,
@@ -58,7 +60,6 @@ impl Detector {
     ) -> Self {
         Self {
             agent,
-            last_seen: vec![None; robots],
             window_steps: super::steps(window_s, dt_s),
             window_s,
             sees_behind: fov_deg >= 360.0,
@@ -66,12 +67,7 @@ impl Detector {
         }
     }
 
-    pub(super) fn observe(&mut self, frame: &Frame<'_>, log: &mut Log) {
-        // The agent's scan was taken at the start of this step, one step before the frame.
-        let scan_step = frame.step.saturating_sub(1);
-        for &id in frame.seen_by_agent {
-            self.last_seen[id as usize] = Some(scan_step);
-        }
+    pub(super) fn observe(&mut self, frame: &Frame<'_>, seen: &Attribution, log: &mut Log) {
         let mut active: Vec<(Key, u32)> = Vec::new();
         for r in frame.robots.iter().filter(|r| r.stalled) {
             for c in &r.contacts {
@@ -108,7 +104,7 @@ impl Detector {
                 frame.step,
                 key.0,
                 Some(key.1),
-                self.describe_contact(frame, key, &blocked),
+                self.describe_contact(frame, seen, key, &blocked),
             );
             self.lasting.open.insert(key, index);
         }
@@ -117,6 +113,7 @@ impl Detector {
     fn describe_contact(
         &self,
         frame: &Frame<'_>,
+        seen: &Attribution,
         (robot, other): Key,
         blocked: &[u32],
     ) -> std::collections::BTreeMap<String, Value> {
@@ -127,10 +124,8 @@ impl Detector {
                 Value::Bool(v > 0.0 || self.sees_behind)
             }
             Party::Robot(o) if robot == self.agent || o == self.agent => {
-                let seen = if robot == self.agent { o } else { robot };
-                let recent = self.last_seen[seen as usize]
-                    .is_some_and(|s| s + self.window_steps >= frame.step);
-                Value::Bool(recent)
+                let id = if robot == self.agent { o } else { robot };
+                Value::Bool(seen.seen_within(id, self.window_steps, frame.step))
             }
             _ => Value::Null,
         };
@@ -144,6 +139,9 @@ impl Detector {
         }
         if let Party::Robot(o) = other {
             d.insert("other_speed_m_s".into(), json!(speed(o)));
+        }
+        if robot == self.agent {
+            d.extend(seen.details(frame, other, blocked));
         }
         d
     }

@@ -57,9 +57,10 @@ fn greater(a: f64, b: f64) -> bool {
     a > b
 }
 
-/// The bounding box of one robot's positions over the window.
+/// The bounding box of one robot's positions over a sliding window (shared with
+/// [`super::oscillation`]).
 #[derive(Debug, Default)]
-struct Window {
+pub(super) struct Window {
     min_x: Extreme,
     max_x: Extreme,
     min_y: Extreme,
@@ -68,7 +69,7 @@ struct Window {
 
 impl Window {
     /// Add the position at `step`; returns the diagonal of the box since `oldest`.
-    fn extent(&mut self, step: u64, (x, y): (f64, f64), oldest: u64) -> f64 {
+    pub(super) fn extent(&mut self, step: u64, (x, y): (f64, f64), oldest: u64) -> f64 {
         let w = self.max_x.push(step, x, oldest, greater) - self.min_x.push(step, x, oldest, less);
         let h = self.max_y.push(step, y, oldest, greater) - self.min_y.push(step, y, oldest, less);
         (w * w + h * h).sqrt()

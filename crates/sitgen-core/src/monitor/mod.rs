@@ -3,15 +3,19 @@
 //!
 //! Each event kind is one file with the same doc template (what it detects, why it matters,
 //! parameters, an example log line): [`collision`], [`unsafe_proximity`], [`loitering`],
-//! [`waypoint_reached`], [`route_completed`], [`timeout`]. An event has a start, an end (for
+//! [`oscillation`], [`waypoint_reached`], [`route_completed`], [`timeout`]. Events between
+//! the agent and another party carry [`attribution`]: who moved into whom, from which side,
+//! how fast, and whether the agent's laser had seen it. An event has a start, an end (for
 //! lasting ones), the robot, the other party and details. Events are kept for every robot; a
 //! run's scoring decides which count (by default those that concern the agent, as the paper).
 //!
 //! Times are step counts inside and seconds (rounded to the nanosecond, so that 0.3 is written
 //! as 0.3) in the log, so a log is byte-identical wherever it is produced.
 
+pub mod attribution;
 pub mod collision;
 pub mod loitering;
+pub mod oscillation;
 pub mod route_completed;
 pub mod timeout;
 pub mod unsafe_proximity;
@@ -52,6 +56,41 @@ pub struct MonitorSpec {
     /// pushes again is in one accident, not dozens.
     #[serde(default = "default_merge_gap_s")]
     pub merge_gap_s: f64,
+    /// How far back attribution looks to tell who moved into whom and how fast, seconds, in
+    /// (0, 60]. Default 1.
+    #[serde(default = "default_attribution_window_s")]
+    pub attribution_window_s: f64,
+    /// Window in which turn reversals are counted for `oscillation`, seconds, in (0, 3600].
+    /// Default 10.
+    #[serde(default = "default_oscillation_window_s")]
+    pub oscillation_window_s: f64,
+    /// Turn reversals within the window that make an oscillation, in [2, 1000]. Default 4.
+    #[serde(default = "default_oscillation_reversals")]
+    pub oscillation_reversals: u32,
+    /// Extent of the window's positions below which an oscillating robot is going nowhere,
+    /// metres, in (0, 1000]. Default 1.0.
+    #[serde(default = "default_oscillation_distance_m")]
+    pub oscillation_distance_m: f64,
+    /// Turn rate above which a step counts as turning left or right, degrees per second, in
+    /// (0, 3600]. Default 5.
+    #[serde(default = "default_oscillation_turn_rate_deg_s")]
+    pub oscillation_turn_rate_deg_s: f64,
+}
+
+fn default_attribution_window_s() -> f64 {
+    1.0
+}
+fn default_oscillation_window_s() -> f64 {
+    10.0
+}
+fn default_oscillation_reversals() -> u32 {
+    4
+}
+fn default_oscillation_distance_m() -> f64 {
+    1.0
+}
+fn default_oscillation_turn_rate_deg_s() -> f64 {
+    5.0
 }
 
 fn default_unsafe_proximity_m() -> f64 {
@@ -82,6 +121,11 @@ impl Default for MonitorSpec {
             waypoint_radius_m: default_waypoint_radius_m(),
             visibility_window_s: default_visibility_window_s(),
             merge_gap_s: default_merge_gap_s(),
+            attribution_window_s: default_attribution_window_s(),
+            oscillation_window_s: default_oscillation_window_s(),
+            oscillation_reversals: default_oscillation_reversals(),
+            oscillation_distance_m: default_oscillation_distance_m(),
+            oscillation_turn_rate_deg_s: default_oscillation_turn_rate_deg_s(),
         }
     }
 }
@@ -99,7 +143,29 @@ impl MonitorSpec {
         SpecError::check_positive(&p("loitering_window_s"), self.loitering_window_s, 3600.0)?;
         SpecError::check_positive(&p("waypoint_radius_m"), self.waypoint_radius_m, 100.0)?;
         SpecError::check_positive(&p("visibility_window_s"), self.visibility_window_s, 3600.0)?;
-        SpecError::check_in(&p("merge_gap_s"), self.merge_gap_s, 0.0, 3600.0)
+        SpecError::check_in(&p("merge_gap_s"), self.merge_gap_s, 0.0, 3600.0)?;
+        SpecError::check_positive(&p("attribution_window_s"), self.attribution_window_s, 60.0)?;
+        SpecError::check_positive(
+            &p("oscillation_window_s"),
+            self.oscillation_window_s,
+            3600.0,
+        )?;
+        SpecError::check_in(
+            &p("oscillation_reversals"),
+            f64::from(self.oscillation_reversals),
+            2.0,
+            1000.0,
+        )?;
+        SpecError::check_positive(
+            &p("oscillation_distance_m"),
+            self.oscillation_distance_m,
+            1000.0,
+        )?;
+        SpecError::check_positive(
+            &p("oscillation_turn_rate_deg_s"),
+            self.oscillation_turn_rate_deg_s,
+            3600.0,
+        )
     }
 }
 
@@ -115,6 +181,8 @@ pub enum EventKind {
     UnsafeProximity,
     /// Little net progress over a window, lasting.
     Loitering,
+    /// Turning to and fro while going nowhere, lasting.
+    Oscillation,
     /// A waypoint of the route reached, instant.
     WaypointReached,
     /// The whole route driven, instant.
@@ -125,10 +193,11 @@ pub enum EventKind {
 
 impl EventKind {
     /// Every kind, in log order of precedence.
-    pub const ALL: [EventKind; 6] = [
+    pub const ALL: [EventKind; 7] = [
         EventKind::Collision,
         EventKind::UnsafeProximity,
         EventKind::Loitering,
+        EventKind::Oscillation,
         EventKind::WaypointReached,
         EventKind::RouteCompleted,
         EventKind::Timeout,
@@ -140,6 +209,7 @@ impl EventKind {
             EventKind::Collision => "collision",
             EventKind::UnsafeProximity => "unsafe_proximity",
             EventKind::Loitering => "loitering",
+            EventKind::Oscillation => "oscillation",
             EventKind::WaypointReached => "waypoint_reached",
             EventKind::RouteCompleted => "route_completed",
             EventKind::Timeout => "timeout",
@@ -171,8 +241,22 @@ impl Serialize for Party {
     }
 }
 
+/// Read from `"wall"` or a robot id.
+impl<'de> Deserialize<'de> for Party {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        match serde_json::Value::deserialize(d)? {
+            serde_json::Value::String(s) if s == "wall" => Ok(Party::Wall),
+            v => v
+                .as_u64()
+                .and_then(|id| u32::try_from(id).ok())
+                .map(Party::Robot)
+                .ok_or_else(|| serde::de::Error::custom("expected \"wall\" or a robot id")),
+        }
+    }
+}
+
 /// One event of a run. Field names are stable: they are the JSON Lines format.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Event {
     /// What happened.
     pub kind: EventKind,
@@ -188,6 +272,7 @@ pub struct Event {
     /// Whether it counts toward the run's score (by default: it concerns the agent).
     pub scored: bool,
     /// Kind-specific facts, by name (documented in each kind's file).
+    #[serde(default)]
     pub details: BTreeMap<String, serde_json::Value>,
 }
 
@@ -215,6 +300,7 @@ impl Event {
             EventKind::Collision => collision::describe(self, agent),
             EventKind::UnsafeProximity => unsafe_proximity::describe(self, agent),
             EventKind::Loitering => loitering::describe(self),
+            EventKind::Oscillation => oscillation::describe(self, agent),
             EventKind::WaypointReached => waypoint_reached::describe(self),
             EventKind::RouteCompleted => route_completed::describe(self),
             EventKind::Timeout => timeout::describe(self),
@@ -230,7 +316,8 @@ impl Event {
         )
     }
 
-    fn detail_f64(&self, name: &str) -> f64 {
+    /// A numeric detail, NaN when absent.
+    pub fn detail_f64(&self, name: &str) -> f64 {
         self.details
             .get(name)
             .and_then(serde_json::Value::as_f64)
@@ -274,6 +361,8 @@ pub struct Frame<'a> {
     pub robots: &'a [RobotState],
     /// Ids of the robots the agent's laser saw at the start of this step.
     pub seen_by_agent: &'a [u32],
+    /// The world itself (the map, for the clearance of a robot to walls).
+    pub world: &'a World,
 }
 
 /// The event log under construction: open lasting events by key, closed in order.
@@ -382,7 +471,9 @@ pub struct Monitor {
     collision: collision::Detector,
     unsafe_proximity: unsafe_proximity::Detector,
     loitering: loitering::Detector,
+    oscillation: oscillation::Detector,
     waypoints: waypoint_reached::Detector,
+    attribution: attribution::Attribution,
 }
 
 impl Monitor {
@@ -401,7 +492,6 @@ impl Monitor {
                 dt_s,
             },
             collision: collision::Detector::new(
-                situation.robots.len(),
                 agent,
                 spec.visibility_window_s,
                 world.spec().laser.fov_deg,
@@ -410,6 +500,7 @@ impl Monitor {
             ),
             unsafe_proximity: unsafe_proximity::Detector::new(
                 world.robots(),
+                agent,
                 spec.unsafe_proximity_m,
                 steps(spec.merge_gap_s, dt_s),
             ),
@@ -419,7 +510,23 @@ impl Monitor {
                 spec.loitering_window_s,
                 dt_s,
             ),
+            oscillation: oscillation::Detector::new(
+                world.robots(),
+                &oscillation::Thresholds {
+                    window_s: spec.oscillation_window_s,
+                    reversals: spec.oscillation_reversals,
+                    distance_m: spec.oscillation_distance_m,
+                    turn_rate_deg_s: spec.oscillation_turn_rate_deg_s,
+                },
+                dt_s,
+            ),
             waypoints: waypoint_reached::Detector::new(situation, spec.waypoint_radius_m),
+            attribution: attribution::Attribution::new(
+                situation.robots.len(),
+                agent,
+                steps(spec.attribution_window_s, dt_s),
+                dt_s,
+            ),
         }
     }
 
@@ -430,10 +537,15 @@ impl Monitor {
 
     /// Watch the world after a step.
     pub fn observe(&mut self, frame: &Frame<'_>) {
-        self.collision.observe(frame, &mut self.log);
-        self.unsafe_proximity.observe(frame, &mut self.log);
+        self.attribution.observe(frame);
+        self.collision
+            .observe(frame, &self.attribution, &mut self.log);
+        self.unsafe_proximity
+            .observe(frame, &self.attribution, &mut self.log);
         self.waypoints.observe(frame, &mut self.log);
         self.loitering
+            .observe(frame, self.waypoints.done(), &mut self.log);
+        self.oscillation
             .observe(frame, self.waypoints.done(), &mut self.log);
     }
 
@@ -458,6 +570,7 @@ impl Monitor {
         self.collision.finish(step, &mut self.log);
         self.unsafe_proximity.finish(step, &mut self.log);
         self.loitering.finish(step, &mut self.log);
+        self.oscillation.finish(step, &mut self.log);
         if timed_out {
             timeout::record(
                 &mut self.log,

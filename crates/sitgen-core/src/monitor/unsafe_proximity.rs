@@ -3,7 +3,9 @@
 //! **What it detects.** Two robots whose footprints (the oriented rectangles, not enclosing
 //! circles) are closer than `unsafe_proximity_m`, contact included. One event per pair, lasting
 //! while they stay that close; `robot` is the lower id, so the agent's pairs name the agent.
-//! Details: `min_clearance_m`, the smallest clearance reached while it lasted.
+//! Details: `min_clearance_m`, the smallest clearance reached while it lasted; where the agent
+//! is one of the pair, the [`super::attribution`] facts when it began (`initiator`: which of
+//! them closed in, `bearing`, speeds, whether the agent's laser had seen the other).
 //!
 //! **Why it matters.** A near miss is a collision that luck avoided; people near a robot feel
 //! unsafe well before contact. The paper scores it from the moment it starts and per second
@@ -20,11 +22,13 @@
 
 use serde_json::json;
 
+use super::attribution::Attribution;
 use super::{details, party_name, Event, EventKind, Frame, Lasting, Log, Party};
 use crate::sim::RobotState;
 
 #[derive(Debug)]
 pub(super) struct Detector {
+    agent: u32,
     threshold_m: f64,
     /// Each robot's enclosing radius, metres (fixed for the run).
     reach: Vec<f64>,
@@ -34,8 +38,14 @@ pub(super) struct Detector {
 }
 
 impl Detector {
-    pub(super) fn new(robots: &[RobotState], threshold_m: f64, merge_steps: u64) -> Self {
+    pub(super) fn new(
+        robots: &[RobotState],
+        agent: u32,
+        threshold_m: f64,
+        merge_steps: u64,
+    ) -> Self {
         Self {
+            agent,
             threshold_m,
             reach: robots.iter().map(|r| r.body.enclosing_radius()).collect(),
             lasting: Lasting::new(merge_steps),
@@ -43,7 +53,7 @@ impl Detector {
         }
     }
 
-    pub(super) fn observe(&mut self, frame: &Frame<'_>, log: &mut Log) {
+    pub(super) fn observe(&mut self, frame: &Frame<'_>, seen: &Attribution, log: &mut Log) {
         let mut close = Vec::new();
         for (i, a) in frame.robots.iter().enumerate() {
             for b in &frame.robots[i + 1..] {
@@ -68,12 +78,16 @@ impl Detector {
             let index = match self.lasting.open.get(&key) {
                 Some(&i) => i,
                 None => {
+                    let mut d = details([("min_clearance_m", json!(clearance))]);
+                    if key.0 == self.agent {
+                        d.extend(seen.details(frame, Party::Robot(key.1), &[]));
+                    }
                     let i = log.open(
                         EventKind::UnsafeProximity,
                         frame.step,
                         key.0,
                         Some(Party::Robot(key.1)),
-                        details([("min_clearance_m", json!(clearance))]),
+                        d,
                     );
                     self.lasting.open.insert(key, i);
                     i

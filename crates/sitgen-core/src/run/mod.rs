@@ -8,7 +8,8 @@
 //! 4. the world steps ([`World::step`]);
 //! 5. the monitor watches the new state, and every robot's pose is appended to the trajectory;
 //! 6. the run ends when the monitor sees the agent complete its route (`completed`) or the time
-//!    limit is reached (`timeout`, with a timeout event).
+//!    limit is reached (`timeout`, with a timeout event); its scored events give its score and
+//!    its failure class ([`crate::failure::classify`]).
 //!
 //! A run is a pure function of (situation, run spec, seed): no clock, no shared state.
 
@@ -16,6 +17,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::control::{self, Command, Controller};
+use crate::failure::{self, Failure};
 use crate::mission::ControllerSpec;
 use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
 use crate::scoring::{self, Score, ScoringSpec};
@@ -114,6 +116,8 @@ pub struct RunRecord {
     pub score: Score,
     /// The event log, in start order.
     pub events: Vec<Event>,
+    /// What went wrong: the failure class of the most severe scored event; `None` if nothing.
+    pub failure: Option<Failure>,
     /// Steps simulated.
     pub steps: u64,
     /// Simulated seconds.
@@ -263,6 +267,7 @@ impl Run {
             step: self.world.steps(),
             robots: self.world.robots(),
             seen_by_agent: &seen,
+            world: &self.world,
         });
         if monitor.route_completed(self.agent) {
             self.ended = Some((Outcome::Completed, "the agent completed its route".into()));
@@ -305,10 +310,12 @@ impl Run {
             |e| score_peers || e.concerns(agent),
         );
         let score = scoring::score(&events, &self.scoring);
+        let failure = failure::classify(&events, agent);
         RunRecord {
             outcome,
             reason,
             score,
+            failure,
             events,
             steps: self.world.steps(),
             time_s: self.world.time_s(),

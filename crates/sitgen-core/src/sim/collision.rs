@@ -91,6 +91,14 @@ impl Rect {
         one_way(&a, &b).min(one_way(&b, &a))
     }
 
+    /// Distance from point `p` to the rectangle, metres (0 inside).
+    pub fn point_distance(&self, p: (f64, f64)) -> f64 {
+        let d = (p.0 - self.centre.0, p.1 - self.centre.1);
+        let along = (d.0 * self.u.0 + d.1 * self.u.1).abs() - self.half_length;
+        let across = (d.1 * self.u.0 - d.0 * self.u.1).abs() - self.half_width;
+        along.max(0.0).hypot(across.max(0.0))
+    }
+
     /// Whether the interior of the rectangle intersects the axis-aligned square with lower-left
     /// corner `(x0, y0)` and side `side`.
     pub fn overlaps_square(&self, x0: f64, y0: f64, side: f64) -> bool {

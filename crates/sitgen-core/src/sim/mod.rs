@@ -411,6 +411,62 @@ impl World {
         false
     }
 
+    /// Clearance from robot `i`'s footprint to the nearest occupied cell or the map's edge,
+    /// metres (0 in contact), if there is one within `within_m`; the monitor names the nearest
+    /// party of an event with it. Exact: every occupied cell near the footprint is a square
+    /// measured against the rectangle; the distance field skips robots in the open.
+    pub fn wall_clearance(&self, i: usize, within_m: f64) -> Option<f64> {
+        let r = &self.robots[i];
+        let rect = r.footprint();
+        let g = &self.map.grid;
+        let res = self.map.resolution_m;
+        let (w, h) = (g.cols as f64 * res, g.rows as f64 * res);
+        let (x0, y0, x1, y1) = rect.bounds();
+        let mut best = x0.min(y0).min(w - x1).min(h - y1).max(0.0);
+        let mut reach = within_m.min(best);
+        let c = (r.pose.x_m / res) as usize;
+        let from_bottom = (r.pose.y_m / res) as usize;
+        if c < g.cols && from_bottom < g.rows {
+            let clear = f64::from(self.clearance_m[(g.rows - 1 - from_bottom) * g.cols + c]);
+            if clear - res * std::f64::consts::SQRT_2 > r.body.enclosing_radius() + within_m {
+                return (best <= within_m).then_some(best);
+            }
+            // The pose lies inside the footprint, within half a cell diagonal of its cell's
+            // centre: no cell nearer the footprint can lie farther out than this.
+            reach = reach.min(clear + res);
+        }
+        let cells = |lo: f64, hi: f64, n: usize| {
+            (
+                ((lo - reach) / res).floor().max(0.0) as usize,
+                (((hi + reach) / res).ceil().max(0.0) as usize).min(n),
+            )
+        };
+        let (c0, c1) = cells(x0, x1, g.cols);
+        let (w0, w1) = cells(y0, y1, g.rows);
+        for wr in w0..w1 {
+            let row = g.rows - 1 - wr;
+            for col in c0..c1 {
+                if !g.cells[row * g.cols + col] {
+                    continue;
+                }
+                let centre = ((col as f64 + 0.5) * res, (wr as f64 + 0.5) * res);
+                // The cell's centre is at most half a diagonal from its nearest point: skip
+                // cells that cannot beat the best without the exact test.
+                if rect.point_distance(centre) - res * std::f64::consts::FRAC_1_SQRT_2 >= best {
+                    continue;
+                }
+                let cell = Rect {
+                    centre,
+                    u: (1.0, 0.0),
+                    half_length: res / 2.0,
+                    half_width: res / 2.0,
+                };
+                best = best.min(rect.distance(&cell));
+            }
+        }
+        (best <= within_m).then_some(best)
+    }
+
     /// What robot `id` senses now. Only the agent carries the laser.
     pub fn observe(&self, id: u32) -> Result<Observation, String> {
         let r = self

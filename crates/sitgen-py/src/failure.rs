@@ -1,0 +1,40 @@
+//! Bindings of `sitgen_core::failure`: the failure class of a stored event log, and the list of
+//! classes.
+
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use sitgen_core::failure::{classify, FailureClass};
+use sitgen_core::monitor::Event;
+
+/// The failure (JSON: class, description, events, features) of an event log given as JSON
+/// Lines, whose agent is robot `agent`; `None` if it has no scored failure. A line that is not
+/// an event is an error naming its line number.
+#[pyfunction]
+#[pyo3(signature = (events_jsonl, agent=0))]
+fn classify_events(events_jsonl: &str, agent: u32) -> PyResult<Option<String>> {
+    let mut events = Vec::new();
+    for (i, line) in events_jsonl.lines().enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let e: Event = serde_json::from_str(line)
+            .map_err(|e| PyValueError::new_err(format!("event line {}: {e}", i + 1)))?;
+        events.push(e);
+    }
+    Ok(classify(&events, agent).map(|f| serde_json::to_string(&f).expect("failures serialize")))
+}
+
+/// Every failure class as (key, description), most severe first.
+#[pyfunction]
+fn failure_classes() -> Vec<(&'static str, &'static str)> {
+    FailureClass::ALL
+        .iter()
+        .map(|c| (c.key(), c.description()))
+        .collect()
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(classify_events, m)?)?;
+    m.add_function(wrap_pyfunction!(failure_classes, m)?)?;
+    Ok(())
+}

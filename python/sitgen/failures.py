@@ -1,0 +1,266 @@
+"""Distinct failures: a campaign's runs grouped by failure class, each group with its
+representative run (the highest-scoring), most dangerous first.
+
+A run's failure class is computed in the core from its scored events (``docs/failures.md``).
+Where one class is broad (at least ``BROAD_RUNS`` runs), it is split by behaviour features of
+its deciding events with agglomerative clustering (scikit-learn, Ward linkage: deterministic,
+no random start), and each part is named in words by what sets it apart: the side the other
+party came from, the terrain, and whether its failures lasted long or short, were fast or slow
+— so a split always reads as a sentence, never as "cluster 3".
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import statistics
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any, TextIO
+
+import numpy as np
+
+from sitgen import _core
+from sitgen.store import Store
+
+BROAD_RUNS = 20
+"""A class with at least this many runs is split where its runs fall into clear groups."""
+
+MIN_SILHOUETTE = 0.5
+"""A split is kept only if its groups are this well separated (silhouette, −1 … 1)."""
+
+MAX_CLUSTERED = 2000
+"""Runs of one class clustered at most (evenly spaced by id); the rest join the nearest group."""
+
+SIDES = ("front", "left", "right", "rear")
+
+
+class FailureFilterError(ValueError):
+    """An unknown failure class asked for."""
+
+
+def classes() -> list[tuple[str, str]]:
+    """Every failure class as (key, sentence), most severe first."""
+    return _core.failure_classes()
+
+
+def check_class(key: str) -> str:
+    """``key`` if it is a failure class, else an error naming the known ones."""
+    known = [k for k, _ in classes()]
+    if key not in known:
+        raise FailureFilterError(
+            f"--class: unknown failure class {key!r}; expected one of {', '.join(known)}"
+        )
+    return key
+
+
+@dataclass
+class DistinctFailure:
+    """One distinct failure of a campaign."""
+
+    key: str
+    """The failure class key, with ``/`` and the split's words for part of a broad class."""
+    failure_class: str
+    description: str
+    runs: int
+    share: float
+    """Of all runs of the campaign."""
+    best_score: float
+    representative: int
+    """The highest-scoring run (lowest id on ties)."""
+    median_duration_s: float
+    """Median over its runs of how long the deciding events lasted."""
+    run_ids: list[int] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["class"] = d.pop("failure_class")
+        return d
+
+
+def distinct_failures(store: Store) -> list[DistinctFailure]:
+    """The campaign's distinct failures, best score first (then key)."""
+    total = store.db.execute("SELECT count(*) FROM runs").fetchone()[0]
+    by_class: dict[str, list[dict[str, Any]]] = {}
+    rows = store.db.execute(
+        "SELECT r.id, r.score, r.failure_class, r.failure, s.terrain FROM runs r "
+        "JOIN situations s ON s.id = r.situation_id WHERE r.failure_class IS NOT NULL "
+        "ORDER BY r.id"
+    )
+    for run_id, score, key, failure, terrain in rows:
+        f = json.loads(failure)
+        by_class.setdefault(key, []).append(
+            {"id": run_id, "score": score, "terrain": terrain, **f["features"]}
+        )
+    sentences = dict(classes())
+    out = []
+    for key, runs in by_class.items():
+        for marks, part in split(runs):
+            words = [w for w, _ in marks]
+            description = sentences.get(key, key) + (f", {', '.join(words)}" if words else "")
+            sub_key = "/".join([key, *[t for _, t in marks]])
+            out.append(_group(sub_key, key, description, part, total))
+    out.sort(key=lambda d: (-d.best_score, d.key))
+    return out
+
+
+def _group(
+    key: str, failure_class: str, description: str, runs: list[dict[str, Any]], total: int
+) -> DistinctFailure:
+    best = min(runs, key=lambda r: (-r["score"], r["id"]))
+    return DistinctFailure(
+        key=key,
+        failure_class=failure_class,
+        description=description,
+        runs=len(runs),
+        share=len(runs) / total if total else 0.0,
+        best_score=best["score"],
+        representative=best["id"],
+        median_duration_s=statistics.median(float(r.get("seconds", 0.0)) for r in runs),
+        run_ids=sorted(r["id"] for r in runs),
+    )
+
+
+def _features(runs: Sequence[dict[str, Any]]) -> tuple[np.ndarray, list[str]]:
+    """Standardised behaviour features: side one-hot, log duration, agent speed, terrain."""
+    names: list[str] = []
+    cols: list[list[float]] = []
+    sides = [r.get("bearing") for r in runs]
+    if any(sides):
+        for side in SIDES:
+            names.append(f"side:{side}")
+            cols.append([1.0 if s == side else 0.0 for s in sides])
+    names.append("seconds")
+    cols.append([math.log1p(float(r.get("seconds", 0.0))) for r in runs])
+    names.append("speed")
+    cols.append([float(r.get("agent_mean_speed_m_s", 0.0)) for r in runs])
+    terrains = sorted({str(r.get("terrain")) for r in runs})
+    if len(terrains) > 1:
+        for t in terrains:
+            names.append(f"terrain:{t}")
+            cols.append([1.0 if str(r.get("terrain")) == t else 0.0 for r in runs])
+    x = np.array(cols, dtype=float).T
+    spread = x.std(axis=0)
+    spread[spread == 0] = 1.0
+    return (x - x.mean(axis=0)) / spread, names
+
+
+Mark = tuple[str, str]
+"""Words that tell a part of a class apart (``from the rear``), and its token in keys (``rear``)."""
+
+
+def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, Any]]]]:
+    """A class's runs as (marks, runs) parts: one part with no marks unless the class is broad
+    and its runs fall into clearly separated groups that words can tell apart."""
+    if len(runs) < BROAD_RUNS:
+        return [([], runs)]
+    from sklearn.cluster import AgglomerativeClustering
+    from sklearn.metrics import silhouette_score
+
+    x, names = _features(runs)
+    step = max(1, math.ceil(len(runs) / MAX_CLUSTERED))
+    sample = x[::step]
+    if len(np.unique(sample, axis=0)) < 2:
+        return [([], runs)]
+    best: tuple[float, np.ndarray] | None = None
+    for k in (2, 3, 4):
+        if len(sample) <= k:
+            break
+        labels = AgglomerativeClustering(n_clusters=k, linkage="ward").fit_predict(sample)
+        quality = float(silhouette_score(sample, labels))
+        if best is None or quality > best[0] + 1e-12:
+            best = (quality, labels)
+    if best is None or best[0] < MIN_SILHOUETTE:
+        return [([], runs)]
+    labels = best[1]
+    centres = np.array([sample[labels == c].mean(axis=0) for c in range(labels.max() + 1)])
+    assigned = np.argmin(((x[:, None, :] - centres[None, :, :]) ** 2).sum(axis=2), axis=1)
+    parts: dict[tuple[Mark, ...], list[dict[str, Any]]] = {}
+    for c in range(len(centres)):
+        members = [r for r, a in zip(runs, assigned, strict=True) if a == c]
+        if not members:
+            continue
+        others = [r for r, a in zip(runs, assigned, strict=True) if a != c]
+        words = tuple(describe(members, others, names))
+        parts.setdefault(words, []).extend(members)
+    if len(parts) < 2:
+        return [([], runs)]
+    return sorted(
+        ((list(w), sorted(p, key=lambda r: r["id"])) for w, p in parts.items()),
+        key=lambda wp: wp[1][0]["id"],
+    )
+
+
+def describe(
+    members: list[dict[str, Any]], others: list[dict[str, Any]], names: list[str]
+) -> list[Mark]:
+    """What tells ``members`` from ``others``: a side or terrain that at least 80% of the
+    members share and fewer of the others; lasting longer or shorter, or the agent going faster
+    or slower, than 80% of the others for 80% of the members."""
+    marks: list[Mark] = []
+    categorical = (("side", "bearing", "from the {}"), ("terrain", "terrain", "in {}"))
+    for label, feature, phrase in categorical:
+        if not any(n.startswith(label + ":") for n in names):
+            continue
+        values = [str(r.get(feature)) for r in members]
+        top = max(sorted(set(values)), key=values.count)
+        share = values.count(top) / len(values)
+        share_others = sum(str(r.get(feature)) == top for r in others) / max(1, len(others))
+        if share >= 0.8 and share_others < share:
+            marks.append((phrase.format(top), top))
+    numeric = (
+        ("seconds", ("lasting over {} s", "long"), ("lasting under {} s", "short")),
+        (
+            "agent_mean_speed_m_s",
+            ("agent faster than {} m/s", "fast"),
+            ("agent slower than {} m/s", "slow"),
+        ),
+    )
+    for feature, more, less in numeric:
+        mine = sorted(float(r.get(feature, 0.0)) for r in members)
+        theirs = sorted(float(r.get(feature, 0.0)) for r in others)
+        if not theirs:
+            continue
+        lo, hi = _quantile(mine, 0.2), _quantile(mine, 0.8)
+        if lo > _quantile(theirs, 0.8):
+            marks.append((more[0].format(_round(lo)), more[1]))
+        elif hi < _quantile(theirs, 0.2):
+            marks.append((less[0].format(_round(hi)), less[1]))
+    return marks
+
+
+def _quantile(values: list[float], q: float) -> float:
+    return float(np.quantile(values, q)) if values else 0.0
+
+
+def _round(x: float) -> str:
+    """Two significant figures, for words."""
+    if x == 0:
+        return "0"
+    digits = max(0, 1 - math.floor(math.log10(abs(x))))
+    return f"{x:.{digits}f}"
+
+
+FAILURE_COLUMNS = (
+    "key",
+    "class",
+    "description",
+    "runs",
+    "share",
+    "best_score",
+    "representative",
+    "median_duration_s",
+)
+
+
+def write_failures(failures: list[DistinctFailure], format: str, out: TextIO) -> None:
+    """Write distinct failures as ``json`` (a list of objects) or ``csv``."""
+    rows = [f.as_dict() for f in failures]
+    if format == "json":
+        json.dump(rows, out, indent=2)
+        out.write("\n")
+        return
+    writer = csv.DictWriter(out, fieldnames=list(FAILURE_COLUMNS), extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
