@@ -74,13 +74,18 @@ def test_usage_errors_exit_2_without_a_traceback(tmp_path: Path) -> None:
     assert r.stderr.startswith("error: terrain.preset: unknown preset `moon`")
 
 
-def test_demo_writes_every_preset(tmp_path: Path) -> None:
-    r = run_cli("demo", "-o", str(tmp_path / "demo"))
+def test_demo_writes_every_preset_runs_the_campaign_and_reports(tmp_path: Path) -> None:
+    r = run_cli("demo", "-o", str(tmp_path / "demo"), "--n", "30")
     assert r.returncode == 0, r.stderr
     for name in sitgen.preset_names():
         for suffix in (".png", ".yaml", ".json", "-situation.png"):
             assert (tmp_path / "demo" / f"{name}{suffix}").is_file(), f"{name}{suffix}"
         sitgen.Situation.load(tmp_path / "demo" / f"{name}.json")
+    assert (tmp_path / "demo" / "paper.db").is_file()
+    index = tmp_path / "demo" / "report" / "index.html"
+    assert index.is_file()
+    assert "distinct failures" in r.stdout
+    assert r.stdout.rstrip().endswith(f"report: {index}")
 
 
 def test_presets_and_schema_commands() -> None:

@@ -422,7 +422,10 @@ class StopOnInterrupt:
 
 
 def summary(store: Store, top: int = 5) -> dict[str, Any]:
-    """The paper's §4.2 figures: runs, mean and median score, share under 10 points, top runs."""
+    """The paper's §4.2 figures (runs, mean and median score, share under 10 points, top runs)
+    and the campaign's distinct failures, best first."""
+    from sitgen.failures import distinct_failures
+
     scores = store.scores()
     ranked = store.ranked(top)
     outcomes: dict[str, int] = {}
@@ -438,4 +441,5 @@ def summary(store: Store, top: int = 5) -> dict[str, Any]:
             {"run": r["run"], "score": r["score"], "main_events": main_events(r["breakdown"])}
             for r in ranked
         ],
+        "distinct": [f.as_dict() for f in distinct_failures(store)],
     }

@@ -294,6 +294,8 @@ def run_command(
             f"{situation}: {record.controller}, outcome {record.outcome} after "
             f"{record.time_s:.1f} s ({record.reason}), score {record.score:g}"
         )
+        if record.failure is not None:
+            typer.echo(f"failure: {record.failure['description']} ({record.failure['class']})")
         if record.breakdown:
             table = Table(title="score breakdown")
             for column in ("event", "count", "seconds", "points"):
@@ -436,6 +438,12 @@ def campaign(
     )
     for r in s["top"]:
         typer.echo(f"  run {r['run']:>5}  score {r['score']:>10.1f}  {r['main_events']}")
+    typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
+    for f in s["distinct"][:top]:
+        typer.echo(
+            f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
+            f"{f['description']}"
+        )
     if result.interrupted:
         raise typer.Exit(130)
 
@@ -445,27 +453,79 @@ def rank(
     db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
     top: Annotated[int, typer.Option("--top", help="How many runs.")] = 20,
     format: Annotated[str, typer.Option("--format", "-f", help="table, csv or json.")] = "table",
+    distinct: Annotated[
+        bool,
+        typer.Option(
+            "--distinct", help="The representative of each distinct failure first, then the rest."
+        ),
+    ] = False,
+    failure_class: Annotated[
+        str | None,
+        typer.Option("--class", help="Only runs of this failure class (see `sitgen failures`)."),
+    ] = None,
 ) -> None:
     """The runs of a campaign, most dangerous first."""
+    from sitgen.failures import FailureFilterError
     from sitgen.rank import ranked_rows, write_ranking
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, csv, json")
-    rows = ranked_rows(db, top)
+    _existing_store(db)
+    try:
+        rows = ranked_rows(db, top, failure_class, distinct)
+    except FailureFilterError as e:
+        raise UsageError(str(e)) from None
     if format == "table":
         table = Table(title=f"{db}: top {len(rows)} runs")
-        for column in ("rank", "run", "score", "outcome", "main events", "terrain", "peers"):
+        columns = ("rank", "run", "score", "outcome", "failure class", "main events", "terrain")
+        for column in columns:
             table.add_column(
                 column, justify="right" if column in ("rank", "run", "score") else "left"
             )
         for r in rows:
             table.add_row(
                 str(r["rank"]), str(r["run"]), f"{r['score']:.1f}", r["outcome"],
-                r["main_events"], str(r["terrain"]), str(r["peers"]),
+                r.get("distinct") or r["failure_class"] or "", r["main_events"],
+                str(r["terrain"]),
             )  # fmt: skip
         Console(width=160).print(table)
     else:
         write_ranking(rows, format, sys.stdout)
+
+
+@app.command()
+def failures(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    format: Annotated[str, typer.Option("--format", "-f", help="table, json or csv.")] = "table",
+) -> None:
+    """One row per distinct failure of a campaign, the most dangerous (best score) first: its
+    class, sentence, runs, share of runs, best score, representative run and median duration."""
+    from sitgen.failures import distinct_failures, write_failures
+    from sitgen.store import Store
+
+    if format not in ("table", "csv", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json, csv")
+    _existing_store(db)
+    with Store(db) as store:
+        found = distinct_failures(store)
+    if format != "table":
+        write_failures(found, format, sys.stdout)
+        return
+    table = Table(title=f"{db}: {len(found)} distinct failures")
+    for column in ("class", "failure", "runs", "share", "best score", "run", "median s"):
+        table.add_column(column, justify="left" if column in ("class", "failure") else "right")
+    for f in found:
+        table.add_row(
+            f.key, f.description, str(f.runs), f"{100 * f.share:.1f}%", f"{f.best_score:.1f}",
+            str(f.representative), f"{f.median_duration_s:.1f}",
+        )  # fmt: skip
+    Console(width=200).print(table)
+
+
+def _existing_store(db: Path) -> None:
+    """Stop with a one-line error unless ``db`` is a file (opening would create a new store)."""
+    if not db.is_file():
+        raise UsageError(f"{db}: no such campaign store")
 
 
 @app.command()
@@ -486,14 +546,18 @@ def rerun(
 
 @app.command()
 def demo(
-    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the maps.")] = Path(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for everything.")] = Path(
         "demo"
     ),
     seed: SeedOption = 0,
+    n: Annotated[int, typer.Option("--n", min=1, help="Runs of the paper's campaign.")] = 500,
 ) -> None:
-    """Generate one situation of every built-in preset: its map (PNG + ROS YAML), the situation
-    (JSON) and its figure (the main job on built-in defaults)."""
+    """The main job on built-in defaults: one situation of every preset (map PNG + ROS YAML,
+    situation JSON, figure), then the paper's campaign (500 runs, seed 1: --n) into
+    OUTPUT/paper.db, its HTML report in OUTPUT/report/, and its distinct failures."""
+    from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign
     from sitgen.figure import save_situation_figure
+    from sitgen.report import write_report
 
     output.mkdir(parents=True, exist_ok=True)
     table = Table(title=f"sitgen presets, seed {seed}")
@@ -520,6 +584,18 @@ def demo(
         f"wrote {len(preset_names())} maps (PNG + ROS YAML), situations (JSON) and figures "
         f"to {output}/"
     )
+    db = output / "paper.db"
+    typer.echo(f"running the paper's campaign ({n} runs, seed 1) into {db} ...")
+    with StopOnInterrupt() as stop:
+        result = run_campaign(parse_campaign(None), db, seed=1, n=n, stop=stop)
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        raise typer.Exit(130)
+    typer.echo(f"{result.total} runs stored ({result.ran} run now in {result.wall_s:.1f} s)")
+    report_dir = output / "report"
+    write_report(db, report_dir, 50)
+    failures(db, "table")
+    typer.echo(f"report: {report_dir / 'index.html'}")
 
 
 @app.command()

@@ -15,7 +15,7 @@ import csv
 import json
 import math
 import statistics
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, TextIO
 
@@ -122,8 +122,17 @@ def _group(
     )
 
 
+SPEED_SCALE_M_S = 0.2
+"""Agent speeds this far apart count as far apart as two sides, or durations e times apart."""
+
+MIN_SEPARATION = 1.0
+"""Groups whose centres are closer than this (in feature units) are not worth a split."""
+
+
 def _features(runs: Sequence[dict[str, Any]]) -> tuple[np.ndarray, list[str]]:
-    """Standardised behaviour features: side one-hot, log duration, agent speed, terrain."""
+    """Behaviour features on fixed, meaningful scales (so a spread of a few tenths of a second
+    never looks like two groups): side one-hot, log duration, agent speed per 0.2 m/s, terrain
+    one-hot."""
     names: list[str] = []
     cols: list[list[float]] = []
     sides = [r.get("bearing") for r in runs]
@@ -134,16 +143,13 @@ def _features(runs: Sequence[dict[str, Any]]) -> tuple[np.ndarray, list[str]]:
     names.append("seconds")
     cols.append([math.log1p(float(r.get("seconds", 0.0))) for r in runs])
     names.append("speed")
-    cols.append([float(r.get("agent_mean_speed_m_s", 0.0)) for r in runs])
+    cols.append([float(r.get("agent_mean_speed_m_s", 0.0)) / SPEED_SCALE_M_S for r in runs])
     terrains = sorted({str(r.get("terrain")) for r in runs})
     if len(terrains) > 1:
         for t in terrains:
             names.append(f"terrain:{t}")
             cols.append([1.0 if str(r.get("terrain")) == t else 0.0 for r in runs])
-    x = np.array(cols, dtype=float).T
-    spread = x.std(axis=0)
-    spread[spread == 0] = 1.0
-    return (x - x.mean(axis=0)) / spread, names
+    return np.array(cols, dtype=float).T, names
 
 
 Mark = tuple[str, str]
@@ -168,6 +174,10 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
         if len(sample) <= k:
             break
         labels = AgglomerativeClustering(n_clusters=k, linkage="ward").fit_predict(sample)
+        centres = np.array([sample[labels == c].mean(axis=0) for c in range(k)])
+        gaps = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
+        if gaps[np.triu_indices(k, 1)].min() < MIN_SEPARATION:
+            continue
         quality = float(silhouette_score(sample, labels))
         if best is None or quality > best[0] + 1e-12:
             best = (quality, labels)
@@ -196,8 +206,9 @@ def describe(
     members: list[dict[str, Any]], others: list[dict[str, Any]], names: list[str]
 ) -> list[Mark]:
     """What tells ``members`` from ``others``: a side or terrain that at least 80% of the
-    members share and fewer of the others; lasting longer or shorter, or the agent going faster
-    or slower, than 80% of the others for 80% of the members."""
+    members share and fewer of the others; lasting more than twice as long (or under half as
+    long), or the agent going over 0.1 m/s faster (or slower), than 80% of the others for 80%
+    of the members."""
     marks: list[Mark] = []
     categorical = (("side", "bearing", "from the {}"), ("terrain", "terrain", "in {}"))
     for label, feature, phrase in categorical:
@@ -209,23 +220,29 @@ def describe(
         share_others = sum(str(r.get(feature)) == top for r in others) / max(1, len(others))
         if share >= 0.8 and share_others < share:
             marks.append((phrase.format(top), top))
-    numeric = (
-        ("seconds", ("lasting over {} s", "long"), ("lasting under {} s", "short")),
+    numeric: tuple[tuple[str, Callable[[float, float], bool], Mark, Mark], ...] = (
+        (
+            "seconds",
+            lambda more, less: more > 2 * less,
+            ("lasting over {} s", "long"),
+            ("lasting under {} s", "short"),
+        ),
         (
             "agent_mean_speed_m_s",
+            lambda more, less: more > less + 0.1,
             ("agent faster than {} m/s", "fast"),
             ("agent slower than {} m/s", "slow"),
         ),
     )
-    for feature, more, less in numeric:
+    for feature, beyond, more, less in numeric:
         mine = sorted(float(r.get(feature, 0.0)) for r in members)
         theirs = sorted(float(r.get(feature, 0.0)) for r in others)
         if not theirs:
             continue
         lo, hi = _quantile(mine, 0.2), _quantile(mine, 0.8)
-        if lo > _quantile(theirs, 0.8):
+        if beyond(lo, _quantile(theirs, 0.8)):
             marks.append((more[0].format(_round(lo)), more[1]))
-        elif hi < _quantile(theirs, 0.2):
+        elif beyond(_quantile(theirs, 0.2), hi):
             marks.append((less[0].format(_round(hi)), less[1]))
     return marks
 

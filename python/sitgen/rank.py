@@ -18,6 +18,8 @@ RANK_COLUMNS = (
     "score",
     "outcome",
     "main_events",
+    "failure_class",
+    "failure",
     "terrain",
     "peers",
     "collisions",
@@ -33,10 +35,32 @@ RANK_COLUMNS = (
 TABLES = ("campaign", "situations", "runs", "events", "trajectories")
 
 
-def ranked_rows(db: str | Path, top: int | None = None) -> list[dict[str, Any]]:
-    """The top runs, most dangerous first, with their rank (1 = highest score)."""
+def ranked_rows(
+    db: str | Path,
+    top: int | None = None,
+    failure_class: str | None = None,
+    distinct: bool = False,
+) -> list[dict[str, Any]]:
+    """The top runs, most dangerous first, with their rank (1 = first). ``failure_class``
+    keeps the runs of one class; ``distinct`` puts the representative of each distinct failure
+    first (best first, each marked with its ``distinct`` key), then the rest by score."""
+    from sitgen.failures import check_class, distinct_failures
+
+    if failure_class is not None:
+        check_class(failure_class)
     with Store(db) as store:
-        rows = store.ranked(top)
+        rows = store.ranked(None if distinct else top, failure_class)
+        if distinct:
+            failures = [
+                f
+                for f in distinct_failures(store)
+                if failure_class is None or f.failure_class == failure_class
+            ]
+            by_id = {r["run"]: r for r in rows}
+            first = [{**by_id[f.representative], "distinct": f.key} for f in failures]
+            chosen = {f.representative for f in failures}
+            rows = first + [r for r in rows if r["run"] not in chosen]
+            rows = rows[:top] if top is not None else rows
     return [{"rank": i + 1, **r} for i, r in enumerate(rows)]
 
 

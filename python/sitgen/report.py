@@ -1,10 +1,13 @@
 """The report: a static, self-contained HTML triage view of a campaign.
 
-``sitgen report campaign.db -o report/`` writes ``index.html`` (campaign facts, the score
-distribution on a log scale, events by kind, every run ranked in a table that sorts and filters)
-and, for the top runs, ``run-<id>.html`` with the situation figure (map, routes, driven paths,
-event markers), the event timeline, the score breakdown, a replay (play, pause, scrub, speed;
-every robot's footprint and the agent's laser rays) and the command that reruns it. No network:
+``sitgen report campaign.db -o report/`` writes ``index.html`` (first the campaign's distinct
+failures, one card each with its sentence, runs, share, best score and its representative run's
+figure; then campaign facts, the score distribution on a log scale, events by kind, every run
+ranked in a table that sorts and filters by event kind and failure class) and, for the top runs
+and every distinct failure's representative, ``run-<id>.html`` with the run's failure class and
+the events that decided it, the situation figure (map, routes, driven paths, event markers), the
+event timeline, the score breakdown, a replay (play, pause, scrub, speed; every robot's
+footprint and the agent's laser rays) and the command that reruns it. No network:
 styles and scripts are inline, each run's data sits beside its page as a script (``run-<id>.js``,
 trajectories as base64 float32) so pages open from the file system and stay small for 600 s
 runs. The replay's laser rays are cast in the page from the map and the poses with the
@@ -22,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
 from sitgen.situation import Situation
 from sitgen.store import Store, main_events
@@ -36,6 +40,12 @@ td.num { text-align: right; font-variant-numeric: tabular-nums; }
 .controls button, .controls select { margin-right: .5em; } #scrub { width: 60%; }
 canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
 .figure { max-width: 100%; border: 1px solid #ccc; }
+.cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(270px, 1fr)); gap: 12px; }
+.card { border: 1px solid #ddd; border-radius: 6px; padding: 8px 10px; background: #fafafa; }
+.card h3 { font-size: 1em; margin: .1em 0 .3em; } .card p { margin: .3em 0; }
+.card img { width: 100%; border: 1px solid #ccc; display: block; } .muted { color: #666; }
+td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
+mark { background: #fde2b8; } #failure-events span:hover { background: #f3f3f3; }
 """
 
 
@@ -89,6 +99,7 @@ INDEX_SCRIPT = """
   const table = document.getElementById('runs');
   const body = table.tBodies[0];
   const filter = document.getElementById('filter');
+  const classFilter = document.getElementById('class-filter');
   let order = {column: 'score', descending: true};
   function key(row, column) {
     const v = row.dataset[column];
@@ -107,25 +118,72 @@ INDEX_SCRIPT = """
   }
   table.querySelectorAll('th.sortable').forEach(th =>
     th.addEventListener('click', () => sortBy(th.dataset.column)));
-  filter.addEventListener('change', () => {
-    const kind = filter.value;
+  function applyFilters() {
+    // Both filters at once: the event kind and the failure class ('-': runs with no class).
+    const kind = filter.value, cls = classFilter.value;
     let shown = 0;
     Array.from(body.rows).forEach(r => {
-      const visible = !kind || r.dataset.kinds.split(' ').includes(kind);
+      const visible = (!kind || r.dataset.kinds.split(' ').includes(kind)) &&
+        (!cls || r.dataset.class === (cls === '-' ? '' : cls));
       r.hidden = !visible;
       if (visible) shown += 1;
     });
     document.getElementById('shown').textContent = shown;
-  });
-  window.sitgenIndex = {sortBy};
+  }
+  filter.addEventListener('change', applyFilters);
+  classFilter.addEventListener('change', applyFilters);
+  window.sitgenIndex = {sortBy, applyFilters};
 })();
 </script>
 """
 
 
-def _index(store: Store, top_pages: set[int]) -> str:
+def _distinct_section(
+    failures: list[DistinctFailure], pages: set[int], ranks: dict[int, int], total: int
+) -> str:
+    """One card per distinct failure, most dangerous first: its sentence, runs, share, best
+    score and its representative run's figure, linked to the run's page."""
+    body = ["<section id='distinct'><h2>Distinct failures</h2>"]
+    if not failures:
+        body.append("<p id='no-failures'>No failures: no run has a failure class.</p></section>")
+        return "".join(body)
+    failing = sum(f.runs for f in failures)
+    body.append(
+        f"<p class='muted'>{failing} of {total} runs fall into {len(failures)} distinct "
+        "failures (a failure class, a broad one split by behaviour), most dangerous first; "
+        "each shows its representative, its highest-scoring run.</p><div class='cards'>"
+    )
+    for f in failures:
+        run_id = f.representative
+        rank = ranks.get(run_id)
+        where = f"run {run_id}" + (f" (rank {rank})" if rank is not None else "")
+        if run_id in pages:
+            figure = (
+                f"<a href='run-{run_id}.html'><img src='run-{run_id}.png' loading='lazy' "
+                f"alt='situation figure of run {run_id}'></a>"
+            )
+            link = f"<a class='representative' href='run-{run_id}.html'>{where} →</a>"
+        else:
+            figure = ""
+            link = f"<span class='representative'>{where} (no stored trajectory)</span>"
+        body.append(
+            f"<div class='card' data-key='{html.escape(f.key)}' "
+            f"data-class='{html.escape(f.failure_class)}' data-runs='{f.runs}' "
+            f"data-representative='{run_id}'>"
+            f"<h3 title='{html.escape(f.key)}'>{html.escape(f.description)}</h3>"
+            f"<p>{f.runs} run{'s' if f.runs != 1 else ''} ({f.share:.1%} of all), "
+            f"best score <b>{f.best_score:.1f}</b>, deciding events lasting "
+            f"{f.median_duration_s:.1f} s (median)</p>{figure}<p>representative: {link}</p>"
+            "</div>"
+        )
+    body.append("</div></section>")
+    return "".join(body)
+
+
+def _index(
+    store: Store, rows: list[dict[str, Any]], failures: list[DistinctFailure], pages: set[int]
+) -> str:
     campaign = store.campaign() or {}
-    rows = store.ranked()
     scores = [r["score"] for r in rows]
     kinds: dict[str, list[int]] = {}
     for kind, count, runs in store.db.execute(
@@ -139,8 +197,15 @@ def _index(store: Store, top_pages: set[int]) -> str:
     ):
         run_kinds.setdefault(run_id, set()).add(kind)
     outcomes: dict[str, int] = {}
+    present: dict[str, tuple[str, int]] = {}
     for r in rows:
         outcomes[r["outcome"]] = outcomes.get(r["outcome"], 0) + 1
+        if r["failure_class"] is not None:
+            _, n = present.get(r["failure_class"], ("", 0))
+            present[r["failure_class"]] = (r["failure"] or r["failure_class"], n + 1)
+    severity = {key: i for i, (key, _) in enumerate(classes())}
+    class_options = sorted(present, key=lambda k: (severity.get(k, len(severity)), k))
+    unclassified = sum(r["failure_class"] is None for r in rows)
     mean = sum(scores) / len(scores) if scores else 0.0
     median = float(np.median(scores)) if scores else 0.0
     facts = [
@@ -157,7 +222,9 @@ def _index(store: Store, top_pages: set[int]) -> str:
         ),
     ]
     spec = json.dumps(campaign.get("spec", {}), indent=2, sort_keys=True)
-    body = ["<h1>sitgen campaign report</h1><table class='facts'>"]
+    ranks = {r["run"]: rank for rank, r in enumerate(rows, 1)}
+    body = ["<h1>sitgen campaign report</h1>", _distinct_section(failures, pages, ranks, len(rows))]
+    body.append("<h2>Campaign</h2><table class='facts'>")
     body += [f"<tr><td>{k}</td><td>{html.escape(str(v))}</td></tr>" for k, v in facts]
     body.append("</table><details><summary>campaign spec</summary><pre>")
     body.append(html.escape(spec) + "</pre></details>")
@@ -171,6 +238,14 @@ def _index(store: Store, top_pages: set[int]) -> str:
     body.append("</table><h2>Runs, most dangerous first</h2><p class='controls'>")
     body.append("Show runs with <select id='filter'><option value=''>any event</option>")
     body += [f"<option value='{k}'>{k}</option>" for k in kinds]
+    body.append("</select> of class <select id='class-filter'><option value=''>any class</option>")
+    body += [
+        f"<option value='{html.escape(k)}' title='{html.escape(k)}'>"
+        f"{html.escape(present[k][0])} ({present[k][1]})</option>"
+        for k in class_options
+    ]
+    if unclassified:
+        body.append(f"<option value='-'>no failure ({unclassified})</option>")
     body.append(f"</select> <span id='shown'>{len(rows)}</span> shown. Click a heading to sort.")
     body.append("</p><table id='runs'><thead><tr>")
     columns = [
@@ -178,6 +253,7 @@ def _index(store: Store, top_pages: set[int]) -> str:
         ("run", "run"),
         ("score", "score"),
         ("outcome", "outcome"),
+        ("failure", "class"),
         ("events", "main events"),
         ("terrain", "terrain"),
         ("peers", "peers"),
@@ -186,15 +262,20 @@ def _index(store: Store, top_pages: set[int]) -> str:
     body.append("</tr></thead><tbody>")
     for rank, r in enumerate(rows, 1):
         run_id = r["run"]
-        link = f"<a href='run-{run_id}.html'>{run_id}</a>" if run_id in top_pages else str(run_id)
+        link = f"<a href='run-{run_id}.html'>{run_id}</a>" if run_id in pages else str(run_id)
         events = html.escape(r["main_events"])
+        key = html.escape(r["failure_class"] or "")
+        sentence = html.escape(r["failure"] or r["failure_class"] or "")
         body.append(
             f"<tr data-rank='{rank}' data-run='{run_id}' data-score='{r['score']}' "
             f"data-outcome='{r['outcome']}' data-events='{events}' "
+            f"data-class='{key}' data-failure='{sentence}' "
             f"data-terrain='{html.escape(str(r['terrain']))}' data-peers='{r['peers'] or 0}' "
             f"data-kinds='{' '.join(sorted(run_kinds.get(run_id, ())))}'>"
             f"<td class='num'>{rank}</td><td class='num'>{link}</td>"
-            f"<td class='num'>{r['score']:.1f}</td><td>{r['outcome']}</td><td>{events}</td>"
+            f"<td class='num'>{r['score']:.1f}</td><td>{r['outcome']}</td>"
+            f"<td class='class' title='{key}'>{sentence or '<span class=muted>none</span>'}</td>"
+            f"<td>{events}</td>"
             f"<td>{html.escape(str(r['terrain']))}</td><td class='num'>{r['peers']}</td></tr>"
         )
     body.append("</tbody></table>")

@@ -56,6 +56,10 @@ class RunRecord:
     """The event log as JSON Lines (byte-identical for the same inputs)."""
     events_text: str = field(repr=False)
     """The event log as text, one line per event."""
+    failure: dict[str, Any] | None = None
+    """What went wrong: ``class`` (key), ``description`` (sentence), ``events`` (positions in
+    the log of the events that decided it), ``features``; None if nothing did
+    (docs/failures.md)."""
 
     def to_dict(self) -> dict[str, Any]:
         """Everything but the trajectory, as JSON-ready data."""
@@ -68,6 +72,7 @@ class RunRecord:
             "seed": self.seed,
             "steps": self.steps,
             "time_s": self.time_s,
+            "failure": self.failure,
             "events": self.events,
         }
 
@@ -153,6 +158,7 @@ def run(
         seed=seed,
         events_jsonl=out["events_jsonl"],
         events_text=out["events_text"],
+        failure=record.get("failure"),
     )
 
 

@@ -1,0 +1,207 @@
+"""Distinct failures end to end: classes stored per run, ``sitgen failures``, ``rank
+--distinct``/``--class``, the campaign summary, explainable splits, and old stores upgraded."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import shutil
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import sitgen
+from sitgen import _core
+from sitgen.failures import BROAD_RUNS, classes, distinct_failures, split
+from sitgen.store import SCHEMA_VERSION, Store
+
+from .conftest import run_cli
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """The paper's campaign, first 60 runs (seed 1): collisions, near misses and oscillation."""
+    db = tmp_path_factory.mktemp("failures") / "paper.db"
+    r = run_cli("campaign", "--n", "60", "--seed", "1", "--db", str(db))
+    assert r.returncode == 0, r.stderr
+    return db, r.stdout
+
+
+def failures_json(db: Path) -> list[dict[str, Any]]:
+    r = run_cli("failures", str(db), "--format", "json")
+    assert r.returncode == 0, r.stderr
+    rows: list[dict[str, Any]] = json.loads(r.stdout)
+    return rows
+
+
+def test_every_run_with_a_scored_failure_has_the_class_the_core_gives_its_log(
+    campaign: tuple[Path, str],
+) -> None:
+    db, _ = campaign
+    keys = {k for k, _ in classes()}
+    with Store(db) as store:
+        rows = store.db.execute(
+            "SELECT id, failure_class, failure, events_jsonl, score FROM runs"
+        ).fetchall()
+    assert len(rows) == 60
+    classified = 0
+    for run_id, key, failure, events, score in rows:
+        assert failure == _core.classify_events(events, 0) or json.loads(failure) == json.loads(
+            _core.classify_events(events, 0) or "null"
+        ), run_id
+        scored_failure = any(
+            e["scored"] and e["kind"] not in ("waypoint_reached", "route_completed")
+            for e in map(json.loads, events.splitlines())
+        )
+        assert (key is not None) == scored_failure, run_id
+        if key is not None:
+            classified += 1
+            assert key in keys
+            assert score > 0
+    assert classified >= 10, "the paper's campaign fails often"
+
+
+def test_failures_lists_each_distinct_failure_once_best_first(
+    campaign: tuple[Path, str],
+) -> None:
+    db, _ = campaign
+    rows = failures_json(db)
+    assert rows, "a campaign of 60 runs has failures"
+    for row in rows:
+        assert {"key", "class", "description", "runs", "best_score", "representative"} <= set(row)
+    assert [r["best_score"] for r in rows] == sorted((r["best_score"] for r in rows), reverse=True)
+    assert len({r["key"] for r in rows}) == len(rows)
+    with Store(db) as store:
+        scores = {r["run"]: (r["score"], r["failure_class"]) for r in store.ranked()}
+    seen: set[int] = set()
+    for row in rows:
+        members = row["run_ids"]
+        assert len(members) == row["runs"]
+        assert not seen & set(members), "a run belongs to one distinct failure"
+        seen |= set(members)
+        assert all(scores[m][1] == row["class"] for m in members)
+        best = max(members, key=lambda m: (scores[m][0], -m))
+        assert row["representative"] == best
+        assert row["best_score"] == scores[best][0]
+        assert row["share"] == pytest.approx(row["runs"] / 60)
+    assert seen == {run for run, (_, key) in scores.items() if key is not None}
+    assert failures_json(db) == rows, "deterministic"
+    r = run_cli("failures", str(db), "--format", "csv")
+    table = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert [t["key"] for t in table] == [row["key"] for row in rows]
+    r = run_cli("failures", str(db))
+    assert r.returncode == 0 and f"{len(rows)} distinct failures" in r.stdout
+
+
+def test_rank_distinct_puts_each_representative_first_then_the_rest(
+    campaign: tuple[Path, str],
+) -> None:
+    db, _ = campaign
+    distinct = failures_json(db)
+    r = run_cli("rank", str(db), "--distinct", "--top", "1000", "--format", "json")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert len(rows) == 60
+    head = rows[: len(distinct)]
+    assert [h["run"] for h in head] == [d["representative"] for d in distinct]
+    assert [h["distinct"] for h in head] == [d["key"] for d in distinct]
+    rest = rows[len(distinct) :]
+    assert [x["score"] for x in rest] == sorted((x["score"] for x in rest), reverse=True)
+    assert [x["rank"] for x in rows] == list(range(1, 61))
+
+
+def test_rank_by_class_and_bad_filters(campaign: tuple[Path, str]) -> None:
+    db, _ = campaign
+    key = failures_json(db)[0]["class"]
+    r = run_cli("rank", str(db), "--class", key, "--format", "json", "--top", "100")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert rows and all(x["failure_class"] == key for x in rows)
+    r = run_cli("rank", str(db), "--class", "drove_into_the_moon")
+    assert r.returncode == 2
+    assert r.stderr.startswith("error: --class: unknown failure class 'drove_into_the_moon'")
+    assert len(r.stderr.strip().splitlines()) == 1
+    r = run_cli("failures", str(db.parent / "missing.db"))
+    assert r.returncode == 2 and "no such campaign store" in r.stderr
+    assert not (db.parent / "missing.db").exists()
+    r = run_cli("failures", str(db), "--format", "xml")
+    assert r.returncode == 2 and "--format" in r.stderr
+
+
+def test_the_campaign_summary_counts_distinct_failures(campaign: tuple[Path, str]) -> None:
+    db, out = campaign
+    n = len(failures_json(db))
+    assert f"{n} distinct failures" in out
+
+
+def test_a_store_from_schema_1_is_upgraded_on_open_and_loses_nothing(
+    campaign: tuple[Path, str], tmp_path: Path
+) -> None:
+    db, _ = campaign
+    old = tmp_path / "old.db"
+    shutil.copy(db, old)
+    with sqlite3.connect(old) as c:
+        c.execute("DROP INDEX runs_by_failure_class")
+        c.execute("ALTER TABLE runs DROP COLUMN failure_class")
+        c.execute("ALTER TABLE runs DROP COLUMN failure")
+        c.execute("UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    before = sqlite3.connect(old).execute("SELECT id, events_jsonl, score FROM runs").fetchall()
+    assert failures_json(old) == failures_json(db)
+    with sqlite3.connect(old) as c:
+        version = c.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
+        assert version == (str(SCHEMA_VERSION),)
+        assert c.execute("SELECT id, events_jsonl, score FROM runs").fetchall() == before
+    with sqlite3.connect(old) as c:
+        c.execute("UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+    r = run_cli("failures", str(old))
+    assert r.returncode == 1, "a store sitgen cannot use, as for every store error"
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert "newer than this sitgen's" in r.stderr and "Traceback" not in r.stderr
+
+
+def _runs(side: str, seconds: float, n: int, start: int) -> list[dict[str, Any]]:
+    return [
+        {
+            "id": start + i,
+            "score": 100.0 + i,
+            "terrain": "caves",
+            "bearing": side,
+            "seconds": seconds + 0.01 * i,
+            "agent_mean_speed_m_s": 0.0,
+        }
+        for i in range(n)
+    ]
+
+
+def test_a_broad_class_splits_where_words_tell_the_parts_apart() -> None:
+    runs = _runs("rear", 500.0, 15, 0) + _runs("front", 3.0, 15, 100)
+    parts = split(runs)
+    assert len(parts) == 2
+    (marks_a, a), (marks_b, b) = parts
+    assert {r["bearing"] for r in a} == {"rear"} and {r["bearing"] for r in b} == {"front"}
+    assert ("from the rear", "rear") in marks_a and ("lasting over 500 s", "long") in marks_a
+    assert ("from the front", "front") in marks_b and ("lasting under 3.1 s", "short") in marks_b
+
+
+def test_a_small_or_uniform_class_stays_whole() -> None:
+    small = _runs("rear", 500.0, BROAD_RUNS // 2, 0) + _runs("front", 3.0, 2, 100)
+    assert len(split(small)) == 1
+    uniform = _runs("left", 10.0, 40, 0)
+    assert len(split(uniform)) == 1
+
+
+def test_the_class_of_a_run_reaches_python_runs(tmp_path: Path) -> None:
+    s = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=3)
+    record = sitgen.run(s, time_limit=5)
+    failure = record.failure
+    assert failure is None or failure["class"] in {k for k, _ in classes()}
+    assert failure is not None, "a route not completed in 5 s is a failure"
+    assert failure["class"] == "route_not_completed"
+
+
+def test_distinct_failures_of_an_empty_store_are_none(tmp_path: Path) -> None:
+    with Store(tmp_path / "empty.db") as store:
+        assert distinct_failures(store) == []
