@@ -26,7 +26,7 @@
 //! `monitor.merge_gap_s` (seconds, default 1): a contact broken for less than this and resumed
 //! continues the same collision.
 //!
-//! **Example.** `   12.3 s  agent    collision with peer 2 at 0.00 m/s (not visible 1 s before), 4.1 s`
+//! **Example.** `   12.3 s  agent    collision with peer 2 at 0.00 m/s (struck from the rear; not visible 1 s before), 4.1 s`
 //!
 //! **Source.** Arnold & Alexander (2013) §3 ("stalls … produced by Stage when the robot collides
 //! with terrain or another robot"); Stage's stall semantics, `reference/algorithms.md` §2.3.
@@ -155,12 +155,33 @@ impl Detector {
 pub(super) fn describe(e: &Event, agent: u32) -> String {
     let window = e.detail_f64("visibility_window_s");
     let visible = match e.details.get("visible").and_then(Value::as_bool) {
-        Some(true) => format!(" (visible {window} s before)"),
-        Some(false) => format!(" (not visible {window} s before)"),
+        Some(true) => format!("visible {window} s before"),
+        Some(false) => format!("not visible {window} s before"),
         None => String::new(),
     };
+    let side = e
+        .details
+        .get("bearing")
+        .and_then(Value::as_str)
+        .map(|b| format!(" from the {b}"))
+        .unwrap_or_default();
+    let who = match e.details.get("initiator").and_then(Value::as_str) {
+        Some("agent") => format!("drove into it{side}"),
+        Some("other") => format!("struck{side}"),
+        Some("both") => format!("both closing{side}"),
+        _ => String::new(),
+    };
+    let facts: Vec<String> = [who, visible]
+        .into_iter()
+        .filter(|f| !f.is_empty())
+        .collect();
+    let facts = if facts.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", facts.join("; "))
+    };
     format!(
-        "collision with {} at {:.2} m/s{visible}",
+        "collision with {} at {:.2} m/s{facts}",
         party_name(e.other, agent),
         e.detail_f64("speed_m_s")
     )

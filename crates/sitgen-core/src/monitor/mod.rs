@@ -293,7 +293,8 @@ impl Event {
     }
 
     /// The human-readable line, e.g.
-    /// `  12.3 s  agent    collision with peer 2 at 0.40 m/s (not visible 1 s before), 4.1 s`.
+    /// `  12.3 s  agent    collision with peer 2 at 0.40 m/s (drove into it from the front; not
+    /// visible 1 s before), 4.1 s`.
     pub fn to_text(&self, agent: u32) -> String {
         let robot = robot_name(self.robot, agent);
         let what = match self.kind {

@@ -85,9 +85,9 @@ fn a_peer_driving_into_the_still_agent_from_behind_is_an_unseen_collision() {
     // Standing still is loitering too, from the start.
     let loiter = of_kind(&rec, EventKind::Loitering);
     assert!(loiter.iter().any(|e| e.robot == 0 && e.start_s == 0.0));
-    assert!(hit
-        .to_text(0)
-        .contains("collision with peer 1 at 0.00 m/s (not visible 1 s before), 13.2 s"));
+    assert!(hit.to_text(0).contains(
+        "collision with peer 1 at 0.00 m/s (struck from the rear; not visible 1 s before), 13.2 s"
+    ));
 }
 
 #[test]
