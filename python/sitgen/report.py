@@ -43,7 +43,8 @@ canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
 .cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(270px, 1fr)); gap: 12px; }
 .card { border: 1px solid #ddd; border-radius: 6px; padding: 8px 10px; background: #fafafa; }
 .card h3 { font-size: 1em; margin: .1em 0 .3em; } .card p { margin: .3em 0; }
-.card img { width: 100%; border: 1px solid #ccc; display: block; } .muted { color: #666; }
+.card img { width: 100%; height: 250px; object-fit: contain; background: #fff;
+  border: 1px solid #ccc; display: block; } .muted { color: #666; }
 td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
 mark { background: #fde2b8; } #failure-events span:hover { background: #f3f3f3; }
 """
@@ -172,8 +173,8 @@ def _distinct_section(
             f"data-representative='{run_id}'>"
             f"<h3 title='{html.escape(f.key)}'>{html.escape(f.description)}</h3>"
             f"<p>{f.runs} run{'s' if f.runs != 1 else ''} ({f.share:.1%} of all), "
-            f"best score <b>{f.best_score:.1f}</b>, deciding events lasting "
-            f"{f.median_duration_s:.1f} s (median)</p>{figure}<p>representative: {link}</p>"
+            f"best score <b>{f.best_score:.1f}</b>, median duration "
+            f"{f.median_duration_s:.1f} s</p>{figure}<p>representative: {link}</p>"
             "</div>"
         )
     body.append("</div></section>")
@@ -416,8 +417,11 @@ RUN_SCRIPT = """
 """
 
 
-def _timeline_svg(events: list[dict[str, Any]], end_s: float) -> str:
-    """One lane per event kind: lasting events as bars, instant ones as ticks; click to seek."""
+def _timeline_svg(
+    events: list[dict[str, Any]], end_s: float, deciding: frozenset[int] = frozenset()
+) -> str:
+    """One lane per event kind: lasting events as bars, instant ones as ticks; click to seek.
+    The events that decided the run's failure class (positions in ``events``) are outlined."""
     kinds = [k for k in EVENT_COLOURS if any(e["kind"] == k for e in events)]
     kinds += sorted({e["kind"] for e in events} - set(kinds))
     width, lane, left = 900, 22, 130
@@ -429,14 +433,18 @@ def _timeline_svg(events: list[dict[str, Any]], end_s: float) -> str:
         y = j * lane + 4
         parts.append(f"<text x='0' y='{y + 13}' font-size='12'>{kind}</text>")
         colour = f"rgb{EVENT_COLOURS.get(kind, (40, 140, 60))}"
-        for e in (e for e in events if e["kind"] == kind):
+        for i, e in ((i, e) for i, e in enumerate(events) if e["kind"] == kind):
             x = left + e["start_s"] * scale
             w = max(2.0, ((e["end_s"] or e["start_s"]) - e["start_s"]) * scale)
             opacity = 1.0 if e["scored"] else 0.35
             tip = html.escape(f"{e['start_s']:.1f} s, robot {e['robot']}, {kind}")
+            outline = ""
+            if i in deciding:
+                tip += " (decided the failure class)"
+                outline = " stroke='#000' stroke-width='1.5' class='deciding'"
             parts.append(
                 f"<rect x='{x:.1f}' y='{y}' width='{w:.1f}' height='{lane - 6}' fill='{colour}' "
-                f"opacity='{opacity}' data-seek='{e['start_s']}' style='cursor:pointer'>"
+                f"opacity='{opacity}' data-seek='{e['start_s']}' data-event='{i}'{outline}>"
                 f"<title>{tip}</title></rect>"
             )
     axis_y = height - 12
@@ -452,9 +460,15 @@ def _timeline_svg(events: list[dict[str, Any]], end_s: float) -> str:
 
 
 def _run_page(
-    store: Store, run_id: int, rank: int, out: Path, db_name: str
+    store: Store,
+    run_id: int,
+    rank: int,
+    out: Path,
+    db_name: str,
+    distinct: DistinctFailure | None = None,
 ) -> tuple[str, str] | None:
-    """The page and its data script for one run; None if the run has no situation."""
+    """The page and its data script for one run; None if the run has no situation.
+    ``distinct`` is the distinct failure the run belongs to, if any."""
     row = store.run_row(run_id)
     if row["situation"] is None:
         return None
@@ -495,6 +509,11 @@ def _run_page(
         f" {end_s:.1f} s, controller <code>{html.escape(row['controller'])}</code>,"
         f" {len(situation.robots) - 1} peers, situation seed {row['situation_seed']}</p>"
     )
+    failure = row["failure"]
+    deciding = frozenset(
+        i for i in (failure or {}).get("events", []) if isinstance(i, int) and 0 <= i < len(events)
+    )
+    body.append(_failure_section(failure, events, distinct, run_id))
     body.append("<h2>Why this rank</h2><table id='breakdown'>")
     body.append("<tr><th>event</th><th>count</th><th>seconds</th><th>points</th></tr>")
     ordered = sorted(breakdown.items(), key=lambda kv: -kv[1]["points"])
@@ -518,7 +537,7 @@ def _run_page(
     body.append(
         "<p>Agent red, peers blue; the agent's laser rays drawn from the map and poses.</p>"
     )
-    body.append("<h2>Timeline</h2>" + _timeline_svg(events, end_s))
+    body.append("<h2>Timeline</h2>" + _timeline_svg(events, end_s, deciding))
     body.append("<h2>Situation</h2>")
     body.append(
         f"<img class='figure' src='run-{run_id}.png' alt='situation figure of run {run_id}'>"
@@ -528,7 +547,17 @@ def _run_page(
         "driven paths; ✕ collision, ○ unsafe proximity, ◇ loitering, ■ timeout.</p>"
     )
     body.append("<h2>Event log</h2><pre id='events'>")
-    body.append(html.escape("\n".join(_event_line(e) for e in events)) + "</pre>")
+    body.append(
+        "\n".join(
+            f"<mark id='event-{i}' title='decided the failure class'>{html.escape(line)}</mark>"
+            if i in deciding
+            else html.escape(line)
+            for i, line in enumerate(_event_line(e) for e in events)
+        )
+        + "</pre>"
+    )
+    if deciding:
+        body.append("<p>Marked: the events that decided the failure class.</p>")
     body.append(
         f"<h2>Rerun</h2><p><code>sitgen rerun {html.escape(db_name)} {run_id}</code> regenerates "
         "the situation from its spec and seed, runs it again and confirms the same event log."
@@ -536,6 +565,83 @@ def _run_page(
     )
     scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
     return _page(f"sitgen run {run_id}", "".join(body), scripts), script
+
+
+FEATURE_WORDS = {
+    "count": ("deciding events", "{}"),
+    "start_s": ("the first began at", "{:.1f} s"),
+    "seconds": ("they lasted, in all", "{:.1f} s"),
+    "bearing": ("the other party came from the", "{}"),
+    "agent_mean_speed_m_s": ("the agent's mean speed", "{:.2f} m/s"),
+    "closing_speed_m_s": ("closing speed", "{:.2f} m/s"),
+}
+"""How a failure's features read on a run page: words, and the value's format."""
+
+
+def _failure_section(
+    failure: dict[str, Any] | None,
+    events: list[dict[str, Any]],
+    distinct: DistinctFailure | None,
+    run_id: int,
+) -> str:
+    """The run's failure class in words and why: its sentence, the features of its deciding
+    events, and those events of the log by position."""
+    body = ["<h2>Failure class</h2>"]
+    if failure is None:
+        body.append(
+            "<p id='failure' data-class=''>Failure: <b>no failure</b> (no scored event put this "
+            "run in a failure class).</p>"
+        )
+        return "".join(body)
+    key = str(failure.get("class", ""))
+    sentence = str(failure.get("description") or key)
+    body.append(
+        f"<p id='failure' data-class='{html.escape(key)}'>Failure: <b>{html.escape(sentence)}</b>"
+        f" (class <code>{html.escape(key)}</code>).</p>"
+    )
+    if distinct is not None:
+        role = (
+            "its representative"
+            if distinct.representative == run_id
+            else f"represented by <a href='run-{distinct.representative}.html'>run "
+            f"{distinct.representative}</a>"
+        )
+        body.append(
+            f"<p id='distinct-failure' data-key='{html.escape(distinct.key)}'>One of "
+            f"{distinct.runs} runs of the distinct failure “{html.escape(distinct.description)}”"
+            f", {role}.</p>"
+        )
+    features = failure.get("features") or {}
+    if features:
+        body.append("<table id='failure-features'>")
+        order = list(FEATURE_WORDS)
+        for name, value in sorted(
+            features.items(), key=lambda kv: (order.index(kv[0]) if kv[0] in order else 99, kv[0])
+        ):
+            words, fmt = FEATURE_WORDS.get(name, (name.replace("_", " "), "{}"))
+            try:
+                shown = fmt.format(value)
+            except (TypeError, ValueError):
+                shown = str(value)
+            body.append(f"<tr><td>{html.escape(words)}</td><td>{html.escape(shown)}</td></tr>")
+        body.append("</table>")
+    positions = [
+        i for i in failure.get("events", []) if isinstance(i, int) and 0 <= i < len(events)
+    ]
+    if positions:
+        body.append("<p>Decided by these events of the log (by position; click to seek):</p>")
+        body.append("<pre id='failure-events'>")
+        body.append(
+            "\n".join(
+                f"<span data-event='{i}' data-seek='{events[i]['start_s']}'>"
+                f"{html.escape(f'#{i:<4}' + _event_line(events[i]))}</span>"
+                for i in positions
+            )
+        )
+        body.append("</pre>")
+    else:
+        body.append("<p>No events of the log are named as deciding it.</p>")
+    return "".join(body)
 
 
 def _event_line(e: dict[str, Any]) -> str:
@@ -546,23 +652,28 @@ def _event_line(e: dict[str, Any]) -> str:
 
 
 def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
-    """Write the report of campaign store ``db`` into ``out``; returns the pages written."""
+    """Write the report of campaign store ``db`` into ``out``; returns the pages written. The
+    ``top`` runs get a page, and so does every distinct failure's representative."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     with Store(db) as store:
-        ranked = store.ranked(top)
+        ranked = store.ranked()
+        ranks = {r["run"]: rank for rank, r in enumerate(ranked, 1)}
+        failures = distinct_failures(store)
+        part_of = {run_id: f for f in failures for run_id in f.run_ids}
+        wanted = [r["run"] for r in ranked[: max(0, top)]] + [f.representative for f in failures]
         pages: set[int] = set()
-        for rank, r in enumerate(ranked, 1):
-            made = _run_page(store, r["run"], rank, out, Path(db).name)
+        for run_id in dict.fromkeys(wanted):
+            made = _run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
             if made is None:
                 continue
             page, script = made
-            (out / f"run-{r['run']}.js").write_text(script)
-            path = out / f"run-{r['run']}.html"
+            (out / f"run-{run_id}.js").write_text(script)
+            path = out / f"run-{run_id}.html"
             path.write_text(page)
-            pages.add(r["run"])
+            pages.add(run_id)
             written.append(path)
         index = out / "index.html"
-        index.write_text(_index(store, pages))
+        index.write_text(_index(store, ranked, failures, pages))
     return [index, *written]

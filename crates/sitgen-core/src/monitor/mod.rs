@@ -51,9 +51,9 @@ pub struct MonitorSpec {
     /// count as visible, seconds, in (0, 3600]. Default 1.
     #[serde(default = "default_visibility_window_s")]
     pub visibility_window_s: f64,
-    /// A collision or unsafe proximity interrupted for less than this and resumed is one
-    /// event, seconds, in [0, 3600]. Default 1: a robot that pushes, backs off a centimetre and
-    /// pushes again is in one accident, not dozens.
+    /// A collision, unsafe proximity or oscillation interrupted for less than this and resumed
+    /// is one event, seconds, in [0, 3600]. Default 1: a robot that pushes, backs off a
+    /// centimetre and pushes again is in one accident, not dozens.
     #[serde(default = "default_merge_gap_s")]
     pub merge_gap_s: f64,
     /// How far back attribution looks to tell who moved into whom and how fast, seconds, in
@@ -68,7 +68,7 @@ pub struct MonitorSpec {
     #[serde(default = "default_oscillation_reversals")]
     pub oscillation_reversals: u32,
     /// Extent of the window's positions below which an oscillating robot is going nowhere,
-    /// metres, in (0, 1000]. Default 1.0.
+    /// metres, in (0, 1000]. Default 0.5.
     #[serde(default = "default_oscillation_distance_m")]
     pub oscillation_distance_m: f64,
     /// Turn rate above which a step counts as turning left or right, degrees per second, in
@@ -87,7 +87,7 @@ fn default_oscillation_reversals() -> u32 {
     4
 }
 fn default_oscillation_distance_m() -> f64 {
-    1.0
+    0.5
 }
 fn default_oscillation_turn_rate_deg_s() -> f64 {
     5.0
@@ -518,6 +518,7 @@ impl Monitor {
                     reversals: spec.oscillation_reversals,
                     distance_m: spec.oscillation_distance_m,
                     turn_rate_deg_s: spec.oscillation_turn_rate_deg_s,
+                    merge_steps: steps(spec.merge_gap_s, dt_s),
                 },
                 dt_s,
             ),

@@ -8,7 +8,7 @@
 //! faster than `oscillation_turn_rate_deg_s`, so a robot driving straight with small
 //! corrections does not reverse. The event starts at the first reversal of the window that
 //! first qualified and ends at the last reversal (or where the robot got away, when the extent
-//! grew past the threshold). Details: `reversals` (counted while it lasted), `window_s`,
+//! grew past the threshold); a pause shorter than `merge_gap_s` continues it. Details: `reversals` (counted while it lasted), `window_s`,
 //! `extent_m` (the largest extent of a window while it lasted), `nearest` (`"wall"`, a robot
 //! id, or `null` when nothing was within 2 m) and `nearest_m` (the smallest footprint
 //! clearance to it while it lasted).
@@ -21,9 +21,10 @@
 //!
 //! **Parameters.** `monitor.oscillation_window_s` (seconds, default 10), `oscillation_reversals`
 //! (count, default 4: two full left–right cycles, more than a single hesitation),
-//! `oscillation_distance_m` (metres, default 1.0: the loitering threshold, over half the window)
+//! `oscillation_distance_m` (metres, default 0.5: loitering's pace, 5 cm/s, over the window)
 //! and `oscillation_turn_rate_deg_s` (degrees per second, default 5: far above the drift of a
-//! robot holding a heading, far below SND's turns of tens of degrees per second).
+//! robot holding a heading, far below SND's turns of tens of degrees per second);
+//! `monitor.merge_gap_s` (seconds, default 1).
 //!
 //! **Example.** `   31.4 s  agent    oscillation: 6 turn reversals within 0.42 m, nearest peer 1 at 0.12 m, 8.3 s`
 //!
@@ -65,6 +66,8 @@ struct Open {
     largest_extent: f64,
     /// The nearest party so far and its clearance, metres.
     nearest: Option<(Party, f64)>,
+    /// Since when it has not been oscillating, and where it ended then.
+    pause: Option<(u64, u64)>,
 }
 
 #[derive(Debug)]
@@ -74,6 +77,7 @@ pub(super) struct Detector {
     window_s: f64,
     window_steps: u64,
     min_turn_rad: f64,
+    merge_steps: u64,
     robots: Vec<Turning>,
 }
 
@@ -83,6 +87,8 @@ pub(super) struct Thresholds {
     pub reversals: u32,
     pub distance_m: f64,
     pub turn_rate_deg_s: f64,
+    /// Pauses shorter than this many steps continue the same event.
+    pub merge_steps: u64,
 }
 
 impl Detector {
@@ -109,6 +115,7 @@ impl Detector {
             window_s: t.window_s,
             window_steps,
             min_turn_rad: t.turn_rate_deg_s.to_radians() * dt_s,
+            merge_steps: t.merge_steps,
             robots,
         }
     }
@@ -163,24 +170,30 @@ impl Detector {
                         reversals,
                         largest_extent: extent,
                         nearest: None,
+                        pause: None,
                     });
                 }
                 (true, true) => {
                     let open = t.open.as_mut().expect("open");
                     open.reversals += u64::from(reversed);
                     open.largest_extent = open.largest_extent.max(extent);
+                    open.pause = None;
                 }
                 (true, false) => {
-                    let open = t.open.take().expect("open");
-                    // Got away (the box grew): ends now; else it ended at the last reversal.
+                    let open = t.open.as_mut().expect("open");
+                    // Got away (the box grew): it ended now; else at the last reversal. A pause
+                    // shorter than the merge gap continues the same oscillation.
                     let end = if extent >= self.distance_m {
                         frame.step
                     } else {
                         t.reversals.back().copied().unwrap_or(frame.step)
                     };
-                    let end = end.max(open.began);
-                    log.close(open.index, end);
-                    t.last_end = end;
+                    let (since, end) = *open.pause.get_or_insert((frame.step, end.max(open.began)));
+                    if frame.step - since >= self.merge_steps {
+                        log.close(open.index, end);
+                        t.last_end = end;
+                        t.open = None;
+                    }
                 }
                 (false, false) => {}
             }
@@ -207,7 +220,8 @@ impl Detector {
         for t in &mut self.robots {
             if let Some(open) = t.open.take() {
                 let last = t.reversals.back().copied().unwrap_or(step);
-                log.close(open.index, last.max(open.began));
+                let end = open.pause.map_or(last.max(open.began), |(_, end)| end);
+                log.close(open.index, end);
             }
         }
     }
