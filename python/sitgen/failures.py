@@ -11,7 +11,6 @@ party came from, the terrain, and whether its failures lasted long or short, wer
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import statistics
@@ -22,6 +21,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
+from sitgen.rank import write_rows
 from sitgen.store import Store
 
 BROAD_RUNS = 20
@@ -273,11 +273,4 @@ FAILURE_COLUMNS = (
 
 def write_failures(failures: list[DistinctFailure], format: str, out: TextIO) -> None:
     """Write distinct failures as ``json`` (a list of objects) or ``csv``."""
-    rows = [f.as_dict() for f in failures]
-    if format == "json":
-        json.dump(rows, out, indent=2)
-        out.write("\n")
-        return
-    writer = csv.DictWriter(out, fieldnames=list(FAILURE_COLUMNS), extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
+    write_rows([f.as_dict() for f in failures], FAILURE_COLUMNS, format, out)

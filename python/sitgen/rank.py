@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TextIO
@@ -66,11 +67,18 @@ def ranked_rows(
 
 def write_ranking(rows: list[dict[str, Any]], format: str, out: TextIO) -> None:
     """Write the ranking as ``csv`` or ``json``."""
+    write_rows(rows, RANK_COLUMNS, format, out)
+
+
+def write_rows(
+    rows: list[dict[str, Any]], columns: Sequence[str], format: str, out: TextIO
+) -> None:
+    """Write rows as ``json`` (a list of objects, every field) or ``csv`` (``columns``)."""
     if format == "json":
         json.dump(rows, out, indent=2)
         out.write("\n")
         return
-    writer = csv.DictWriter(out, fieldnames=list(RANK_COLUMNS), extrasaction="ignore")
+    writer = csv.DictWriter(out, fieldnames=list(columns), extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
 
