@@ -177,10 +177,14 @@ def report(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the site.")] = Path(
         "report"
     ),
-    top: Annotated[int, typer.Option("--top", min=0, help="Runs that get a page.")] = 50,
+    top: Annotated[
+        int,
+        typer.Option("--top", min=0, help="Top runs that get a page (and every representative)."),
+    ] = 50,
 ) -> None:
-    """Write an HTML triage report of a campaign: ranked runs, score distribution, and for the
-    top runs a page with the figure, timeline, score breakdown and a replay. Opens from disk."""
+    """Write an HTML triage report of a campaign: distinct failures first, ranked runs, score
+    distribution, and for the top runs and each distinct failure's representative a page with
+    the figure, failure class, timeline, score breakdown and a replay. Opens from disk."""
     from sitgen.report import write_report
 
     if not db.is_file():
