@@ -205,3 +205,23 @@ def test_the_class_of_a_run_reaches_python_runs(tmp_path: Path) -> None:
 def test_distinct_failures_of_an_empty_store_are_none(tmp_path: Path) -> None:
     with Store(tmp_path / "empty.db") as store:
         assert distinct_failures(store) == []
+
+
+def test_snd_turning_to_and_fro_beside_a_wall_is_an_oscillation() -> None:
+    """Job 308 of the paper's campaign (seed 1, caves): SND turns left and right on the spot
+    beside a wall from its first second, Player's driver faithfully locked up."""
+    from sitgen.campaign import build_job, parse_campaign
+
+    job = build_job(parse_campaign(None), 1, 308)
+    s = sitgen.generate_situation(job.situation, seed=job.seed)
+    record = sitgen.run(s, spec={**job.run, "time_limit_s": 30}, seed=job.seed)
+    assert record.controller == "snd_follow"
+    oscillations = [e for e in record.events if e["kind"] == "oscillation" and e["robot"] == 0]
+    assert len(oscillations) == 1, record.events_text
+    o = oscillations[0]
+    assert o["start_s"] < 3.0 and o["end_s"] > 25.0
+    assert o["details"]["nearest"] == "wall"
+    assert o["details"]["extent_m"] < 0.1
+    assert o["details"]["reversals"] > 100
+    assert record.failure is not None
+    assert record.failure["class"] == "oscillated_beside_wall"

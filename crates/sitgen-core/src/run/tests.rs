@@ -5,6 +5,9 @@
 
 use super::*;
 use crate::mission::ControllerSpec;
+use std::f64::consts::PI;
+
+use crate::failure::FailureClass;
 use crate::monitor::{EventKind, Party};
 use crate::test_data::{robot, situation};
 
@@ -406,4 +409,99 @@ fn a_contact_broken_for_a_moment_and_resumed_is_one_collision() {
         "ends when the pushing stops: {end}"
     );
     assert!(collisions(0.0).len() > 10);
+}
+
+#[test]
+fn a_peer_driving_head_on_into_the_still_agent_is_struck_while_stopped_seen() {
+    // The peer starts 6 m ahead of the agent's laser and drives straight at it: the laser
+    // sees it the whole way, the agent never moves.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (6.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
+            robot(1, (12.0, 10.0, PI), &[[2.0, 10.0]], "straight"),
+        ],
+    );
+    let rec = run_with_still_agent(&s, 20.0);
+    let f = rec.failure.as_ref().expect("a collision");
+    assert_eq!(f.class, FailureClass::StruckWhileStoppedSeen);
+    let hit = &rec.events[f.events[0]];
+    assert_eq!(hit.kind, EventKind::Collision);
+    assert_eq!(hit.details["initiator"], "other");
+    assert_eq!(hit.details["bearing"], "front");
+    assert_eq!(hit.details["seen"], true);
+    assert!(hit.details["seen_before_s"].as_f64().unwrap() > 5.0);
+    assert!(close(
+        hit.details["last_seen_before_s"].as_f64().unwrap(),
+        0.1
+    ));
+    assert!(close(
+        hit.details["agent_mean_speed_m_s"].as_f64().unwrap(),
+        0.0
+    ));
+    let closing = hit.details["closing_speed_m_s"].as_f64().unwrap();
+    assert!(
+        (closing - 0.45).abs() < 0.06,
+        "the peer closed at about 0.5 m/s: {closing}"
+    );
+}
+
+#[test]
+fn the_agent_and_a_peer_driving_into_each_other_both_closed_in() {
+    // Pure pursuit does not avoid: both drive along y = 10 toward each other.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (4.0, 10.0, 0.0), &[[16.0, 10.0]], "follow"),
+            robot(1, (12.0, 10.0, PI), &[[2.0, 10.0]], "straight"),
+        ],
+    );
+    let rec = run(&s, &spec(None, 30.0), 0).unwrap();
+    let f = rec.failure.as_ref().expect("a collision");
+    assert_eq!(
+        f.class,
+        FailureClass::CollidedAsBothClosedIn,
+        "{:#?}",
+        rec.events
+    );
+    let hit = &rec.events[f.events[0]];
+    assert_eq!(hit.details["initiator"], "both");
+    assert_eq!(hit.details["bearing"], "front");
+    assert!(hit.details["agent_approach_m_s"].as_f64().unwrap() > 0.05);
+    assert!(hit.details["other_approach_m_s"].as_f64().unwrap() > 0.05);
+}
+
+#[test]
+fn turning_to_and_fro_on_the_spot_beside_a_peer_is_an_oscillation_beside_it() {
+    // The agent turns left for 1 s, right for 1 s, again and again, without driving; a still
+    // peer stands about 0.8 m from its flank, outside unsafe proximity even as the agent's
+    // corners sweep. Reversals every second, from 1.1 s.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
+            robot(1, (10.0, 11.3, 0.0), &[[10.0, 11.3]], "straight"),
+        ],
+    );
+    let mut r = Run::new(&s, &spec(Some("cmd:dither"), 12.0), 0).unwrap();
+    let mut step = 0u64;
+    while !r.step(Some((0.0, if (step / 10) % 2 == 0 { 0.3 } else { -0.3 }))) {
+        step += 1;
+    }
+    let rec = r.finish();
+    let osc = of_kind(&rec, EventKind::Oscillation);
+    assert_eq!(osc.len(), 1, "{:#?}", rec.events);
+    let o = osc[0];
+    assert_eq!(o.robot, 0);
+    assert!(close(o.start_s, 1.1), "first reversal: {}", o.start_s);
+    assert_eq!(o.details["nearest"], 1);
+    assert!(o.details["reversals"].as_u64().unwrap() >= 10);
+    assert!(o.details["extent_m"].as_f64().unwrap() < 0.2);
+    assert!(o.scored);
+    assert!(of_kind(&rec, EventKind::UnsafeProximity).is_empty());
+    let f = rec.failure.as_ref().unwrap();
+    assert_eq!(f.class, FailureClass::OscillatedBesidePeer);
 }
