@@ -488,7 +488,14 @@ fn turning_to_and_fro_on_the_spot_beside_a_peer_is_an_oscillation_beside_it() {
     );
     let mut r = Run::new(&s, &spec(Some("cmd:dither"), 12.0), 0).unwrap();
     let mut step = 0u64;
-    while !r.step(Some((0.0, if (step / 10) % 2 == 0 { 0.3 } else { -0.3 }))) {
+    while !r.step(Some((
+        0.0,
+        if (step / 10).is_multiple_of(2) {
+            0.3
+        } else {
+            -0.3
+        },
+    ))) {
         step += 1;
     }
     let rec = r.finish();
