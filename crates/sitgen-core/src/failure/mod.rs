@@ -277,4 +277,6 @@ pub fn classify(events: &[Event], agent: u32) -> Option<Failure> {
 }
 
 #[cfg(test)]
+mod situation_tests;
+#[cfg(test)]
 mod tests;

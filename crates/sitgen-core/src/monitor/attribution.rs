@@ -9,7 +9,8 @@
 //!   other party drove into the agent), `"both"` (both closed in). A party *closes in* when its
 //!   own displacement over the `attribution_window_s` before, projected on the line from it to
 //!   the other, exceeds [`MOVING_M_S`]. When neither did (contact while turning on the spot),
-//!   the robot whose move was refused is the initiator. Walls never move: always `"agent"`.
+//!   the robot whose move was refused is the initiator (in a near miss, where no move was
+//!   refused, the one that came nearer). Walls never move: always `"agent"`.
 //! - `agent_approach_m_s`, `other_approach_m_s`: those projected speeds (m/s, positive =
 //!   toward the other), and `closing_speed_m_s`: how fast the distance between the two centres
 //!   fell over the window (robots only).
@@ -126,6 +127,9 @@ impl Attribution {
             (true, false) => "agent",
             (false, true) => "other",
             (false, false) if blocked.contains(&self.agent) => "agent",
+            (false, false) if !blocked.is_empty() => "other",
+            // A near miss refuses no move: the one that came nearer did it.
+            (false, false) if agent_approach >= other_approach => "agent",
             (false, false) => "other",
         };
         let bearing_deg = crate::sim::wrap_angle((oy - ay).atan2(ox - ax) - heading).to_degrees();

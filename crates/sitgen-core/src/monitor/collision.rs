@@ -140,8 +140,11 @@ impl Detector {
         if let Party::Robot(o) = other {
             d.insert("other_speed_m_s".into(), json!(speed(o)));
         }
+        // The pair is keyed by the lower id; attribution is told the party that is not the agent.
         if robot == self.agent {
             d.extend(seen.details(frame, other, blocked));
+        } else if other == Party::Robot(self.agent) {
+            d.extend(seen.details(frame, Party::Robot(robot), blocked));
         }
         d
     }

@@ -1,7 +1,8 @@
 //! # `oscillation` event
 //!
 //! **What it detects.** A robot that has not finished its route and that turns to and fro
-//! while going nowhere: within the last `oscillation_window_s` its turn direction reversed at
+//! while going nowhere: within the last `oscillation_window_s` (a full window, so not in a
+//! run's first seconds) its turn direction reversed at
 //! least `oscillation_reversals` times and every position lay in a box whose diagonal (the
 //! *extent*) is below `oscillation_distance_m`. The turn direction of a step is the sign of the
 //! heading change the world actually made (never the command), counted only when it turns
@@ -147,8 +148,12 @@ impl Detector {
             let extent = t
                 .window
                 .extent(frame.step, (r.pose.x_m, r.pose.y_m), oldest);
-            let oscillating =
-                !done[i] && t.reversals.len() >= self.reversals && extent < self.distance_m;
+            // A full window first, as loitering: a robot's first seconds cover too little
+            // ground for its extent to mean "going nowhere".
+            let oscillating = frame.step >= self.window_steps
+                && !done[i]
+                && t.reversals.len() >= self.reversals
+                && extent < self.distance_m;
             match (t.open.is_some(), oscillating) {
                 (false, true) => {
                     let began = t.reversals[0].max(t.last_end);

@@ -79,8 +79,11 @@ impl Detector {
                 Some(&i) => i,
                 None => {
                     let mut d = details([("min_clearance_m", json!(clearance))]);
+                    // Keyed by the lower id; attribution is told the robot that is not the agent.
                     if key.0 == self.agent {
                         d.extend(seen.details(frame, Party::Robot(key.1), &[]));
+                    } else if key.1 == self.agent {
+                        d.extend(seen.details(frame, Party::Robot(key.0), &[]));
                     }
                     let i = log.open(
                         EventKind::UnsafeProximity,

@@ -346,7 +346,7 @@ pub fn run(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<RunRecord
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 
 /// One run of a campaign: a situation to generate and how to run it.
 #[derive(Debug, Clone)]

@@ -11,10 +11,10 @@ use crate::failure::FailureClass;
 use crate::monitor::{EventKind, Party};
 use crate::test_data::{robot, situation};
 
-const FRONT: f64 = 0.26835;
-const REAR: f64 = 0.35765;
+pub(crate) const FRONT: f64 = 0.26835;
+pub(crate) const REAR: f64 = 0.35765;
 
-fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
+pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
     RunSpec {
         controller: controller.map(|name| ControllerSpec {
             name: name.into(),
@@ -26,7 +26,7 @@ fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
 }
 
 /// Run `s` with an agent that stands still (an external controller sending (0, 0)).
-fn run_with_still_agent(s: &Situation, time_limit_s: f64) -> RunRecord {
+pub(crate) fn run_with_still_agent(s: &Situation, time_limit_s: f64) -> RunRecord {
     let mut r = Run::new(s, &spec(Some("cmd:still"), time_limit_s), 0).unwrap();
     while !r.step(Some((0.0, 0.0))) {}
     r.finish()
