@@ -9,7 +9,7 @@ use serde_json::{json, Value};
 
 use super::FailureClass;
 use crate::monitor::{Event, EventKind, Party};
-use crate::run::tests::{run_with_still_agent, spec, FRONT, REAR};
+use crate::run::tests::{close, rear_approach, run_with_still_agent, spec, FRONT, REAR};
 use crate::run::{run, Outcome, RunRecord};
 use crate::situation::Situation;
 use crate::test_data::{robot, situation};
@@ -59,24 +59,12 @@ fn log(rec: &RunRecord) -> String {
     crate::monitor::to_text(&rec.events, 0)
 }
 
-fn close(a: f64, b: f64) -> bool {
-    (a - b).abs() < 1e-9
-}
-
 #[test]
 fn a_peer_driving_into_the_stopped_agent_from_behind_is_struck_while_stopped_unseen() {
-    // The agent stands at x = 10 facing +x; a `straight` peer drives up behind it along the
-    // same line at 0.5 m/s and its move is refused at 6.8 s (see `run::tests`). The 180° laser
-    // never sees it: struck, stopped, unseen, from the rear. Over the 1 s attribution window
-    // the peer made 9 moves of 5 cm (the tenth, at contact, was refused): 0.45 m/s.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
-            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
-        ],
-    );
+    // `run::tests::rear_approach`: contact at 6.8 s. The 180° laser never sees the peer:
+    // struck, stopped, unseen, from the rear. Over the 1 s attribution window the peer made 9
+    // moves of 5 cm (the tenth, at contact, was refused): 0.45 m/s.
+    let s = rear_approach();
     let rec = run_with_still_agent(&s, 20.0);
     let (class, e) = decided(&rec);
     assert_eq!(
@@ -393,41 +381,4 @@ fn a_vo_agent_cornered_by_a_blind_peer_in_a_corridor_collides_while_oscillating(
     assert_eq!(osc.len(), 1, "{}", log(&rec));
     assert!(osc[0].start_s <= e.start_s && osc[0].end_s.unwrap() + 1.0 >= e.start_s);
     assert!(osc[0].detail_f64("reversals") >= 4.0);
-}
-
-#[test]
-#[ignore = "does not happen: `vo` peers carry no laser, so there is no reciprocal dance \
-            (see the comment and run with --ignored --nocapture for the agent's trace)"]
-fn two_vo_robots_meeting_head_on_in_the_open_oscillate() {
-    // Expected: the reciprocal dance of Velocity Obstacles (both swerve the same way, then both
-    // back, again and again). What happens: only the agent has a laser (`World::observe`), so
-    // the `vo` peer sees no obstacle and drives straight at its waypoint; the agent swerves
-    // once, about 35° to one side, passes at ~0.2 m and turns back to its goal. It turns
-    // left/right at most 3–5 times in any 10 s, but it covers about 4.5 m in those 10 s, far
-    // beyond the 1 m extent under which an oscillation is going nowhere.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (5.0, 10.0, 0.0), &[[15.0, 10.0]], "vo"),
-            robot(1, (15.0, 10.0, std::f64::consts::PI), &[[5.0, 10.0]], "vo"),
-        ],
-    );
-    let rec = run(&s, &spec(None, 60.0), 0).unwrap();
-    println!("{}", log(&rec));
-    for (k, p) in rec.trajectory.chunks(rec.robots * 3).enumerate() {
-        if (60..=130).contains(&k) {
-            println!(
-                "{:5.1} s  agent ({:.2}, {:.2}) {:6.1}°   peer ({:.2}, {:.2}) {:6.1}°",
-                k as f64 * 0.1,
-                p[0],
-                p[1],
-                p[2].to_degrees(),
-                p[3],
-                p[4],
-                p[5].to_degrees()
-            );
-        }
-    }
-    assert!(!oscillations(&rec).is_empty(), "no oscillation event");
 }

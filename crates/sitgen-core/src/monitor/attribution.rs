@@ -69,16 +69,20 @@ impl Attribution {
             self.first_seen[id as usize].get_or_insert(scan_step);
             self.last_seen[id as usize] = Some(scan_step);
         }
-        if self.history.len() > self.window_steps {
-            self.history.pop_front();
-        }
-        self.history.push_back(
+        // The oldest row is reused for the newest: no allocation per step.
+        let mut row = if self.history.len() > self.window_steps {
+            self.history.pop_front().expect("non-empty")
+        } else {
+            Vec::with_capacity(frame.robots().len())
+        };
+        row.clear();
+        row.extend(
             frame
-                .robots
+                .robots()
                 .iter()
-                .map(|r| (r.pose.x_m, r.pose.y_m, r.pose.heading_rad))
-                .collect(),
+                .map(|r| (r.pose.x_m, r.pose.y_m, r.pose.heading_rad)),
         );
+        self.history.push_back(row);
     }
 
     /// Whether the agent's laser saw robot `id` within `window_steps` before `step`.

@@ -69,7 +69,7 @@ impl Detector {
 
     pub(super) fn observe(&mut self, frame: &Frame<'_>, seen: &Attribution, log: &mut Log) {
         let mut active: Vec<(Key, u32)> = Vec::new();
-        for r in frame.robots.iter().filter(|r| r.stalled) {
+        for r in frame.robots().iter().filter(|r| r.stalled) {
             for c in &r.contacts {
                 let key = match *c {
                     Contact::Wall => (r.id, Party::Wall),
@@ -117,10 +117,10 @@ impl Detector {
         (robot, other): Key,
         blocked: &[u32],
     ) -> std::collections::BTreeMap<String, Value> {
-        let speed = |id: u32| frame.robots[id as usize].velocity.0.abs();
+        let speed = |id: u32| frame.robots()[id as usize].velocity.0.abs();
         let visible = match other {
             Party::Wall if robot == self.agent => {
-                let v = frame.robots[robot as usize].velocity.0;
+                let v = frame.robots()[robot as usize].velocity.0;
                 Value::Bool(v > 0.0 || self.sees_behind)
             }
             Party::Robot(o) if robot == self.agent || o == self.agent => {

@@ -111,7 +111,7 @@ impl Detector {
     pub(super) fn observe(&mut self, frame: &Frame<'_>, done: &[bool], log: &mut Log) {
         let full = frame.step >= self.window_steps;
         let oldest = frame.step.saturating_sub(self.window_steps);
-        for r in frame.robots {
+        for r in frame.robots() {
             let i = r.id as usize;
             let extent = self.windows[i].extent(frame.step, (r.pose.x_m, r.pose.y_m), oldest);
             let loitering = full && !done[i] && extent < self.distance_m;

@@ -358,12 +358,18 @@ fn steps(seconds: f64, dt_s: f64) -> u64 {
 pub struct Frame<'a> {
     /// Steps taken so far (the frame's time is `step · dt`).
     pub step: u64,
-    /// Every robot's state.
-    pub robots: &'a [RobotState],
     /// Ids of the robots the agent's laser saw at the start of this step.
     pub seen_by_agent: &'a [u32],
-    /// The world itself (the map, for the clearance of a robot to walls).
+    /// The world after the step: every robot's state, and the map (for the clearance of a
+    /// robot to walls).
     pub world: &'a World,
+}
+
+impl Frame<'_> {
+    /// Every robot's state.
+    pub fn robots(&self) -> &[RobotState] {
+        self.world.robots()
+    }
 }
 
 /// The event log under construction: open lasting events by key, closed in order.

@@ -71,6 +71,22 @@ struct Open {
     pause: Option<(u64, u64)>,
 }
 
+impl Open {
+    /// End the event at `end`, writing what it saw (once, not every step it lasted).
+    fn close(self, end: u64, log: &mut Log) {
+        let (party, metres) = match self.nearest {
+            Some((Party::Wall, m)) => (json!("wall"), json!(m)),
+            Some((Party::Robot(id), m)) => (json!(id), json!(m)),
+            None => (Value::Null, Value::Null),
+        };
+        log.set(self.index, "reversals", json!(self.reversals));
+        log.set(self.index, "extent_m", json!(self.largest_extent));
+        log.set(self.index, "nearest", party);
+        log.set(self.index, "nearest_m", metres);
+        log.close(self.index, end);
+    }
+}
+
 #[derive(Debug)]
 pub(super) struct Detector {
     distance_m: f64,
@@ -123,7 +139,7 @@ impl Detector {
 
     pub(super) fn observe(&mut self, frame: &Frame<'_>, done: &[bool], log: &mut Log) {
         let oldest = frame.step.saturating_sub(self.window_steps);
-        for r in frame.robots {
+        for r in frame.robots() {
             let i = r.id as usize;
             let t = &mut self.robots[i];
             let turn = wrap_angle(r.pose.heading_rad - t.heading);
@@ -163,11 +179,7 @@ impl Detector {
                         began,
                         r.id,
                         None,
-                        details([
-                            ("reversals", json!(reversals)),
-                            ("window_s", json!(self.window_s)),
-                            ("extent_m", json!(extent)),
-                        ]),
+                        details([("window_s", json!(self.window_s))]),
                     );
                     t.open = Some(Open {
                         index,
@@ -195,9 +207,8 @@ impl Detector {
                     };
                     let (since, end) = *open.pause.get_or_insert((frame.step, end.max(open.began)));
                     if frame.step - since >= self.merge_steps {
-                        log.close(open.index, end);
+                        t.open.take().expect("open").close(end, log);
                         t.last_end = end;
-                        t.open = None;
                     }
                 }
                 (false, false) => {}
@@ -208,15 +219,6 @@ impl Detector {
                         open.nearest = Some(n);
                     }
                 }
-                let (party, metres) = match open.nearest {
-                    Some((Party::Wall, m)) => (json!("wall"), json!(m)),
-                    Some((Party::Robot(id), m)) => (json!(id), json!(m)),
-                    None => (Value::Null, Value::Null),
-                };
-                log.set(open.index, "reversals", json!(open.reversals));
-                log.set(open.index, "extent_m", json!(open.largest_extent));
-                log.set(open.index, "nearest", party);
-                log.set(open.index, "nearest_m", metres);
             }
         }
     }
@@ -226,7 +228,7 @@ impl Detector {
             if let Some(open) = t.open.take() {
                 let last = t.reversals.back().copied().unwrap_or(step);
                 let end = open.pause.map_or(last.max(open.began), |(_, end)| end);
-                log.close(open.index, end);
+                open.close(end, log);
             }
         }
     }
@@ -235,11 +237,11 @@ impl Detector {
 /// The nearest robot or wall to robot `i` within [`NEAR_M`], by footprint clearance (a robot
 /// before a wall at the same clearance).
 fn nearest_party(frame: &Frame<'_>, i: usize) -> Option<(Party, f64)> {
-    let r = &frame.robots[i];
+    let r = &frame.robots()[i];
     let me = r.footprint();
     let reach = r.body.enclosing_radius() + NEAR_M;
     let robot = frame
-        .robots
+        .robots()
         .iter()
         .filter(|o| {
             let apart = reach + o.body.enclosing_radius();

@@ -55,8 +55,8 @@ impl Detector {
 
     pub(super) fn observe(&mut self, frame: &Frame<'_>, seen: &Attribution, log: &mut Log) {
         let mut close = Vec::new();
-        for (i, a) in frame.robots.iter().enumerate() {
-            for b in &frame.robots[i + 1..] {
+        for (i, a) in frame.robots().iter().enumerate() {
+            for b in &frame.robots()[i + 1..] {
                 // Enclosing circles farther apart than the threshold settle most pairs.
                 let (dx, dy) = (a.pose.x_m - b.pose.x_m, a.pose.y_m - b.pose.y_m);
                 let apart =

@@ -83,7 +83,7 @@ impl Detector {
     }
 
     pub(super) fn observe(&mut self, frame: &Frame<'_>, log: &mut Log) {
-        for r in frame.robots {
+        for r in frame.robots() {
             let i = r.id as usize;
             let here = (r.pose.x_m, r.pose.y_m);
             let (dx, dy) = (here.0 - self.last[i].0, here.1 - self.last[i].1);

@@ -265,7 +265,6 @@ impl Run {
             .expect("the monitor lives until the end");
         monitor.observe(&Frame {
             step: self.world.steps(),
-            robots: self.world.robots(),
             seen_by_agent: &seen,
             world: &self.world,
         });

@@ -4,10 +4,8 @@
 //! rear 0.35765 m from the rotation centre) and the `straight` controller's 0.5 m/s.
 
 use super::*;
-use crate::mission::ControllerSpec;
-use std::f64::consts::PI;
-
 use crate::failure::FailureClass;
+use crate::mission::ControllerSpec;
 use crate::monitor::{EventKind, Party};
 use crate::test_data::{robot, situation};
 
@@ -36,8 +34,20 @@ fn of_kind(rec: &RunRecord, kind: EventKind) -> Vec<&Event> {
     rec.events.iter().filter(|e| e.kind == kind).collect()
 }
 
-fn close(a: f64, b: f64) -> bool {
+pub(crate) fn close(a: f64, b: f64) -> bool {
     (a - b).abs() < 1e-9
+}
+
+/// The agent at x = 10 facing +x, a `straight` peer 4 m behind it driving along the same line.
+pub(crate) fn rear_approach() -> Situation {
+    situation(
+        200,
+        &[],
+        vec![
+            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
+            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
+        ],
+    )
 }
 
 #[test]
@@ -46,15 +56,7 @@ fn a_peer_driving_into_the_still_agent_from_behind_is_an_unseen_collision() {
     // and drives at 0.5 m/s (0.05 m per step): its front passes the agent's rear when
     // 6 + 0.05 k + FRONT > 10 − REAR, first at k = 68 (6.8 s); the move is refused there.
     // Unsafe proximity (< 0.5 m) first at 6 + 0.05 k + FRONT > 10 − REAR − 0.5, k = 58.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
-            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
-        ],
-    );
-    let rec = run_with_still_agent(&s, 20.0);
+    let rec = run_with_still_agent(&rear_approach(), 20.0);
     let hits = of_kind(&rec, EventKind::Collision);
     assert_eq!(hits.len(), 1, "{:#?}", rec.events);
     let hit = hits[0];
@@ -409,68 +411,6 @@ fn a_contact_broken_for_a_moment_and_resumed_is_one_collision() {
         "ends when the pushing stops: {end}"
     );
     assert!(collisions(0.0).len() > 10);
-}
-
-#[test]
-fn a_peer_driving_head_on_into_the_still_agent_is_struck_while_stopped_seen() {
-    // The peer starts 6 m ahead of the agent's laser and drives straight at it: the laser
-    // sees it the whole way, the agent never moves.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (6.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
-            robot(1, (12.0, 10.0, PI), &[[2.0, 10.0]], "straight"),
-        ],
-    );
-    let rec = run_with_still_agent(&s, 20.0);
-    let f = rec.failure.as_ref().expect("a collision");
-    assert_eq!(f.class, FailureClass::StruckWhileStoppedSeen);
-    let hit = &rec.events[f.events[0]];
-    assert_eq!(hit.kind, EventKind::Collision);
-    assert_eq!(hit.details["initiator"], "other");
-    assert_eq!(hit.details["bearing"], "front");
-    assert_eq!(hit.details["seen"], true);
-    assert!(hit.details["seen_before_s"].as_f64().unwrap() > 5.0);
-    assert!(close(
-        hit.details["last_seen_before_s"].as_f64().unwrap(),
-        0.1
-    ));
-    assert!(close(
-        hit.details["agent_mean_speed_m_s"].as_f64().unwrap(),
-        0.0
-    ));
-    let closing = hit.details["closing_speed_m_s"].as_f64().unwrap();
-    assert!(
-        (closing - 0.45).abs() < 0.06,
-        "the peer closed at about 0.5 m/s: {closing}"
-    );
-}
-
-#[test]
-fn the_agent_and_a_peer_driving_into_each_other_both_closed_in() {
-    // Pure pursuit does not avoid: both drive along y = 10 toward each other.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (4.0, 10.0, 0.0), &[[16.0, 10.0]], "follow"),
-            robot(1, (12.0, 10.0, PI), &[[2.0, 10.0]], "straight"),
-        ],
-    );
-    let rec = run(&s, &spec(None, 30.0), 0).unwrap();
-    let f = rec.failure.as_ref().expect("a collision");
-    assert_eq!(
-        f.class,
-        FailureClass::CollidedAsBothClosedIn,
-        "{:#?}",
-        rec.events
-    );
-    let hit = &rec.events[f.events[0]];
-    assert_eq!(hit.details["initiator"], "both");
-    assert_eq!(hit.details["bearing"], "front");
-    assert!(hit.details["agent_approach_m_s"].as_f64().unwrap() > 0.05);
-    assert!(hit.details["other_approach_m_s"].as_f64().unwrap() > 0.05);
 }
 
 #[test]
