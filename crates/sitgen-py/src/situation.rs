@@ -14,6 +14,10 @@ fn read(json: &str) -> PyResult<Situation> {
     Situation::from_json(json).map_err(|e| SpecError::new_err(e.to_string()))
 }
 
+fn spec_error(e: sitgen_core::spec::SpecError) -> PyErr {
+    SpecError::new_err(e.to_string())
+}
+
 /// Generate the situation of a spec with master seed `seed`; returns its JSON.
 #[pyfunction]
 fn generate_situation(py: Python<'_>, kind: &str, text: &str, seed: u64) -> PyResult<String> {
@@ -21,13 +25,22 @@ fn generate_situation(py: Python<'_>, kind: &str, text: &str, seed: u64) -> PyRe
     let (s, _) = py
         .detach(|| situation::generate(&spec, seed))
         .map_err(|e| GenerationFailed::new_err(e.to_string()))?;
+    sitgen_core::sim::check_start(&s)
+        .map_err(|e| GenerationFailed::new_err(format!("placement: {e}")))?;
     Ok(s.to_json())
 }
 
-/// Check a situation's JSON (the error names the field); returns it re-serialised.
+/// Check a situation's JSON (the error names the field): its fields, routes, where its robots
+/// start, and with `verify_hash` its content hash. Returns it re-serialised.
 #[pyfunction]
-fn check_situation(json: &str) -> PyResult<String> {
-    Ok(read(json)?.to_json())
+#[pyo3(signature = (json, verify_hash = false))]
+fn check_situation(json: &str, verify_hash: bool) -> PyResult<String> {
+    let s = read(json)?;
+    sitgen_core::sim::check_start(&s).map_err(spec_error)?;
+    if verify_hash {
+        s.check_content_hash().map_err(spec_error)?;
+    }
+    Ok(s.to_json())
 }
 
 /// The content hash the situation's map and robots give now.

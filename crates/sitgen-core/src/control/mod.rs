@@ -66,6 +66,38 @@ pub fn build(spec: &ControllerSpec, path: &str) -> Result<Box<dyn Controller>, S
     }
 }
 
+/// Whether a controller name is run outside the core (by the Python layer): `python:…` or
+/// `cmd:…`.
+pub fn is_external(name: &str) -> bool {
+    name.starts_with("python:") || name.starts_with("cmd:")
+}
+
+/// Check a controller spec before any run: a built-in name with known parameters in range, or
+/// a well-formed external name (`python:MODULE:CLASS`, `cmd:PROGRAM …`; whether the module or
+/// program exists is for the Python layer to check). `path` names the spec in errors.
+pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
+    let name_path = join(path, "name");
+    if let Some(target) = spec.name.strip_prefix("python:") {
+        let (module, class) = target.rsplit_once(':').unwrap_or_default();
+        if module.trim().is_empty() || class.trim().is_empty() {
+            return Err(SpecError::new(
+                name_path,
+                format!("`{}`: expected python:MODULE:CLASS", spec.name),
+            ));
+        }
+    } else if let Some(command) = spec.name.strip_prefix("cmd:") {
+        if command.trim().is_empty() {
+            return Err(SpecError::new(
+                name_path,
+                "`cmd:` names no program; expected cmd:PROGRAM ARGS",
+            ));
+        }
+    } else {
+        build(spec, path)?;
+    }
+    Ok(())
+}
+
 /// Reject parameters a controller does not have.
 fn check_known(
     params: &BTreeMap<String, f64>,

@@ -11,6 +11,28 @@
 
 use rayon::prelude::*;
 
+/// Squared distance, in cells², from every cell of `grid` to the nearest occupied cell or to
+/// the ring of cells just outside the map: the world beyond a map's edge is a wall to the
+/// simulator, so placement and planning treat it as one too. Maps with a border wall get the
+/// same distances as from [`squared_distance_to`].
+pub fn squared_distance_with_edge(grid: &super::OccupancyGrid) -> Vec<f64> {
+    let (rows, cols) = (grid.rows + 2, grid.cols + 2);
+    let mut padded = vec![true; rows * cols];
+    for r in 0..grid.rows {
+        let from = r * grid.cols;
+        padded[(r + 1) * cols + 1..(r + 1) * cols + 1 + grid.cols]
+            .copy_from_slice(&grid.cells[from..from + grid.cols]);
+    }
+    let d2 = squared_distance_to(&padded, rows, cols);
+    (0..grid.rows)
+        .flat_map(|r| {
+            d2[(r + 1) * cols + 1..(r + 1) * cols + 1 + grid.cols]
+                .iter()
+                .copied()
+        })
+        .collect()
+}
+
 /// Squared distance, in cells², from every cell to the nearest cell where `feature` is true;
 /// `f64::INFINITY` everywhere when there is no feature cell.
 ///

@@ -9,6 +9,23 @@
 pub mod distance;
 pub mod regions;
 
+/// Largest grid sitgen builds, in cells: 10⁸ cells (≈ 100 MB of occupancy, and of the order of a
+/// 1 km × 1 km site at 0.1 m). Every grid sized from input — a spec, a map file's header, an
+/// image's dimensions, a situation's embedded map — is checked against it before anything of
+/// that size is allocated.
+pub const MAX_CELLS: usize = 100_000_000;
+
+/// Check that a `rows × cols` grid is non-empty and within [`MAX_CELLS`], before allocating it.
+pub fn check_size(rows: usize, cols: usize) -> Result<(), String> {
+    match rows.checked_mul(cols) {
+        Some(0) => Err(format!("{rows} × {cols} cells is an empty map")),
+        Some(n) if n <= MAX_CELLS => Ok(()),
+        _ => Err(format!(
+            "{rows} × {cols} cells is more than the {MAX_CELLS} a map may have"
+        )),
+    }
+}
+
 /// A rectangular raster of `f64` values, one per cell: what noise sources produce and what
 /// pixelise and threshold read. Values from the built-in sources lie in [0, 1], where larger
 /// means "more likely an obstacle".

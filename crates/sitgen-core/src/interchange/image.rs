@@ -12,10 +12,19 @@ pub const OCCUPIED_GREY: u8 = 0;
 /// Grey level written for free cells (ROS map_saver writes 254 for free).
 pub const FREE_GREY: u8 = 254;
 
+/// Open an image whose size (read from its header first) is within [`crate::grid::MAX_CELLS`]
+/// pixels; errors name the file.
+pub fn open_image(path: &Path) -> Result<image::DynamicImage, String> {
+    let shown = path.display();
+    let (w, h) =
+        image::image_dimensions(path).map_err(|e| format!("cannot read image {shown}: {e}"))?;
+    crate::grid::check_size(h as usize, w as usize).map_err(|e| format!("image {shown}: {e}"))?;
+    image::open(path).map_err(|e| format!("cannot read image {shown}: {e}"))
+}
+
 /// Read an image as darkness in [0, 1]: (max − luma) / max at 16-bit precision.
 pub fn read_darkness(path: &Path) -> Result<ScalarField, String> {
-    let img =
-        image::open(path).map_err(|e| format!("cannot read image {}: {e}", path.display()))?;
+    let img = open_image(path)?;
     let luma = img.into_luma16();
     let (cols, rows) = (luma.width() as usize, luma.height() as usize);
     let values = luma

@@ -172,8 +172,7 @@ fn load_ros_yaml(path: &Path, unknown: Unknown) -> Result<LoadedMap, String> {
 
 /// Read an image by the ROS trinary rule.
 pub fn read_trinary(path: &Path, t: Thresholds, unknown: Unknown) -> Result<OccupancyGrid, String> {
-    let img =
-        image::open(path).map_err(|e| format!("cannot read image {}: {e}", path.display()))?;
+    let img = super::image::open_image(path)?;
     let channels = if img.color().has_color() { 3 } else { 1 };
     let rgb = img.to_rgb8();
     let cells = rgb

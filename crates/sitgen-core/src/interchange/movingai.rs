@@ -39,6 +39,7 @@ pub fn parse_map(text: &str) -> Result<OccupancyGrid, String> {
     let (Some(rows), Some(cols)) = (height, width) else {
         return Err("the header must give `height` and `width` before `map`".into());
     };
+    crate::grid::check_size(rows, cols)?;
     let mut grid = OccupancyGrid::filled(rows, cols, true);
     let mut read = 0;
     for (r, line) in lines.take(rows).enumerate() {
@@ -99,6 +100,14 @@ mod tests {
         let g = parse_map(text).unwrap();
         assert_eq!((g.rows, g.cols), (2, 3));
         assert_eq!(g.cells, vec![false, true, true, false, false, false]);
+    }
+
+    #[test]
+    fn a_header_too_large_is_refused_before_allocating() {
+        let e = parse_map("type octile\nheight 1000000000\nwidth 1000000000\nmap\n").unwrap_err();
+        assert!(e.contains("more than the 100000000"), "{e}");
+        let e = parse_map("type octile\nheight 0\nwidth 5\nmap\n").unwrap_err();
+        assert!(e.contains("empty map"), "{e}");
     }
 
     #[test]

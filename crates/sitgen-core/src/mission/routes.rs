@@ -1,7 +1,7 @@
 //! Placement and routes: the steps listed in the module doc of [`crate::mission`].
 
 use crate::geometry::segment::for_each_cell;
-use crate::grid::distance::squared_distance_to;
+use crate::grid::distance::squared_distance_with_edge;
 use crate::grid::regions::{label_regions, Connectivity};
 use crate::grid::Map;
 use crate::rng::ChoiceSource;
@@ -50,7 +50,7 @@ impl<'a> Plan<'a> {
     fn new(map: &'a Map, spec: &MissionSpec) -> Self {
         let g = &map.grid;
         let res = map.resolution_m;
-        let d2 = squared_distance_to(&g.cells, g.rows, g.cols);
+        let d2 = squared_distance_with_edge(g);
         let place_beyond =
             spec.body.enclosing_radius() + spec.clearance_m + res * std::f64::consts::FRAC_1_SQRT_2;
         let placeable: Vec<u32> = (0..d2.len() as u32)

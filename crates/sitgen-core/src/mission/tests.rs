@@ -180,6 +180,9 @@ mod situations {
                         );
                     }
                 }
+                // The simulator agrees that every robot starts clear, and the file reads back.
+                crate::sim::check_start(&s).unwrap_or_else(|e| panic!("{name} {seed}: {e}"));
+                Situation::from_json(&s.to_json()).unwrap();
                 let blocked = dilated(&map, spec.plan_margin_m);
                 let agent = &s.robots[0];
                 assert_eq!(agent.role, Role::Agent);
@@ -319,5 +322,22 @@ mod situations {
             "situation.schema.json",
             &situation::json_schema(),
         );
+    }
+
+    #[test]
+    fn on_a_map_without_a_border_robots_start_inside_it() {
+        // An open 6 m × 6 m map: before the map's edge counted as a wall, robots were drawn
+        // up to the very edge cells, half their footprint outside.
+        for seed in 0..40 {
+            let spec = from_toml_str(
+                "[terrain]\nwidth_m = 6.0\nheight_m = 6.0\n[terrain.source]\nkind = \"perlin\"\n\
+                 [[terrain.filters]]\nkind = \"threshold\"\nvalue = 1.0\n\
+                 [mission]\npeers_min = 3\npeers_max = 3\nmin_route_length_m = 5.0\n",
+            )
+            .unwrap();
+            let s = situation::generate(&spec, seed).unwrap().0;
+            assert_eq!(s.map.decode().unwrap().grid.occupied_count(), 0);
+            crate::sim::check_start(&s).unwrap_or_else(|e| panic!("seed {seed}: {e}"));
+        }
     }
 }

@@ -70,6 +70,19 @@ impl RunSpec {
     pub fn validate(&self, path: &str) -> Result<(), SpecError> {
         SpecError::check_positive(&join(path, "time_limit_s"), self.time_limit_s, 86_400.0)?;
         self.sim.validate(&join(path, "sim"))?;
+        let steps = (self.time_limit_s / self.sim.dt_s).ceil();
+        if steps > MAX_STEPS {
+            return Err(SpecError::new(
+                join(path, "sim.dt_s"),
+                format!(
+                    "{} s at {} s per step is {steps:.0} steps; a run may take at most {MAX_STEPS:.0}",
+                    self.time_limit_s, self.sim.dt_s
+                ),
+            ));
+        }
+        if let Some(c) = &self.controller {
+            control::check(c, &join(path, "controller"))?;
+        }
         self.monitor.validate(&join(path, "monitor"))?;
         self.scoring.validate(&join(path, "scoring"))
     }
@@ -88,10 +101,11 @@ impl RunSpec {
     }
 }
 
-/// Whether a controller name is run outside the core (by the Python layer).
-pub fn is_external(name: &str) -> bool {
-    name.starts_with("python:") || name.starts_with("cmd:")
-}
+pub use crate::control::is_external;
+
+/// Most steps a run may take: 10⁷ (a day at 10 ms steps is 8.6 × 10⁶), so that a tiny `dt_s`
+/// cannot ask for a run that never ends.
+pub const MAX_STEPS: f64 = 1e7;
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -156,6 +170,7 @@ impl Run {
     pub fn new(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<Self, SpecError> {
         spec.validate("run")?;
         let world = World::new(situation, spec.sim.clone(), seed)?;
+        world.check_start()?;
         let monitor = Monitor::new(situation, &world, &spec.monitor);
         let agent = monitor.agent();
         let mut controllers = Vec::with_capacity(situation.robots.len());
@@ -367,6 +382,7 @@ pub type JobResult = Result<(Situation, RunRecord), String>;
 pub fn run_job(job: &Job) -> JobResult {
     let (situation, _) = crate::situation::generate(&job.situation, job.situation_seed)
         .map_err(|e| format!("generation failed: {e}"))?;
+    crate::sim::check_start(&situation).map_err(|e| format!("generation failed: {e}"))?;
     let record = run(&situation, &job.run, job.run_seed).map_err(|e| e.to_string())?;
     Ok((situation, record))
 }

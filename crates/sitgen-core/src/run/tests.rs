@@ -452,3 +452,44 @@ fn turning_to_and_fro_on_the_spot_beside_a_peer_is_an_oscillation_beside_it() {
     let f = rec.failure.as_ref().unwrap();
     assert_eq!(f.class, FailureClass::OscillatedBesidePeer);
 }
+
+#[test]
+fn a_run_spec_with_an_unknown_controller_or_too_many_steps_is_refused_before_running() {
+    let error = |json: &str| RunSpec::from_json(json, "run").unwrap_err().to_string();
+    let e = error(r#"{"controller": {"name": "turbo"}}"#);
+    assert!(
+        e.starts_with("run.controller.name: unknown controller `turbo`; built in:"),
+        "{e}"
+    );
+    let e = error(r#"{"controller": {"name": "python:no_class"}}"#);
+    assert_eq!(
+        e,
+        "run.controller.name: `python:no_class`: expected python:MODULE:CLASS"
+    );
+    let e = error(r#"{"controller": {"name": "cmd:  "}}"#);
+    assert!(
+        e.starts_with("run.controller.name: `cmd:` names no program"),
+        "{e}"
+    );
+    let e = error(r#"{"sim": {"dt_s": 1e-9}}"#);
+    assert!(e.starts_with("run.sim.dt_s: 600 s at 0.000000001 s per step is 600000000000 steps; a run may take at most 10000000"), "{e}");
+    assert!(RunSpec::from_json(r#"{"time_limit_s": 86400, "sim": {"dt_s": 0.01}}"#, "run").is_ok());
+}
+
+#[test]
+fn a_situation_spec_names_known_controllers_and_only_the_agent_an_external_one() {
+    let read =
+        |toml: &str| crate::spec::from_toml_str(&format!("[terrain]\npreset = \"caves\"\n{toml}"));
+    let error = |toml: &str| read(toml).unwrap_err().to_string();
+    let e = error("[mission.agent_controller]\nname = \"turbo\"\n");
+    assert!(
+        e.starts_with("mission.agent_controller.name: unknown controller `turbo`"),
+        "{e}"
+    );
+    let e = error("[mission.peer_controller]\nname = \"cmd:peer\"\n");
+    assert!(
+        e.starts_with("mission.peer_controller.name: only the agent"),
+        "{e}"
+    );
+    assert!(read("[mission.agent_controller]\nname = \"cmd:my_robot --fast\"\n").is_ok());
+}

@@ -241,6 +241,11 @@ fn limit(value: f64, previous: f64, max_change: Option<f64>) -> f64 {
     }
 }
 
+/// Check where the robots of `situation` start ([`World::check_start`]).
+pub fn check_start(situation: &Situation) -> Result<(), SpecError> {
+    World::new(situation, SimSpec::default(), 0)?.check_start()
+}
+
 impl World {
     /// A world at the start of `situation`, with sensor noise drawn from `seed`.
     pub fn new(situation: &Situation, spec: SimSpec, seed: u64) -> Result<Self, SpecError> {
@@ -351,6 +356,39 @@ impl World {
         }
         self.time_s = (self.steps + 1) as f64 * dt;
         self.steps += 1;
+        Ok(())
+    }
+
+    /// Check that every robot starts where the simulator lets it stand: a finite pose, its
+    /// footprint inside the map, clear of every occupied cell and of every other robot. A
+    /// robot that starts in contact would "collide" on the first step, a failure that is the
+    /// situation's, not the controller's; the error names the robot.
+    pub fn check_start(&self) -> Result<(), SpecError> {
+        for (i, r) in self.robots.iter().enumerate() {
+            let path = format!("robots[{i}].start");
+            let p = &r.pose;
+            if !(p.x_m.is_finite() && p.y_m.is_finite() && p.heading_rad.is_finite()) {
+                return Err(SpecError::new(path, "is not a finite pose"));
+            }
+            let contacts = self.contacts_at(i, p);
+            let what = match contacts.first() {
+                None => continue,
+                Some(Contact::Wall) => {
+                    let (x0, y0, x1, y1) = r.footprint().bounds();
+                    let (w, h) = (self.map.width_m(), self.map.height_m());
+                    if x0 < 0.0 || y0 < 0.0 || x1 > w || y1 > h {
+                        format!("its footprint leaves the map, (0, 0) to ({w}, {h}) m")
+                    } else {
+                        "its footprint overlaps an obstacle".to_string()
+                    }
+                }
+                Some(Contact::Robot(j)) => format!("its footprint overlaps robot {j}'s"),
+            };
+            return Err(SpecError::new(
+                path,
+                format!("({:?}, {:?}): {what}", p.x_m, p.y_m),
+            ));
+        }
         Ok(())
     }
 

@@ -161,17 +161,26 @@ impl EmbeddedMap {
         let packed = base64::engine::general_purpose::STANDARD
             .decode(&self.data)
             .map_err(|e| SpecError::new("map.data", format!("not base64: {e}")))?;
-        let mut bits = Vec::new();
+        crate::grid::check_size(self.rows, self.cols).map_err(|e| SpecError::new("map", e))?;
+        let n = self.rows * self.cols;
+        // Inflate no more than the cells need (plus one byte to tell "too long"): a blob that
+        // claims less than it holds is refused without being unpacked.
+        let mut bits = Vec::with_capacity(n.div_ceil(8));
         flate2::read::ZlibDecoder::new(&packed[..])
+            .take(n.div_ceil(8) as u64 + 1)
             .read_to_end(&mut bits)
             .map_err(|e| SpecError::new("map.data", format!("not zlib data: {e}")))?;
-        let n = self.rows * self.cols;
         if bits.len() != n.div_ceil(8) {
             return Err(SpecError::new(
                 "map.data",
                 format!(
-                    "holds {} bytes; {} × {} cells need {}",
-                    bits.len(),
+                    "holds {}{} bytes; {} × {} cells need {}",
+                    if bits.len() > n.div_ceil(8) {
+                        "more than "
+                    } else {
+                        ""
+                    },
+                    bits.len().min(n.div_ceil(8)),
                     self.rows,
                     self.cols,
                     n.div_ceil(8)
@@ -223,6 +232,23 @@ impl Situation {
         format!("sha256:{hex}")
     }
 
+    /// Check that the map and robots still give the recorded content hash: a situation edited
+    /// by hand (or damaged) after it was generated no longer matches its provenance, so a run
+    /// of it would be credited to a spec and seed that do not make it.
+    pub fn check_content_hash(&self) -> Result<(), SpecError> {
+        let now = self.content_hash();
+        if now == self.provenance.content_hash {
+            return Ok(());
+        }
+        Err(SpecError::new(
+            "provenance.content_hash",
+            format!(
+                "the map and robots hash to {now}, not the recorded {}: the file was edited after it was generated",
+                self.provenance.content_hash
+            ),
+        ))
+    }
+
     /// Pretty JSON, as written to files.
     pub fn to_json(&self) -> String {
         let mut text = serde_json::to_string_pretty(self).expect("a situation serialises");
@@ -242,7 +268,11 @@ impl Situation {
         Ok(s)
     }
 
-    /// Check what types cannot: the format, the map, the robots' ids and roles.
+    /// Check what types cannot: the format, the map, the robots' ids and roles, and that every
+    /// route is usable — the agent has at least one waypoint, and every waypoint lies inside
+    /// the map on a free cell (one inside an obstacle could never be reached, and the run
+    /// would report a failure that is not the controller's). Where robots start is checked
+    /// against the simulator's own collision test ([`crate::sim::World::check_start`]).
     pub fn validate(&self) -> Result<(), SpecError> {
         if self.format != FORMAT {
             return Err(SpecError::new(
@@ -250,7 +280,7 @@ impl Situation {
                 format!("`{}` is not supported; expected `{FORMAT}`", self.format),
             ));
         }
-        self.map.decode()?;
+        let map = self.map.decode()?;
         for (i, r) in self.robots.iter().enumerate() {
             let path = format!("robots[{i}]");
             if r.id as usize != i {
@@ -267,12 +297,42 @@ impl Situation {
                 ));
             }
             r.body.validate(&format!("{path}.body"))?;
+            for (k, &[x, y]) in r.waypoints.iter().enumerate() {
+                check_route_point(&map, &format!("{path}.waypoints[{k}]"), x, y)?;
+            }
+            if agent && r.waypoints.is_empty() {
+                return Err(SpecError::new(
+                    format!("{path}.waypoints"),
+                    "the agent needs at least one waypoint (an empty route is completed at once)",
+                ));
+            }
         }
         if self.robots.is_empty() {
             return Err(SpecError::new("robots", "must hold at least the agent"));
         }
         Ok(())
     }
+}
+
+/// Check that a route point lies inside `map` on a free cell.
+fn check_route_point(map: &Map, path: &str, x: f64, y: f64) -> Result<(), SpecError> {
+    let (w, h) = (map.width_m(), map.height_m());
+    if !(x > 0.0 && x < w && y > 0.0 && y < h) {
+        return Err(SpecError::new(
+            path,
+            format!("({x}, {y}) is outside the map, (0, 0) to ({w}, {h}) m"),
+        ));
+    }
+    let res = map.resolution_m;
+    let col = ((x / res) as usize).min(map.grid.cols - 1);
+    let row = map.grid.rows - 1 - ((y / res) as usize).min(map.grid.rows - 1);
+    if map.grid.get(row, col) {
+        return Err(SpecError::new(
+            path,
+            format!("({x}, {y}) is inside an obstacle; a route point must be on free ground"),
+        ));
+    }
+    Ok(())
 }
 
 /// Generate the situation of `spec` with master seed `seed`: terrain from the `terrain`
@@ -304,3 +364,6 @@ pub fn json_schema() -> String {
     text.push('\n');
     text
 }
+
+#[cfg(test)]
+mod tests;

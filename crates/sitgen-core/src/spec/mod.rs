@@ -40,7 +40,16 @@ impl SituationSpec {
     /// Check every range and the filter chain; the error names the first bad field.
     pub fn validate(&self) -> Result<(), SpecError> {
         self.terrain.validate("terrain")?;
-        self.mission.validate("mission")
+        self.mission.validate("mission")?;
+        crate::control::check(&self.mission.agent_controller, "mission.agent_controller")?;
+        let peer = &self.mission.peer_controller;
+        if crate::control::is_external(&peer.name) {
+            return Err(SpecError::new(
+                "mission.peer_controller.name",
+                "only the agent may have a Python or external controller",
+            ));
+        }
+        crate::control::check(peer, "mission.peer_controller")
     }
 }
 

@@ -31,8 +31,8 @@ use filters::{
 };
 use sources::{Caves, ImageSource, MapSource, Maze, Perlin, Rocks, Rooms};
 
-/// Largest map the generator accepts, in cells (10⁸ cells ≈ 100 MB of occupancy).
-pub const MAX_CELLS: f64 = 1e8;
+/// Largest map the generator accepts, in cells ([`crate::grid::MAX_CELLS`]).
+pub const MAX_CELLS: f64 = crate::grid::MAX_CELLS as f64;
 
 /// Default map width and height, metres.
 pub const DEFAULT_SIZE_M: f64 = 40.0;
@@ -431,9 +431,14 @@ fn extent_of(spec: &TerrainSpec) -> Result<Extent, String> {
         }
         (_, w, h) => (w.unwrap_or(DEFAULT_SIZE_M), h.unwrap_or(DEFAULT_SIZE_M)),
     };
+    let (rows, cols) = (
+        crate::grid::cells_for(h, res, 1),
+        crate::grid::cells_for(w, res, 1),
+    );
+    crate::grid::check_size(rows, cols)?;
     Ok(Extent {
-        rows: crate::grid::cells_for(h, res, 1),
-        cols: crate::grid::cells_for(w, res, 1),
+        rows,
+        cols,
         resolution_m: res,
     })
 }

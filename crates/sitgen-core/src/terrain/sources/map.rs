@@ -95,6 +95,8 @@ impl Source for MapSource {
         let res = extent.resolution_m;
         let rows = cells_for(file.height_m(), res, 1);
         let cols = cells_for(file.width_m(), res, 1);
+        crate::grid::check_size(rows, cols)
+            .map_err(|e| format!("{} redrawn at {res} m per cell: {e}", self.path.display()))?;
         Ok(Layer::Occupancy(redraw_conservatively(
             &file.grid,
             file.resolution_m,
