@@ -16,6 +16,14 @@ backend, the order of completion or on interruptions.
 
 Built-in controllers run in Rust across threads (the GIL released); Python and external
 controllers run in a process pool; ``backend="ray"`` sends the same batches to a Ray cluster.
+
+Before any run, the first :data:`CHECKED_JOBS` jobs are built and checked and every controller
+the spec can name is checked (a built-in name, a ``cmd:`` program that exists, a ``python:``
+class that loads): a bad spec stops the campaign with the field named. Jobs are then built as
+they are needed, a few per worker ahead, so a campaign of any size holds only the runs in
+flight; a later job whose draws make a bad spec is stored as that run's ``error``. A worker
+process that dies takes no campaign down: its runs are retried one at a time, and a run that
+kills its worker again is stored as an ``error``.
 """
 
 from __future__ import annotations
@@ -23,14 +31,17 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import math
 import os
 import signal
 import statistics
 import time
 import tomllib
 import zlib
-from collections.abc import Callable, Iterator, Mapping
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections import deque
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from importlib import resources
@@ -45,6 +56,15 @@ from sitgen.store import RunRow, Store, main_events
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
 SECTIONS = ("n", "situation", "run", "vary")
+MAX_RUNS = 1_000_000_000
+"""Most runs a campaign may ask for (jobs are streamed, so memory does not grow with it)."""
+CHECKED_JOBS = 10_000
+"""Jobs built and checked before any run (about a second's work)."""
+MAX_WORKERS_PER_CORE = 4
+"""Local workers allowed per core: more only adds memory and contention."""
+MAX_RAY_WORKERS = 4096
+"""Batches a Ray campaign may keep in flight (twice this many, as ``workers`` says)."""
+CONTROLLER_PATHS = ("run.controller.name", "situation.mission.agent_controller.name")
 
 
 def paper_campaign_text() -> str:
@@ -77,8 +97,8 @@ def parse_campaign(text: str | None, origin: str = "campaign spec") -> CampaignS
         if key not in SECTIONS:
             raise _core.SpecError(f"{key}: unknown campaign field; expected one of {SECTIONS}")
     n = data.get("n", 500)
-    if not isinstance(n, int) or n < 0:
-        raise _core.SpecError(f"n: {n!r} is not a whole number of runs")
+    if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= MAX_RUNS:
+        raise _core.SpecError(f"n: {n!r} is not a whole number of runs in [0, {MAX_RUNS}]")
     for section in ("situation", "run", "vary"):
         if not isinstance(data.get(section, {}), dict):
             raise _core.SpecError(f"{section}: expected a table")
@@ -96,9 +116,16 @@ def parse_campaign(text: str | None, origin: str = "campaign spec") -> CampaignS
         if not isinstance(args, list) or not args:
             raise _core.SpecError(f"{where}.{kind}: expected a non-empty list")
         if kind != "choice":
-            numeric = all(isinstance(a, int | float) and not isinstance(a, bool) for a in args)
+            numeric = all(
+                isinstance(a, int | float) and not isinstance(a, bool) and math.isfinite(a)
+                for a in args
+            )
             if len(args) != 2 or not numeric or args[0] > args[1]:
-                raise _core.SpecError(f"{where}.{kind}: expected [lo, hi] numbers with lo <= hi")
+                raise _core.SpecError(
+                    f"{where}.{kind}: expected [lo, hi] finite numbers with lo <= hi"
+                )
+        if kind == "int" and not all(isinstance(a, int) for a in args):
+            raise _core.SpecError(f"{where}.int: expected [lo, hi] whole numbers")
     return CampaignSpec(
         situation=data.get("situation", {}),
         run=data.get("run", {}),
@@ -156,13 +183,17 @@ class Job:
     index: int
     seed: int
     situation: dict[str, Any]
-    """The resolved situation spec."""
+    """The resolved situation spec (as written, if it could not be built)."""
     run: dict[str, Any]
     """The run spec."""
+    error: str | None = None
+    """Why the job could not be built (its draws made a bad spec); it is stored, not run."""
 
     @property
     def controller(self) -> str:
-        name: str = self.run.get("controller", {}).get("name", "snd_follow")
+        """The agent's controller: the run spec's, else the situation's mission's."""
+        mission = self.situation.get("mission", {}).get("agent_controller", {})
+        name: str = self.run.get("controller", {}).get("name", mission.get("name", "snd_follow"))
         return name
 
 
@@ -202,11 +233,80 @@ def _resolve(situation: dict[str, Any], index: int) -> dict[str, Any]:
 
 
 def build_jobs(spec: CampaignSpec, seed: int, n: int) -> list[Job]:
-    """Every job, checked before anything runs."""
+    """Jobs 0 … n − 1, built and checked (for small campaigns and tests; campaigns stream)."""
     return [build_job(spec, seed, i) for i in range(n)]
 
 
+def stream_jobs(spec: CampaignSpec, seed: int, indices: Iterable[int]) -> Iterator[Job]:
+    """The jobs of ``indices``, built one at a time as they are asked for; a job whose draws
+    make a bad spec comes with its ``error`` set instead of stopping the campaign."""
+    for i in indices:
+        try:
+            yield build_job(spec, seed, i)
+        except _core.SpecError as e:
+            situation = copy.deepcopy(spec.situation)
+            yield Job(i, job_seed(seed, i), situation, copy.deepcopy(spec.run), f"spec: {e}")
+
+
+def controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
+    """Every (field, controller name) the campaign can give its agent."""
+    found: list[tuple[str, str]] = []
+    bases = {
+        CONTROLLER_PATHS[0]: spec.run.get("controller", {}).get("name"),
+        CONTROLLER_PATHS[1]: spec.situation.get("mission", {})
+        .get("agent_controller", {})
+        .get("name"),
+    }
+    for path, base in bases.items():
+        if isinstance(base, str):
+            found.append((path, base))
+        dist = spec.vary.get(path, {})
+        choices = dist.get("choice", [])
+        found += [(f"vary.{path!r}.choice", c) for c in choices if isinstance(c, str)]
+    return found
+
+
+def check_campaign(
+    spec: CampaignSpec, seed: int, n: int, stop: Callable[[], bool] | None = None
+) -> None:
+    """Everything that can be checked before any run: the first :data:`CHECKED_JOBS` jobs
+    build, and every controller the spec names can be used. Raises SpecError naming the
+    field."""
+    from sitgen.controllers import ControllerError, check_controller_name
+
+    for i in range(min(n, CHECKED_JOBS)):
+        if stop is not None and i % 256 == 0 and stop():
+            return
+        build_job(spec, seed, i)
+    checked: set[str] = set()
+    for path, name in controller_names(spec):
+        if name in checked:
+            continue
+        checked.add(name)
+        if not name.startswith(("python:", "cmd:")):
+            _core.check_run_spec(json.dumps({"controller": {"name": name}}))
+            continue
+        try:
+            check_controller_name(name)
+        except ControllerError as e:
+            raise _core.SpecError(f"{path}: {e}") from None
+
+
+def check_workers(workers: int | None, backend: str) -> int:
+    """The worker count to use: the cores by default, else ``workers`` if within the cap
+    (:data:`MAX_WORKERS_PER_CORE` per core locally, :data:`MAX_RAY_WORKERS` on Ray)."""
+    cores = os.cpu_count() or 1
+    if workers is None:
+        return cores
+    most = MAX_RAY_WORKERS if backend == "ray" else MAX_WORKERS_PER_CORE * cores
+    if not 1 <= workers <= most:
+        where = "on Ray" if backend == "ray" else f"here ({MAX_WORKERS_PER_CORE} per core)"
+        raise _core.SpecError(f"--workers: {workers} is not in [1, {most}], the most {where}")
+    return workers
+
+
 def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
+    """The stored form of a job's result."""
     record = json.loads(result["record"]) if result["ok"] else None
     return RunRow(
         id=job.index,
@@ -261,12 +361,45 @@ def is_user(job: Job) -> bool:
     return job.controller.startswith(("python:", "cmd:"))
 
 
-class Executor:
-    """Runs jobs and yields (job, result) as each finishes; ``stop()`` starts no more."""
+def _worker_start() -> None:
+    """A pool worker: Ctrl-C is the campaign's to handle (it finishes the runs in flight), and
+    the worker dies with the campaign even if that is killed outright."""
+    from sitgen.controller_host import die_with_parent
 
-    def __init__(self, workers: int, backend: str = "local", address: str | None = None) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent()
+
+
+def _safe_user_job(job: Job) -> dict[str, Any]:
+    """:func:`run_user_job`, with any failure of sitgen's own on that run stored as its error
+    rather than ending the campaign."""
+    try:
+        return run_user_job(job)
+    except Exception as e:  # sitgen's own bug on one run must not end the campaign
+        return {"ok": False, "error": f"sitgen failed on this run: {type(e).__name__}: {e}"}
+
+
+def _failed(job: Job) -> dict[str, Any] | None:
+    """The result of a job that cannot run (it could not be built), else None."""
+    return None if job.error is None else {"ok": False, "error": job.error}
+
+
+class Executor:
+    """Runs jobs as they are drawn from an iterator, a few per worker ahead, and yields
+    (job, result) as each finishes; ``stop()`` starts no more."""
+
+    def __init__(
+        self,
+        workers: int,
+        backend: str = "local",
+        address: str | None = None,
+        user: bool = False,
+    ) -> None:
         self.workers = max(1, workers)
         self.backend = backend
+        self.user = user
+        """Whether any job may have a Python or external controller (then: a process pool)."""
+        self.window = 4 * self.workers
         self._stopping = False
         self._stream: _core.JobStream | None = None
         if backend == "ray":
@@ -283,43 +416,117 @@ class Executor:
         elif backend != "local":
             raise _core.SpecError(f"--backend: `{backend}` is not one of local, ray")
 
-    def results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
+    def results(self, jobs: Iterable[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         if self.backend == "ray":
-            yield from self._ray_results(jobs)
-        elif any(is_user(j) for j in jobs):
-            yield from self._pool_results(jobs)
+            yield from self._ray_results(iter(jobs))
+        elif self.user:
+            yield from self._pool_results(iter(jobs))
         else:
-            # Built-in controllers: Rust threads, each job yielded as soon as it is done.
-            self._stream = _core.JobStream([_core_args(j) for j in jobs], self.workers)
-            for i, result in self._stream:
-                yield jobs[i], result
+            yield from self._stream_results(iter(jobs))
 
-    def _pool_results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
-        if self.workers == 1:
-            for job in jobs:
-                if self._stopping:
+    def _stream_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
+        """Built-in controllers: Rust threads, each job yielded as soon as it is done."""
+        stream = self._stream = _core.JobStream(self.workers)
+        inflight: dict[int, Job] = {}
+        try:
+            while True:
+                batch: list[Job] = []
+                while not self._stopping and len(inflight) + len(batch) < self.window:
+                    job = next(jobs, None)
+                    if job is None:
+                        break
+                    failed = _failed(job)
+                    if failed is not None:
+                        yield job, failed
+                    else:
+                        batch.append(job)
+                if batch:
+                    inflight.update((j.index, j) for j in batch)
+                    stream.submit([(j.index, _core_args(j)) for j in batch])
+                if not inflight:
                     return
-                yield job, run_user_job(job)
-            return
-        with ProcessPoolExecutor(self.workers) as pool:
-            futures = {pool.submit(run_user_job, job): job for job in jobs}
-            for future in as_completed(futures):
-                if self._stopping:
-                    for f in futures:
-                        f.cancel()
-                if not future.cancelled():
-                    yield futures[future], future.result()
+                index, result = next(stream)
+                job = inflight.pop(index)
+                if result is not None:
+                    yield job, result
+        finally:
+            stream.stop()
+            stream.close()
 
-    def _ray_results(self, jobs: list[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
+    def _pool_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
+        """Python and external controllers: a process pool. A worker that dies breaks the
+        pool; the runs it had in flight are retried one at a time, each in a pool of its own,
+        and a run that kills that one too is stored as an error; then a fresh pool goes on."""
+        suspects: deque[Job] = deque()
+        while not self._stopping:
+            if suspects:
+                job = suspects.popleft()
+                yield job, _alone(job)
+                continue
+            broken = yield from self._pool_pass(jobs, suspects)
+            if not broken:
+                return
+
+    def _pool_pass(
+        self, jobs: Iterator[Job], suspects: deque[Job]
+    ) -> Generator[tuple[Job, dict[str, Any]], None, bool]:
+        """Run jobs in one pool until they run out (False) or the pool breaks (True, with the
+        runs it had in flight put in ``suspects``)."""
+        pool = ProcessPoolExecutor(self.workers, initializer=_worker_start)
+        inflight: dict[Future[dict[str, Any]], Job] = {}
+        try:
+            while True:
+                while not self._stopping and len(inflight) < self.window:
+                    job = next(jobs, None)
+                    if job is None:
+                        break
+                    failed = _failed(job)
+                    if failed is not None:
+                        yield job, failed
+                    else:
+                        inflight[pool.submit(_safe_user_job, job)] = job
+                if not inflight:
+                    return False
+                done, _ = wait(inflight, return_when=FIRST_COMPLETED)
+                broken = False
+                for future in done:
+                    job = inflight.pop(future)
+                    try:
+                        result = future.result()
+                    except BrokenProcessPool:
+                        broken = True
+                        suspects.append(job)
+                        continue
+                    yield job, result
+                if broken:
+                    suspects.extend(inflight.values())
+                    return True
+        finally:
+            _shut(pool)
+
+    def _ray_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         ray = self._ray
         batch = 4
-        queue = [jobs[i : i + batch] for i in range(0, len(jobs), batch)]
         pending: dict[Any, list[Job]] = {}
+        exhausted = False
         # Keep a few batches in flight per worker; yield each as it comes back.
-        while (queue and not self._stopping) or pending:
-            while queue and not self._stopping and len(pending) < 2 * self.workers:
-                chunk = queue.pop(0)
-                pending[self._remote.remote([_core_args(j) for j in chunk])] = chunk
+        while True:
+            while not exhausted and not self._stopping and len(pending) < 2 * self.workers:
+                chunk: list[Job] = []
+                while len(chunk) < batch:
+                    job = next(jobs, None)
+                    if job is None:
+                        exhausted = True
+                        break
+                    failed = _failed(job)
+                    if failed is not None:
+                        yield job, failed
+                    else:
+                        chunk.append(job)
+                if chunk:
+                    pending[self._remote.remote([_core_args(j) for j in chunk])] = chunk
+            if not pending:
+                return
             ready, _ = ray.wait(list(pending), num_returns=1)
             chunk = pending.pop(ready[0])
             yield from zip(chunk, ray.get(ready[0]), strict=True)
@@ -328,6 +535,32 @@ class Executor:
         self._stopping = True
         if self._stream is not None:
             self._stream.stop()
+
+
+def _alone(job: Job) -> dict[str, Any]:
+    """Run one job in a worker of its own: its result, or an error if the worker dies."""
+    pool = ProcessPoolExecutor(1, initializer=_worker_start)
+    try:
+        return pool.submit(_safe_user_job, job).result()
+    except BrokenProcessPool:
+        return {
+            "ok": False,
+            "error": "the worker process running it died (killed by a signal or out of memory)",
+        }
+    finally:
+        _shut(pool)
+
+
+def _shut(pool: ProcessPoolExecutor) -> None:
+    """Shut a pool down now: queued runs are cancelled and its workers killed (their
+    controllers die with them), so nothing outlives the campaign."""
+    processes = list(getattr(pool, "_processes", {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.kill()
+    for process in processes:
+        process.join()
 
 
 def _ray_batch(args: list[tuple[str, int, str, int]]) -> list[dict[str, Any]]:
@@ -360,12 +593,16 @@ def run_campaign(
     on_progress: Callable[[int, int], None] | None = None,
     stop: Callable[[], bool] | None = None,
 ) -> CampaignResult:
-    """Run (or resume) a campaign into the store ``db``. Every job is built and checked before
-    any runs; runs already stored are skipped; ``stop()`` is checked between batches."""
+    """Run (or resume) a campaign into the store ``db``: the spec and its controllers are
+    checked first (:func:`check_campaign`), runs already stored are skipped, jobs are built as
+    they are needed; ``stop()`` is checked after every run."""
     n = spec.n if n is None else n
-    workers = workers or os.cpu_count() or 1
-    jobs = build_jobs(spec, seed, n)
+    if not 0 <= n <= MAX_RUNS:
+        raise _core.SpecError(f"--n: {n} is not in [0, {MAX_RUNS}]")
+    workers = check_workers(workers, backend)
     started = time.perf_counter()
+    check_campaign(spec, seed, n, stop)
+    user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
     with Store(db) as store:
         store.start_campaign(
             spec.source,
@@ -375,21 +612,24 @@ def run_campaign(
             datetime.now(UTC).isoformat(timespec="seconds"),
         )
         done = store.done_ids()
-        todo = [j for j in jobs if j.index not in done]
+        todo = n - sum(1 for i in done if i < n)
         if on_progress:
-            on_progress(n - len(todo), n)
-        executor = Executor(workers, backend, address)
+            on_progress(n - todo, n)
+        executor = Executor(workers, backend, address, user=user)
+        jobs = stream_jobs(spec, seed, (i for i in range(n) if i not in done))
         ran = 0
-        for job, result in executor.results(todo):
+        if stop is not None and stop():
+            executor.stop()
+        for job, result in executor.results(jobs):
             # One transaction per run: a kill loses only the runs in flight.
             store.add_runs([_row(job, result)])
             ran += 1
             if on_progress:
-                on_progress(n - len(todo) + ran, n)
+                on_progress(n - todo + ran, n)
             if stop is not None and stop():
                 executor.stop()
-        interrupted = ran < len(todo)
-        total = len(store.done_ids())
+        interrupted = ran < todo
+        total = store.run_count()
     return CampaignResult(
         ran=ran, total=total, interrupted=interrupted, wall_s=time.perf_counter() - started
     )

@@ -3,34 +3,38 @@
 Both plug in as the agent's controller, named like the built-in ones:
 
 - ``python:module:Class`` (``module`` importable from the current directory or a path to a
-  ``.py`` file): an object with ``reset(info)`` and ``act(obs) -> (v, omega)``;
+  ``.py`` file): an object with ``reset(info)`` and ``act(obs) -> (v, omega)``, run in a
+  process of its own (:mod:`sitgen.controller_host`);
 - ``cmd:program args…``: a program started without a shell, spoken to in lockstep, one JSON
-  object per line each way (docs/controller-protocol.md), with a per-step wall-clock timeout.
+  object per line each way (docs/controller-protocol.md).
 
-Anything that goes wrong inside a controller — an exception, a crash, a hang, a reply that is
-not a command — raises :exc:`ControllerError` with a one-line reason; a run turns it into an
-``error`` outcome, and the next run starts a fresh controller.
+Both get a per-step wall-clock timeout, start in a process group of their own that is killed
+with everything in it when the run ends, and die with sitgen. Anything that goes wrong inside a
+controller — an exception, ``sys.exit``, a crash, a hang, a closed pipe, a reply that is not a
+command — raises :exc:`ControllerError` with a one-line reason; a run turns it into an ``error``
+outcome, and the next run starts a fresh controller.
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib
-import importlib.util
 import json
 import os
 import selectors
 import shlex
+import shutil
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Mapping
-from pathlib import Path
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from sitgen.controller_host import BadReply, command, exception_line
 from sitgen.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
@@ -67,20 +71,12 @@ class UserController:
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         raise NotImplementedError
 
+    def load(self) -> None:
+        """Make it ready to run (start its process, load its class); ControllerError if it
+        cannot be."""
+
     def close(self) -> None:
         """End the run; releases any process."""
-
-
-def _command(value: Any, source: str) -> tuple[float, float]:
-    """A (v, omega) pair from what a controller returned; NaN passes (the run rejects it)."""
-    try:
-        v, omega = value
-        return float(v), float(omega)
-    except (TypeError, ValueError):
-        shown = repr(value)
-        if len(shown) > 80:
-            shown = shown[:77] + "..."
-        raise ControllerError(f"{source} returned {shown}; expected (v, omega) numbers") from None
 
 
 def _observation(obs: Mapping[str, Any]) -> Observation:
@@ -96,88 +92,121 @@ def _observation(obs: Mapping[str, Any]) -> Observation:
     )
 
 
-class PythonController(UserController):
-    """An object with ``reset(info)`` and ``act(obs)``; exceptions become ControllerError."""
+class StepTimeout(Exception):
+    """An in-process controller ran past its step timeout."""
 
-    def __init__(self, target: Any, name: str) -> None:
+
+class PythonController(UserController):
+    """An object with ``reset(info)`` and ``act(obs)``, called in this process (for objects
+    handed to :func:`sitgen.run`; ``python:`` names run in a process of their own). Exceptions,
+    ``sys.exit`` and, in the main thread, a call that runs past the step timeout become
+    ControllerError."""
+
+    def __init__(self, target: Any, name: str, step_timeout_s: float = STEP_TIMEOUT_S) -> None:
         self.name = name
         for method in ("reset", "act"):
             if not callable(getattr(target, method, None)):
                 raise ControllerError(f"controller {name} has no method `{method}`")
         self._target = target
+        self._step_timeout_s = step_timeout_s
 
     def reset(self, info: dict[str, Any]) -> None:
-        try:
-            self._target.reset(info)
-        except Exception as e:  # a user's bug must end this run only
-            raise ControllerError(f"controller {self.name} raised in reset: {_exc(e)}") from e
+        self._call(lambda: self._target.reset(info), "in reset", START_TIMEOUT_S)
 
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
+        when = f"at {obs['time']:.1f} s"
+        value = self._call(lambda: self._target.act(_observation(obs)), when, self._step_timeout_s)
         try:
-            value = self._target.act(_observation(obs))
-        except Exception as e:  # a user's bug must end this run only
+            return command(value, when)
+        except BadReply as e:
+            raise ControllerError(f"controller {self.name} {e}") from None
+
+    def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
+        try:
+            with _deadline(timeout_s):
+                return call()
+        except StepTimeout:
             raise ControllerError(
-                f"controller {self.name} raised at {obs['time']:.1f} s: {_exc(e)}"
-            ) from e
-        return _command(value, f"controller {self.name} at {obs['time']:.1f} s")
+                f"controller {self.name} did not reply within {timeout_s:g} s {when}"
+            ) from None
+        except SystemExit as e:
+            raise ControllerError(
+                f"controller {self.name} called sys.exit({e.code!r}) {when}"
+            ) from None
+        except Exception as e:  # a user's bug must end this run only
+            reason = exception_line(e)
+            raise ControllerError(f"controller {self.name} raised {when}: {reason}") from e
 
     def close(self) -> None:
         close = getattr(self._target, "close", None)
         if callable(close):
             # Closing is best effort: the run's outcome is already set.
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception, SystemExit):
                 close()
 
 
-def _exc(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
-    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+@contextlib.contextmanager
+def _deadline(timeout_s: float) -> Iterator[None]:
+    """Interrupt the block with StepTimeout after ``timeout_s`` of wall time (SIGALRM, so only
+    in the main thread; elsewhere the block runs unbounded)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
 
+    def expire(signum: int, frame: object) -> None:
+        raise StepTimeout
 
-def _load_python(spec: str) -> PythonController:
-    """``module:Class`` or ``path/to/file.py:Class``."""
-    name = f"`python:{spec}`"
-    module_name, sep, attr = spec.rpartition(":")
-    if not sep or not module_name or not attr:
-        raise ControllerError(f"controller {name}: expected python:MODULE:CLASS")
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
-        if module_name.endswith(".py"):
-            path = Path(module_name)
-            loader_spec = importlib.util.spec_from_file_location(path.stem, path)
-            if loader_spec is None or loader_spec.loader is None or not path.is_file():
-                raise ControllerError(f"controller {name}: no file {path}")
-            module = importlib.util.module_from_spec(loader_spec)
-            loader_spec.loader.exec_module(module)
-        else:
-            if os.getcwd() not in sys.path:
-                sys.path.insert(0, os.getcwd())
-            module = importlib.import_module(module_name)
-        cls = getattr(module, attr)
-        return PythonController(cls(), name)
-    except ControllerError:
-        raise
-    except AttributeError:
-        raise ControllerError(f"controller {name}: module has no `{attr}`") from None
-    except Exception as e:  # an import or constructor failure is the controller's fault
-        raise ControllerError(f"controller {name} failed to load: {_exc(e)}") from e
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _program(argv: list[str], name: str) -> str:
+    """The program ``argv`` starts, resolved as exec would; ControllerError if there is none."""
+    program = argv[0]
+    found = shutil.which(program) if os.sep not in program else program
+    if found is None or not os.path.isfile(found) or not os.access(found, os.X_OK):
+        where = "on PATH" if os.sep not in program else "as an executable file"
+        raise ControllerError(f"controller {name} could not start: no program `{program}` {where}")
+    return found
+
+
+def _die_with_parent_prefix() -> list[str]:
+    """``setpriv --pdeathsig KILL --`` where util-linux has it: the program is killed if the
+    process that started it dies, even by SIGKILL (setpriv execs the program in its place)."""
+    setpriv = shutil.which("setpriv")
+    return [setpriv, "--pdeathsig", "KILL", "--"] if setpriv else []
 
 
 class ProcessController(UserController):
-    """A program in lockstep over stdin/stdout, one JSON object per line each way."""
+    """A program in lockstep over stdin/stdout, one JSON object per line each way.
+
+    The program starts in a session (and process group) of its own, so that the terminal's
+    Ctrl-C reaches sitgen only and its children can be killed with it; when the run ends the
+    whole group is killed. Every read and write has a deadline: a program that stops reading,
+    stops writing or closes its output while it runs on cannot hang the run."""
 
     def __init__(
         self,
-        command_line: str,
+        argv: list[str],
+        name: str,
         step_timeout_s: float = STEP_TIMEOUT_S,
         start_timeout_s: float = START_TIMEOUT_S,
+        host: bool = False,
     ) -> None:
-        self.name = f"`cmd:{command_line}`"
-        self._argv = shlex.split(command_line)
-        if not self._argv:
-            raise ControllerError("controller `cmd:`: no program given")
+        self.name = name
+        if not argv:
+            raise ControllerError(f"controller {name}: no program given")
+        self._argv = [_program(argv, name), *argv[1:]]
+        self._host = host
         self._step_timeout_s = step_timeout_s
         self._start_timeout_s = start_timeout_s
         self._proc: subprocess.Popen[bytes] | None = None
+        self._failed = False
         self._buffer = b""
         # Where the program's stderr goes: a pipe nobody reads could fill and hang it; the
         # last line is quoted when it dies. Closed in close().
@@ -185,19 +214,31 @@ class ProcessController(UserController):
         self._selector = selectors.DefaultSelector()
 
     def reset(self, info: dict[str, Any]) -> None:
+        if self._proc is None:
+            self._start()
+        self._exchange({"type": "reset", **info}, self._start_timeout_s, "on reset")
+
+    def load(self) -> None:
+        """Start the program; a Python host is also asked to load its class."""
+        self._start()
+        if self._host:
+            self._exchange({"type": "probe"}, self._start_timeout_s, "on start")
+
+    def _start(self) -> None:
         try:
             self._proc = subprocess.Popen(
-                self._argv,
+                [*_die_with_parent_prefix(), *self._argv],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=self._stderr,
+                start_new_session=True,
             )
         except OSError as e:
             raise ControllerError(f"controller {self.name} could not start: {e}") from e
-        assert self._proc.stdout is not None
+        assert self._proc.stdout is not None and self._proc.stdin is not None
         os.set_blocking(self._proc.stdout.fileno(), False)
+        os.set_blocking(self._proc.stdin.fileno(), False)
         self._selector.register(self._proc.stdout, selectors.EVENT_READ)
-        self._exchange({"type": "reset", **info}, self._start_timeout_s, "on reset")
 
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         message = {
@@ -224,14 +265,17 @@ class ProcessController(UserController):
         return float(v), float(omega)  # type: ignore[arg-type]
 
     def _exchange(self, message: dict[str, Any], timeout_s: float, when: str) -> dict[str, Any]:
-        proc = self._proc
-        assert proc is not None and proc.stdin is not None
-        try:
-            proc.stdin.write(json.dumps(message).encode() + b"\n")
-            proc.stdin.flush()
-        except (BrokenPipeError, OSError):
-            raise ControllerError(self._died(when)) from None
-        line = self._read_line(timeout_s, when)
+        # Until the reply is in, the program counts as failed: close() then kills it at once
+        # instead of waiting for it to end by itself.
+        self._failed = True
+        reply = self._converse(message, timeout_s, when)
+        self._failed = False
+        return reply
+
+    def _converse(self, message: dict[str, Any], timeout_s: float, when: str) -> dict[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        self._write(json.dumps(message).encode() + b"\n", deadline, timeout_s, when)
+        line = self._read_line(deadline, timeout_s, when)
         try:
             reply = json.loads(line)
         except ValueError:
@@ -244,29 +288,57 @@ class ProcessController(UserController):
                 f"controller {self.name} sent a malformed reply {when}: expected a JSON "
                 f"object, got {_short(line.decode(errors='replace'))}"
             )
+        if self._host and isinstance(reply.get("error"), str):
+            raise ControllerError(f"controller {self.name} {reply['error']}")
         return reply
 
-    def _read_line(self, timeout_s: float, when: str) -> bytes:
+    def _write(self, data: bytes, deadline: float, timeout_s: float, when: str) -> None:
+        proc = self._proc
+        assert proc is not None and proc.stdin is not None
+        fd = proc.stdin.fileno()
+        with selectors.DefaultSelector() as writable:
+            writable.register(fd, selectors.EVENT_WRITE)
+            while data:
+                left = deadline - time.monotonic()
+                if left <= 0 or not writable.select(left):
+                    if self._proc is not None and self._proc.poll() is None:
+                        raise ControllerError(
+                            f"controller {self.name} stopped reading its input {when}"
+                        )
+                    raise ControllerError(self._died(when))
+                try:
+                    data = data[os.write(fd, data) :]
+                except BlockingIOError:
+                    continue
+                except OSError:
+                    raise ControllerError(self._died(when)) from None
+
+    def _read_line(self, deadline: float, timeout_s: float, when: str) -> bytes:
         proc = self._proc
         assert proc is not None and proc.stdout is not None
-        deadline = time.monotonic() + timeout_s
         while b"\n" not in self._buffer:
             left = deadline - time.monotonic()
             if left <= 0 or not self._selector.select(left):
-                if proc.poll() is not None:
-                    raise ControllerError(self._died(when))
-                raise ControllerError(
-                    f"controller {self.name} did not reply within {timeout_s:g} s {when}"
-                )
-            chunk = os.read(proc.stdout.fileno(), 1 << 16)
+                raise ControllerError(self._silent(timeout_s, when))
+            try:
+                chunk = os.read(proc.stdout.fileno(), 1 << 16)
+            except BlockingIOError:
+                continue
             if not chunk:
-                proc.wait()
                 raise ControllerError(self._died(when))
             self._buffer += chunk
         line, _, self._buffer = self._buffer.partition(b"\n")
         return line.strip()
 
+    def _silent(self, timeout_s: float, when: str) -> str:
+        assert self._proc is not None
+        if self._proc.poll() is not None:
+            return self._died(when)
+        return f"controller {self.name} did not reply within {timeout_s:g} s {when}"
+
     def _died(self, when: str) -> str:
+        """Why the program stopped answering: its exit code, or that it closed its output and
+        runs on (it is killed when the run closes it)."""
         assert self._proc is not None
         try:
             code = self._proc.wait(timeout=1.0)
@@ -275,24 +347,33 @@ class ProcessController(UserController):
         self._stderr.seek(0)
         tail = self._stderr.read().decode(errors="replace").strip().splitlines()
         said = f": {_short(tail[-1])}" if tail else ""
-        how = f"exited with code {code}" if code is not None else "closed its output"
+        if code is None:
+            how = "closed its output"
+        elif code < 0:
+            how = f"was killed by {signal.Signals(-code).name}"
+        else:
+            how = f"exited with code {code}"
         return f"controller {self.name} {how} {when}{said}"
 
     def close(self) -> None:
         proc = self._proc
         if proc is not None:
             try:
-                if proc.poll() is None and proc.stdin is not None:
-                    proc.stdin.write(b'{"type": "end"}')
-                    proc.stdin.write(b"\n")
+                if not self._failed and proc.poll() is None and proc.stdin is not None:
+                    proc.stdin.write(b'{"type": "end"}\n')
                     proc.stdin.close()
-                proc.wait(timeout=1.0)
-            except (OSError, subprocess.TimeoutExpired):
-                proc.kill()
-                proc.wait()
+                    proc.wait(timeout=1.0)
+            except (OSError, ValueError, subprocess.TimeoutExpired):
+                pass
+            # The whole group: the program and anything it started.
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
             self._selector.close()
-            if proc.stdout is not None:
-                proc.stdout.close()
+            for pipe in (proc.stdin, proc.stdout):
+                if pipe is not None:
+                    with contextlib.suppress(OSError):
+                        pipe.close()
         self._stderr.close()
         self._proc = None
 
@@ -303,14 +384,36 @@ def _short(text: str) -> str:
 
 def load_controller(name: str | Any, step_timeout_s: float = STEP_TIMEOUT_S) -> UserController:
     """The user controller ``name`` names (``python:…``, ``cmd:…``), or wrap an object with
-    ``reset`` and ``act``. Raises ControllerError if it cannot be loaded."""
+    ``reset`` and ``act``. Raises ControllerError if it cannot be started."""
     if not isinstance(name, str):
-        return PythonController(name, f"`{type(name).__name__}`")
+        return PythonController(name, f"`{type(name).__name__}`", step_timeout_s)
     if name.startswith("python:"):
-        return _load_python(name.removeprefix("python:"))
+        # Not `-m`: the package imports the host module, and runpy would warn that it ran a
+        # module already imported.
+        start = "from sitgen.controller_host import main; main()"
+        host = [sys.executable, "-c", start, name.removeprefix("python:")]
+        return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
     if name.startswith("cmd:"):
-        return ProcessController(name.removeprefix("cmd:"), step_timeout_s)
+        command_line = name.removeprefix("cmd:")
+        return ProcessController(shlex.split(command_line), f"`{name}`", step_timeout_s)
     raise ControllerError(f"controller `{name}` is neither python:… nor cmd:…")
+
+
+def check_controller_name(name: str) -> None:
+    """Check, before any run, that a user controller can be used: a ``cmd:`` program that
+    exists, a ``python:`` class that loads (in a host process, within the start timeout).
+    Raises ControllerError with the reason; built-in names are the core's to check."""
+    if name.startswith("cmd:"):
+        argv = shlex.split(name.removeprefix("cmd:"))
+        if not argv:
+            raise ControllerError(f"controller `{name}`: no program given")
+        _program(argv, f"`{name}`")
+    elif name.startswith("python:"):
+        controller = load_controller(name)
+        try:
+            controller.load()
+        finally:
+            controller.close()
 
 
 def is_user_controller(name: Any) -> bool:

@@ -215,6 +215,11 @@ def check_controller(
         user = load_controller(controller, step_timeout_s)
     except ControllerError as e:
         return [Check("loads", False, str(e))]
+    try:
+        user.load()
+    except ControllerError as e:
+        user.close()
+        return [Check("loads", False, str(e))]
     checks.append(Check("loads", True, user.name))
     info = _reset_info(situation, {}, 0)
     core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)

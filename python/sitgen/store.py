@@ -232,6 +232,10 @@ class Store:
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
 
+    def run_count(self) -> int:
+        count: int = self.db.execute("SELECT count(*) FROM runs").fetchone()[0]
+        return count
+
     # Writing.
 
     def add_runs(self, rows: Iterable[RunRow]) -> None:

@@ -1,9 +1,13 @@
 """A controller program that misbehaves on purpose, as its argument says: `crash` exits after a
 few steps, `hang` stops replying, `garbage` replies with text that is not JSON, `noreply` sends
 an object without a command, `nan` sends NaN; `sometimes` crashes in runs whose start x is in
-an even metre; `good` drives straight at 0.3 m/s."""
+an even metre; `closeout` closes its output and runs on; `deaf` stops reading its input and
+floods its output; `spawn` starts a child that sleeps, writes its pid to the file named by the
+second argument and then hangs; `good` drives straight at 0.3 m/s."""
 
 import json
+import os
+import subprocess
 import sys
 import time
 
@@ -28,6 +32,19 @@ for step, line in enumerate(sys.stdin):
         reply = '{"speed": 1}'
     elif step >= 5 and mode == "nan":
         reply = '{"v": NaN, "omega": 0}'
+    elif step >= 5 and mode == "closeout":
+        sys.stdout.close()
+        os.close(1)
+        time.sleep(600)
+    elif step >= 5 and mode == "deaf":
+        while True:
+            sys.stdout.write('{"v": 0.3, "omega": 0.0}\n' * 1000)
+            sys.stdout.flush()
+    elif step >= 5 and mode == "spawn":
+        child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+        with open(sys.argv[2], "w") as f:
+            f.write(f"{child.pid} {os.getpid()}")
+        time.sleep(600)
     else:
         reply = '{"v": 0.3, "omega": 0.0}'
     sys.stdout.write(reply + "\n")

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
 from typing import Any
 
 
@@ -40,3 +43,39 @@ class ReturnsNaN(Forward):
 class NoAct:
     def reset(self, info: dict[str, Any]) -> None:
         pass
+
+
+class Hangs(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        while obs.time > 0.25:
+            pass
+        return 0.3, 0.0
+
+
+class Exits(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        if obs.time > 0.25:
+            sys.exit(0)
+        return 0.3, 0.0
+
+
+class HardExits(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        if obs.time > 0.25:
+            os._exit(7)
+        return 0.3, 0.0
+
+
+class Segfaults(Forward):
+    def act(self, obs: Any) -> tuple[float, float]:
+        if obs.time > 0.25:
+            ctypes.string_at(0)
+        return 0.3, 0.0
+
+
+class Prints(Forward):
+    """Prints to stdout every step: what it prints must not reach the protocol."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        print("thinking...", obs.time)
+        return 0.3, 0.0

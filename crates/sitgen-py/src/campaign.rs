@@ -2,7 +2,7 @@
 //! the GIL.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{channel, Receiver};
+use std::sync::mpsc::{channel, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 
 use pyo3::exceptions::PyStopIteration;
@@ -94,21 +94,23 @@ fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// Jobs running on a pool of `threads` threads in the background; iterating yields
-/// (position in `jobs`, result dict) as each job finishes, so a slow job holds up nobody.
-/// `stop()` lets the jobs already started finish and starts no more.
+/// Jobs running on a pool of `threads` threads in the background, fed a few at a time with
+/// `submit`, so that a campaign of any size holds only the jobs in flight. Iterating yields
+/// (job id, result dict) as each job finishes, so a slow job holds up nobody; exactly one item
+/// comes back per job submitted (the caller counts them). `stop()` lets the jobs already
+/// started finish and starts no more: those not started come back as (job id, None).
 #[pyclass(name = "JobStream", module = "sitgen._core")]
 pub struct JobStream {
-    results: Mutex<Receiver<(usize, Packed)>>,
+    jobs: Mutex<Option<Sender<(usize, JobTuple)>>>,
+    results: Mutex<Receiver<(usize, Option<Packed>)>>,
     stop: Arc<AtomicBool>,
 }
 
 #[pymethods]
 impl JobStream {
     #[new]
-    fn new(jobs: Vec<JobTuple>, threads: usize) -> PyResult<Self> {
-        let parsed: Vec<Result<Job, String>> =
-            jobs.iter().enumerate().map(|(i, j)| job(i, j)).collect();
+    fn new(threads: usize) -> PyResult<Self> {
+        let (job_tx, job_rx) = channel::<(usize, JobTuple)>();
         let (tx, rx) = channel();
         let stop = Arc::new(AtomicBool::new(false));
         let stopping = Arc::clone(&stop);
@@ -118,32 +120,52 @@ impl JobStream {
             .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
         std::thread::spawn(move || {
             pool.install(|| {
-                parsed
-                    .into_par_iter()
-                    .enumerate()
-                    // One job per task, so idle threads take the next job, not half a batch.
-                    .with_max_len(1)
-                    .for_each_with(tx, |tx, (i, job)| {
-                        if stopping.load(Ordering::Relaxed) {
-                            return;
-                        }
-                        let result = job.and_then(|j| pack(run_job(&j)));
+                // One job per task as it arrives, so idle threads take the next job.
+                job_rx
+                    .into_iter()
+                    .par_bridge()
+                    .for_each_with(tx, |tx, (id, tuple)| {
+                        let result = (!stopping.load(Ordering::Relaxed))
+                            .then(|| job(id, &tuple).and_then(|j| pack(run_job(&j))));
                         // The receiver is gone only if Python dropped the stream.
-                        let _ = tx.send((i, result));
+                        let _ = tx.send((id, result));
                     })
             })
         });
         Ok(Self {
+            jobs: Mutex::new(Some(job_tx)),
             results: Mutex::new(rx),
             stop,
         })
+    }
+
+    /// Queue jobs: (job id, (situation spec JSON, situation seed, run spec JSON, run seed)).
+    fn submit(&self, jobs: Vec<(usize, JobTuple)>) -> PyResult<()> {
+        let guard = self.jobs.lock().unwrap_or_else(|e| e.into_inner());
+        let sender = guard
+            .as_ref()
+            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("the stream is closed"))?;
+        for j in jobs {
+            sender
+                .send(j)
+                .map_err(|e| pyo3::exceptions::PyRuntimeError::new_err(e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// Take no more jobs; the threads end when the queued ones are done.
+    fn close(&self) {
+        self.jobs.lock().unwrap_or_else(|e| e.into_inner()).take();
     }
 
     fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
         slf
     }
 
-    fn __next__<'py>(&self, py: Python<'py>) -> PyResult<(usize, Bound<'py, PyDict>)> {
+    fn __next__<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> PyResult<(usize, Option<Bound<'py, PyDict>>)> {
         let next = py.detach(|| {
             self.results
                 .lock()
@@ -151,7 +173,8 @@ impl JobStream {
                 .recv()
         });
         match next {
-            Ok((i, result)) => Ok((i, result_dict(py, result)?)),
+            Ok((i, Some(result))) => Ok((i, Some(result_dict(py, result)?))),
+            Ok((i, None)) => Ok((i, None)),
             Err(_) => Err(PyStopIteration::new_err(())),
         }
     }

@@ -1,0 +1,172 @@
+"""The process a ``python:MODULE:CLASS`` controller runs in.
+
+A Python controller runs in a child process of its own, spoken to over the JSON-lines
+controller protocol (docs/controller-protocol.md) exactly like a ``cmd:`` program, so that
+whatever it does — loop forever, call ``sys.exit``, ``os._exit``, crash the interpreter,
+exhaust memory — ends only its own run, with the same per-step timeout as a program and
+nothing left behind. ``python -c "from sitgen.controller_host import main; main()" MODULE:CLASS``.
+
+Failures the host can see (the class does not load, ``reset`` or ``act`` raises, ``act``
+returns something that is not a pair of numbers, ``sys.exit`` is called) are answered with
+``{"error": "…"}``, a one-line reason that the run reports; anything else shows as the process
+dying or not replying in time.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+
+def die_with_parent() -> None:
+    """Ask Linux to kill this process when its parent dies (PR_SET_PDEATHSIG), so that a
+    killed sitgen leaves no controller or worker behind; a no-op elsewhere."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    pr_set_pdeathsig = 1
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+
+
+def exception_line(e: BaseException) -> str:
+    text = str(e).strip().splitlines()
+    return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
+
+
+def _short(value: Any) -> str:
+    shown = repr(value)
+    return shown if len(shown) <= 80 else shown[:77] + "..."
+
+
+def load_class(target: str) -> Any:
+    """An instance of ``module:Class`` or ``path/to/file.py:Class``; raises ValueError with
+    the one-line reason (the text after the controller's name)."""
+    module_name, sep, attr = target.rpartition(":")
+    if not sep or not module_name or not attr:
+        raise ValueError("expected python:MODULE:CLASS")
+    try:
+        if module_name.endswith(".py"):
+            path = Path(module_name)
+            spec = importlib.util.spec_from_file_location(path.stem, path)
+            if spec is None or spec.loader is None or not path.is_file():
+                raise ValueError(f"no file {path}")
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+        else:
+            if os.getcwd() not in sys.path:
+                sys.path.insert(0, os.getcwd())
+            module = importlib.import_module(module_name)
+    except ValueError:
+        raise
+    except BaseException as e:  # an import that fails in any way is the controller's fault
+        raise ValueError(f"failed to load: {exception_line(e)}") from None
+    if not hasattr(module, attr):
+        raise ValueError(f"module has no `{attr}`")
+    try:
+        instance = getattr(module, attr)()
+    except BaseException as e:  # so is a constructor that fails
+        raise ValueError(f"failed to load: {exception_line(e)}") from None
+    for method in ("reset", "act"):
+        if not callable(getattr(instance, method, None)):
+            raise ValueError(f"has no method `{method}`")
+    return instance
+
+
+class BadReply(Exception):
+    """``act`` returned something that is not a command."""
+
+
+def command(value: Any, when: str) -> tuple[float, float]:
+    """A (v, omega) pair from what ``act`` returned; NaN passes (the run rejects it)."""
+    try:
+        v, omega = value
+        return float(v), float(omega)
+    except (TypeError, ValueError):
+        raise BadReply(f"{when} returned {_short(value)}; expected (v, omega) numbers") from None
+
+
+def _observation(message: dict[str, Any], angles: Any) -> Any:
+    from sitgen.sim import Observation
+
+    return Observation(
+        ranges=np.asarray(message["ranges"], dtype=np.float64),
+        angles=angles,
+        pose=tuple(message["pose"]),
+        velocity=tuple(message["velocity"]),
+        stalled=message["stalled"],
+        time=message["time"],
+        tracks=tuple(
+            {"id": t["id"], "position": tuple(t["position"]), "velocity": tuple(t["velocity"])}
+            for t in message["tracks"]
+        ),
+        waypoints_reached=message.get("waypoints_reached", 0),
+    )
+
+
+def serve(target: str, inbox: IO[str], outbox: IO[str]) -> int:
+    """Answer the protocol's messages from ``inbox`` on ``outbox`` until ``end``."""
+
+    def reply(message: dict[str, Any]) -> None:
+        outbox.write(json.dumps(message) + "\n")
+        outbox.flush()
+
+    try:
+        controller, failure = load_class(target), None
+    except ValueError as e:
+        controller, failure = None, str(e)
+    angles: Any = None
+    for line in inbox:
+        message = json.loads(line)
+        kind = message.get("type")
+        if kind == "end":
+            break
+        if failure is not None:
+            reply({"error": failure})
+            return 1
+        if kind == "probe":
+            reply({"ready": True})
+            continue
+        when = "in reset" if kind == "reset" else f"at {message.get('time', 0.0):.1f} s"
+        try:
+            if kind == "reset":
+                angles = np.asarray(message["laser"]["angles"], dtype=np.float64)
+                controller.reset({k: v for k, v in message.items() if k != "type"})
+                reply({"ready": True})
+            else:
+                v, omega = command(controller.act(_observation(message, angles)), when)
+                reply({"v": v, "omega": omega})
+        except BadReply as e:
+            reply({"error": str(e)})
+            return 1
+        except SystemExit as e:
+            reply({"error": f"called sys.exit({e.code!r}) {when}"})
+            return 1
+        except BaseException as e:  # a user's bug must end this run only
+            reply({"error": f"raised {when}: {exception_line(e)}"})
+            return 1
+    return 0
+
+
+def main() -> None:
+    die_with_parent()
+    # The protocol owns the real stdout; anything the controller prints goes to stderr.
+    outbox = os.fdopen(os.dup(sys.stdout.fileno()), "w")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    sys.stdout = sys.stderr
+    sys.exit(serve(sys.argv[1], sys.stdin, outbox))
+
+
+if __name__ == "__main__":
+    main()
