@@ -162,10 +162,7 @@ impl JobStream {
         slf
     }
 
-    fn __next__<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(usize, Option<Bound<'py, PyDict>>)> {
+    fn __next__<'py>(&self, py: Python<'py>) -> PyResult<(usize, Option<Bound<'py, PyDict>>)> {
         let next = py.detach(|| {
             self.results
                 .lock()
