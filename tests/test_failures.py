@@ -203,7 +203,7 @@ def test_the_class_of_a_run_reaches_python_runs() -> None:
 
 
 def test_distinct_failures_of_an_empty_store_are_none(tmp_path: Path) -> None:
-    with Store(tmp_path / "empty.db") as store:
+    with Store(tmp_path / "empty.db", create=True) as store:
         assert distinct_failures(store) == []
 
 

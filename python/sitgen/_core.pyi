@@ -7,6 +7,7 @@ import numpy as np
 import numpy.typing as npt
 
 __version__: str
+MAX_CELLS: int
 
 class SpecError(ValueError): ...
 class GenerationFailed(RuntimeError): ...

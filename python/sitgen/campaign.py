@@ -603,7 +603,8 @@ def run_campaign(
     started = time.perf_counter()
     check_campaign(spec, seed, n, stop)
     user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
-    with Store(db) as store:
+    with Store(db, create=True) as store:
+        store.lock_for_writing()
         store.start_campaign(
             spec.source,
             seed,

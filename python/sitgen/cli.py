@@ -7,6 +7,7 @@ the field or file, and exit 2 (bad input) or 1 (generation or I/O failed); never
 from __future__ import annotations
 
 import json
+import sqlite3
 import sys
 from pathlib import Path
 from typing import Annotated, Any
@@ -35,6 +36,14 @@ DEFAULT_PRESET = "rocky_desert"
 """The preset used when a command gets neither a spec nor --preset."""
 
 SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")]
+AllowEditedOption = Annotated[
+    bool,
+    typer.Option(
+        "--allow-edited",
+        help="Read a situation file edited by hand after it was generated (its content hash "
+        "no longer matches).",
+    ),
+]
 
 
 class UsageError(Exception):
@@ -145,6 +154,7 @@ def show(
     output: Annotated[Path, typer.Option("--output", "-o", help="Figure to write (PNG).")] = Path(
         "situation.png"
     ),
+    allow_edited: AllowEditedOption = False,
 ) -> None:
     """Draw a situation in the paper's style: map, routes, starts and goals, scale bar; with
     --run, also the paths driven and where the agent's scored events began."""
@@ -154,12 +164,13 @@ def show(
     if run_id is None:
         if _is_store(source):
             raise UsageError(f"{source} is a campaign store: give --run RUN_ID")
-        save_situation_figure(Situation.load(source), output)
+        save_situation_figure(Situation.load(source, allow_edited), output)
     else:
         from sitgen.store import Store
 
         if not _is_store(source):
             raise UsageError("--run needs a campaign store (.db), not a situation file")
+        _existing_store(source)
         with Store(source) as store:
             row = store.run_row(run_id)
             trajectory = store.trajectory(run_id)
@@ -187,8 +198,7 @@ def report(
     the figure, failure class, timeline, score breakdown and a replay. Opens from disk."""
     from sitgen.report import write_report
 
-    if not db.is_file():
-        raise UsageError(f"{db}: no such campaign store")
+    _existing_store(db)
     pages = write_report(db, output, top)
     typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
@@ -208,12 +218,14 @@ def export(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
         "export"
     ),
+    allow_edited: AllowEditedOption = False,
 ) -> None:
     """Export a situation for Player/Stage or ROS, or a campaign's tables for analysis
     (pandas, polars, DuckDB)."""
     if _is_store(source):
         from sitgen.rank import export_tables
 
+        _existing_store(source)
         if format == "stage":
             format = "parquet"
         if format not in ("parquet", "csv"):
@@ -223,7 +235,7 @@ def export(
         return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")
-    for path in Situation.load(source).export(output, format):
+    for path in Situation.load(source, allow_edited).export(output, format):
         typer.echo(f"wrote {path}")
 
 
@@ -238,13 +250,23 @@ def _is_store(path: Path) -> bool:
         return False
 
 
+def _read_text(path: Path, what: str) -> str:
+    """A spec file's text, or a one-line error naming the file."""
+    try:
+        return path.read_bytes().decode("utf-8")
+    except OSError as e:
+        raise UsageError(f"{path}: cannot read the {what}: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise UsageError(f"{path}: not a {what}: byte {e.start} is not UTF-8 text") from None
+
+
 def _read_run_spec(path: Path | None) -> dict[str, Any]:
     if path is None:
         return {}
     import tomllib
 
     try:
-        return tomllib.loads(path.read_text())
+        return tomllib.loads(_read_text(path, "run spec"))
     except tomllib.TOMLDecodeError as e:
         raise _core.SpecError(f"{path}: TOML syntax error: {e}") from None
 
@@ -276,13 +298,14 @@ def run_command(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the record as JSON instead of text.")
     ] = False,
+    allow_edited: AllowEditedOption = False,
 ) -> None:
     """Run one situation: print the outcome, the score with its breakdown, and the event log.
     Exits 1 when the controller failed (outcome error)."""
     from sitgen.run import run
 
     record = run(
-        Situation.load(situation),
+        Situation.load(situation, allow_edited),
         controller=controller,
         time_limit=time_limit,
         seed=seed,
@@ -321,7 +344,8 @@ def check_controller_command(
         Path | None,
         typer.Option("--situation", help="Situation to drive (default: open_field, seed 0)."),
     ] = None,
-    steps: Annotated[int, typer.Option("--steps", min=1, help="Steps to drive.")] = 50,
+    steps: Annotated[int, typer.Option("--steps", min=1, max=100_000, help="Steps to drive.")] = 50,
+    allow_edited: AllowEditedOption = False,
 ) -> None:
     """Check that a user controller speaks the interface: loads, resets, replies with finite
     commands in time, stays within the limits, and shuts down. Exits 1 if a check fails."""
@@ -330,7 +354,7 @@ def check_controller_command(
     if not controller.startswith(("python:", "cmd:")):
         raise UsageError(f"controller `{controller}`: expected python:MODULE:CLASS or cmd:PROGRAM")
     loaded = (
-        Situation.load(situation)
+        Situation.load(situation, allow_edited)
         if situation is not None
         else generate_situation(preset_spec("open_field"), seed=0)
     )
@@ -380,12 +404,7 @@ def campaign(
     from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign, summary
     from sitgen.store import Store, StoreError
 
-    text = None
-    if spec is not None:
-        try:
-            text = spec.read_text()
-        except OSError as e:
-            raise UsageError(f"{spec}: cannot read the campaign spec: {e.strerror}") from None
+    text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
     total_n = parsed.n if n is None else n
     started = time.perf_counter()
@@ -527,7 +546,10 @@ def failures(
 
 
 def _existing_store(db: Path) -> None:
-    """Stop with a one-line error unless ``db`` is a file (opening would create a new store)."""
+    """Stop with a one-line error unless ``db`` is a file (a mistyped path is not a new,
+    empty store)."""
+    if db.is_dir():
+        raise UsageError(f"{db}: is a folder, not a campaign store")
     if not db.is_file():
         raise UsageError(f"{db}: no such campaign store")
 
@@ -541,6 +563,7 @@ def rerun(
     identical situation, event log and score. Exits 1 if anything differs."""
     from sitgen.rank import rerun as rerun_run
 
+    _existing_store(db)
     check = rerun_run(db, run_id)
     for line in check.lines:
         typer.echo(line)
@@ -635,6 +658,11 @@ def main() -> None:
         sys.exit(EXIT_BAD_INPUT)
     except (_core.GenerationFailed, OSError, StoreError) as e:
         print(f"error: {e}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
+    except sqlite3.Error as e:
+        # A store damaged on disk, or a disk that filled up: every run committed before is
+        # still there (each is its own transaction).
+        print(f"error: campaign store: {e}; the runs stored before are kept", file=sys.stderr)
         sys.exit(EXIT_FAILED)
 
 

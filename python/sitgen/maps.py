@@ -46,9 +46,15 @@ def load_map(
 
 def _load_barn(path: Path, index: int | None) -> Grid:
     try:
-        grids = np.load(path, allow_pickle=False)
+        # Mapped, not read: the header's shape is checked before anything is allocated.
+        mapped = np.load(path, allow_pickle=False, mmap_mode="r")
     except (OSError, ValueError) as e:
         raise OSError(f"cannot read {path}: {e}") from None
+    if mapped.size > _core.MAX_CELLS:
+        raise OSError(
+            f"{path}: holds {mapped.size} cells, more than the {_core.MAX_CELLS} a map may have"
+        )
+    grids = np.asarray(mapped)
     if grids.ndim == 3:
         if index is None or not 0 <= index < grids.shape[0]:
             raise OSError(

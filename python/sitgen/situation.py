@@ -48,19 +48,34 @@ class Robot:
 class Situation:
     """A complete situation: map, robots and provenance."""
 
-    def __init__(self, json_text: str) -> None:
-        """Check ``json_text`` (raises SpecError naming the bad field) and wrap it."""
-        self._json = _core.check_situation(json_text)
+    def __init__(self, json_text: str, verify_hash: bool = False) -> None:
+        """Check ``json_text`` (raises SpecError naming the bad field) and wrap it: its fields,
+        that every robot starts clear and inside the map, that every route is usable, and with
+        ``verify_hash`` that the map and robots still give the recorded content hash."""
+        self._json = _core.check_situation(json_text, verify_hash)
         self._data: dict[str, Any] = json.loads(self._json)
 
     @classmethod
-    def load(cls, path: str | Path) -> Situation:
-        """Read a situation file; raises SpecError (prefixed with the file) if it is bad."""
+    def load(cls, path: str | Path, allow_edited: bool = False) -> Situation:
+        """Read a situation file; raises SpecError (prefixed with the file) if it is bad, or
+        if it was edited after it was generated (its content hash no longer matches) unless
+        ``allow_edited``."""
         path = Path(path)
         try:
-            return cls(path.read_text())
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise _core.SpecError(
+                f"{path}: not a situation file: byte {e.start} is not UTF-8 text"
+            ) from None
+        try:
+            return cls(text, verify_hash=not allow_edited)
         except _core.SpecError as e:
-            raise _core.SpecError(f"{path}: {e}") from None
+            hint = (
+                " (pass --allow-edited to run a hand-edited situation)"
+                if str(e).startswith("provenance.content_hash")
+                else ""
+            )
+            raise _core.SpecError(f"{path}: {e}{hint}") from None
 
     def save(self, path: str | Path) -> None:
         """Write the situation as JSON."""

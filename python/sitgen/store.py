@@ -9,6 +9,7 @@ runs already stored.
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import zlib
 from collections.abc import Iterable, Iterator
@@ -114,11 +115,26 @@ class RunRow:
     robots: int
 
 
-class Store:
-    """An open campaign store."""
+TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
 
-    def __init__(self, path: str | Path) -> None:
+
+class Store:
+    """An open campaign store. Reading (the default) needs an existing store; ``create``
+    makes a new one where there is none."""
+
+    def __init__(self, path: str | Path, create: bool = False) -> None:
         self.path = Path(path)
+        self._lock: Any = None
+        if self.path.is_dir():
+            raise StoreError(f"{self.path}: is a folder, not a campaign store")
+        if not self.path.exists():
+            if not create:
+                raise StoreError(f"{self.path}: no such campaign store")
+            folder = self.path.parent
+            if not folder.is_dir():
+                raise StoreError(f"{self.path}: cannot create the store: no folder {folder}")
+            if not os.access(folder, os.W_OK | os.X_OK):
+                raise StoreError(f"{self.path}: cannot create the store: {folder} is read-only")
         try:
             self.db = sqlite3.connect(self.path, timeout=30.0)
             self.db.execute("PRAGMA journal_mode=WAL")
@@ -127,6 +143,8 @@ class Store:
             version = self._schema_version()
         except sqlite3.DatabaseError as e:
             raise StoreError(f"{self.path}: not a sitgen campaign store ({e})") from None
+        if version is not None:
+            self._check_tables()
         if version is None:
             with self.db:
                 self.db.executescript(SCHEMA)
@@ -178,10 +196,42 @@ class Store:
                 raise StoreError(f"{self.path}: an SQLite file, but not a sitgen campaign store")
             return None
         row = self.db.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone()
-        return int(row[0]) if row else None
+        if row is None:
+            return None
+        try:
+            return int(row[0])
+        except (TypeError, ValueError):
+            raise StoreError(
+                f"{self.path}: damaged store: schema_version is {row[0]!r}, not a number"
+            ) from None
+
+    def _check_tables(self) -> None:
+        present = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master")}
+        missing = [t for t in TABLES if t not in present]
+        if missing:
+            raise StoreError(f"{self.path}: damaged store: no table {', '.join(missing)}")
+
+    def lock_for_writing(self) -> None:
+        """Hold the store for one campaign at a time (an advisory lock, released on close):
+        a second campaign on the same store stops with an error instead of interleaving."""
+        import fcntl
+
+        self._lock = self.path.open("rb")
+        try:
+            fcntl.flock(self._lock.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self._lock.close()
+            self._lock = None
+            raise StoreError(
+                f"{self.path}: another campaign is writing to this store; wait for it to end "
+                "or give another --db"
+            ) from None
 
     def close(self) -> None:
         self.db.close()
+        if self._lock is not None:
+            self._lock.close()
+            self._lock = None
 
     def __enter__(self) -> Store:
         return self

@@ -29,6 +29,7 @@ pyo3::create_exception!(
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", sitgen_core::VERSION)?;
+    m.add("MAX_CELLS", sitgen_core::grid::MAX_CELLS)?;
     m.add("SpecError", m.py().get_type::<SpecError>())?;
     m.add("GenerationFailed", m.py().get_type::<GenerationFailed>())?;
     spec::register(m)?;
