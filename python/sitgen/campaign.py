@@ -93,6 +93,11 @@ def parse_campaign(text: str | None, origin: str = "campaign spec") -> CampaignS
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise _core.SpecError(f"{origin}: TOML syntax error: {e}") from None
+    return campaign_from_data(data)
+
+
+def campaign_from_data(data: dict[str, Any]) -> CampaignSpec:
+    """Check a campaign spec given as a dict of sections. Raises SpecError naming the field."""
     for key in data:
         if key not in SECTIONS:
             raise _core.SpecError(f"{key}: unknown campaign field; expected one of {SECTIONS}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import os
 import sys
+import time
 from typing import Any
 
 
@@ -78,4 +79,12 @@ class Prints(Forward):
 
     def act(self, obs: Any) -> tuple[float, float]:
         print("thinking...", obs.time)
+        return 0.3, 0.0
+
+
+class Slow(Forward):
+    """Takes 50 ms a step: a run lasts long enough to be interrupted."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        time.sleep(0.05)
         return 0.3, 0.0

@@ -320,7 +320,7 @@ fn check_route_point(map: &Map, path: &str, x: f64, y: f64) -> Result<(), SpecEr
     if !(x > 0.0 && x < w && y > 0.0 && y < h) {
         return Err(SpecError::new(
             path,
-            format!("({x}, {y}) is outside the map, (0, 0) to ({w}, {h}) m"),
+            format!("({x:?}, {y:?}) is outside the map, (0, 0) to ({w}, {h}) m"),
         ));
     }
     let res = map.resolution_m;
@@ -329,7 +329,7 @@ fn check_route_point(map: &Map, path: &str, x: f64, y: f64) -> Result<(), SpecEr
     if map.grid.get(row, col) {
         return Err(SpecError::new(
             path,
-            format!("({x}, {y}) is inside an obstacle; a route point must be on free ground"),
+            format!("({x:?}, {y:?}) is inside an obstacle; a route point must be on free ground"),
         ));
     }
     Ok(())

@@ -67,7 +67,7 @@ fn robots_outside_the_map_inside_obstacles_or_overlapping_are_refused() {
 fn waypoints_outside_the_map_or_in_an_obstacle_and_an_empty_agent_route_are_refused() {
     let mut s = two_robots((2.0, 2.0, 0.0), (2.0, 8.0, 0.0));
     s.robots[1].waypoints = vec![[8.0, 8.0], [12.0, 3.0]];
-    assert!(load_error(&s).starts_with("robots[1].waypoints[1]: (12, 3) is outside the map"));
+    assert!(load_error(&s).starts_with("robots[1].waypoints[1]: (12.0, 3.0) is outside the map"));
     s.robots[1].waypoints = vec![[5.05, 4.95]];
     assert!(
         load_error(&s).starts_with("robots[1].waypoints[0]: (5.05, 4.95) is inside an obstacle")

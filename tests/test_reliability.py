@@ -1,0 +1,632 @@
+"""Reliability: nothing a user or their controller does may hang sitgen, exhaust its memory, or
+store a failure that is not the controller's. Each family drives the CLI as a user would, in a
+child process whose memory and time are bounded here, and asserts the exit code, a one-line
+message, and that stores keep every run they had."""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import resource
+import signal
+import sqlite3
+import struct
+import subprocess
+import sys
+import time
+import zlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import sitgen
+from sitgen.campaign import build_job, campaign_from_data, parse_campaign
+from tests.conftest import ROOT, Result, sitgen_command
+
+MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehaving.py'}"
+PY = "python:tests.controllers.pycontrollers"
+MEMORY_BYTES = 2 << 30
+"""Address space a sitgen child may use: far above what any command here needs, far below what
+an unbounded allocation would take."""
+
+
+def run_limited(
+    *args: str,
+    cwd: Path | None = None,
+    timeout_s: float = 120.0,
+    memory_bytes: int = MEMORY_BYTES,
+    file_bytes: int | None = None,
+) -> Result:
+    """Run the ``sitgen`` command with bounded memory (and file size), as a user would."""
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
+        if file_bytes is not None:
+            resource.setrlimit(resource.RLIMIT_FSIZE, (file_bytes, file_bytes))
+
+    done = subprocess.run(
+        [*sitgen_command(), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd or ROOT,
+        timeout=timeout_s,
+        preexec_fn=limit,
+        check=False,
+    )
+    return Result(done.returncode, done.stdout, done.stderr)
+
+
+def one_line_error(result: Result, code: int, starts: str) -> None:
+    """The command failed with ``code`` and a single ``error: …`` line starting as given."""
+    assert result.returncode == code, result.stdout + result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith(f"error: {starts}"), lines[0]
+
+
+def stored_runs(db: Path) -> int:
+    with sqlite3.connect(db) as con:
+        count: int = con.execute("SELECT count(*) FROM runs").fetchone()[0]
+    return count
+
+
+@pytest.fixture(scope="module")
+def situation() -> sitgen.Situation:
+    spec = {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 1, "peers_max": 1}}
+    return sitgen.generate_situation(spec, seed=3)
+
+
+@pytest.fixture(scope="module")
+def situation_file(situation: sitgen.Situation, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("reliability") / "situation.json"
+    situation.save(path)
+    return path
+
+
+def edited(situation: sitgen.Situation, path: Path, edit: Callable[[dict[str, Any]], None]) -> Path:
+    data = json.loads(situation.to_json())
+    edit(data)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def campaign_spec(path: Path, controller: str, n: int = 3, time_limit_s: float = 5.0) -> Path:
+    path.write_text(
+        f'n = {n}\n[situation.terrain]\npreset = "open_field"\n'
+        f"[situation.mission]\npeers_min = 0\npeers_max = 1\n"
+        f"[run]\ntime_limit_s = {time_limit_s}\n[run.controller]\nname = {json.dumps(controller)}\n"
+    )
+    return path
+
+
+# A campaign survives any controller.
+
+
+@pytest.mark.parametrize(
+    ("controller", "reason"),
+    [
+        (f"{PY}:Hangs", "did not reply within 1 s at 0.3 s"),
+        (f"{PY}:Exits", "called sys.exit(0) at 0.3 s"),
+        (f"{PY}:HardExits", "exited with code 7 at 0.3 s"),
+        (f"{PY}:Segfaults", "was killed by SIGSEGV at 0.3 s"),
+        (f"{MISBEHAVING} closeout", "closed its output at 0.4 s"),
+        (f"{MISBEHAVING} deaf", "stopped reading its input at"),
+    ],
+)
+def test_a_controller_that_hangs_exits_or_crashes_is_that_runs_error(
+    situation_file: Path, controller: str, reason: str
+) -> None:
+    done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "outcome error" in done.stdout and reason in done.stdout, done.stdout
+    checked = run_limited("check-controller", controller, timeout_s=60)
+    assert checked.returncode == 1 and "FAIL act" in checked.stdout, checked.stdout
+
+
+def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: Path) -> None:
+    db = tmp_path / "c.db"
+    for controller in (f"{PY}:Exits", f"{PY}:Segfaults", f"{PY}:Hangs"):
+        spec = campaign_spec(tmp_path / "c.toml", controller, n=2)
+        done = run_limited("campaign", str(spec), "--db", str(db), "--workers", "2")
+        assert done.returncode == 0, done.stdout + done.stderr
+        db.unlink()
+    # Of mixed runs, the good ones are stored as runs and the bad ones as errors.
+    spec = campaign_spec(tmp_path / "c.toml", f"{MISBEHAVING} sometimes", n=6)
+    done = run_limited("campaign", str(spec), "--db", str(db), "--workers", "2")
+    assert done.returncode == 0, done.stderr
+    with sqlite3.connect(db) as con:
+        outcomes = [r[0] for r in con.execute("SELECT outcome FROM runs")]
+    assert len(outcomes) == 6 and "error" in outcomes and set(outcomes) != {"error"}
+
+
+@pytest.mark.parametrize(
+    ("controller", "message"),
+    [
+        ("turbo", "run.controller.name: unknown controller `turbo`"),
+        ("python:missing_module:X", "run.controller.name: controller `python:missing_module:X` "
+         "failed to load: ModuleNotFoundError"),
+        ("cmd:/no/such", "run.controller.name: controller `cmd:/no/such` could not start"),
+        ("python:no_class", "run.controller.name: `python:no_class`: expected python:MODULE"),
+    ],
+)  # fmt: skip
+def test_a_campaign_with_an_unknown_controller_fails_before_any_run(
+    tmp_path: Path, controller: str, message: str
+) -> None:
+    db = tmp_path / "c.db"
+    spec = campaign_spec(tmp_path / "c.toml", controller)
+    one_line_error(run_limited("campaign", str(spec), "--db", str(db)), 2, message)
+    assert not db.exists(), "nothing is created"
+
+
+def test_a_controller_named_in_a_situation_spec_is_checked_at_generate(tmp_path: Path) -> None:
+    spec = tmp_path / "s.toml"
+    spec.write_text('[terrain]\npreset = "caves"\n[mission.agent_controller]\nname = "turbo"\n')
+    done = run_limited("generate", str(spec), "-o", str(tmp_path / "s.json"))
+    one_line_error(done, 2, "mission.agent_controller.name: unknown controller `turbo`")
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie waiting to be reaped does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _processes_with(marker: str) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit() and int(entry.name) != os.getpid():
+            try:
+                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            if marker in cmdline and _alive(int(entry.name)):
+                found.append(int(entry.name))
+    return found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_controllers_children_end_with_its_run(situation_file: Path, tmp_path: Path) -> None:
+    pids = tmp_path / "pids"
+    controller = f"{MISBEHAVING} spawn {pids}"
+    done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
+    assert done.returncode == 1 and "did not reply within 1 s" in done.stdout, done.stdout
+    child, program = (int(p) for p in pids.read_text().split())
+    assert not _alive(program) and not _alive(child), "the program's whole group is killed"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_killing_a_campaign_outright_leaves_no_worker_or_controller(tmp_path: Path) -> None:
+    db = tmp_path / "killed.db"
+    spec = campaign_spec(tmp_path / "slow.toml", f"{PY}:Slow", n=8, time_limit_s=60.0)
+    proc = subprocess.Popen(
+        [*sitgen_command(), "campaign", str(spec), "--db", str(db), "--workers", "2"],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while len(_processes_with("pycontrollers:Slow")) < 2 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert len(_processes_with("pycontrollers:Slow")) == 2, "two controllers at work"
+        assert len(_processes_with(str(db))) == 3, "the campaign and its two workers"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 10
+    while (_processes_with(str(db)) or _processes_with("pycontrollers:Slow")) and (
+        time.monotonic() < deadline
+    ):
+        time.sleep(0.1)
+    assert _processes_with(str(db)) == [], "no pool worker outlives the campaign"
+    assert _processes_with("pycontrollers:Slow") == [], "no controller outlives the campaign"
+
+
+# Resources are bounded, up front.
+
+
+def test_a_campaign_of_a_billion_runs_streams_and_stops_on_ctrl_c(tmp_path: Path) -> None:
+    db = tmp_path / "big.db"
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_BYTES, MEMORY_BYTES))
+
+    proc = subprocess.Popen(
+        [*sitgen_command(), "campaign", "--n", "1000000000", "--db", str(db), "--workers", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=limit,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            time.sleep(0.5)
+            if db.exists() and stored_runs(db) >= 4:
+                break
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "stopped early" in out
+    assert stored_runs(db) >= 4
+
+
+def _png_header(width: int, height: int) -> bytes:
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data)
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    idat = zlib.compress(b"\0" * 64)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", idat) + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "source", "message"),
+    [
+        ("huge.map", b"type octile\nheight 1000000000\nwidth 1000000000\nmap\n", "map",
+         "1000000000 × 1000000000 cells is more than the 100000000 a map may have"),
+        ("huge.png", _png_header(100_000, 100_000), "image",
+         "100000 × 100000 cells is more than the 100000000 a map may have"),
+        ("huge.png", _png_header(100_000, 100_000), "map",
+         "100000 × 100000 cells is more than the 100000000 a map may have"),
+    ],
+)  # fmt: skip
+def test_map_files_claiming_huge_sizes_are_refused_before_allocating(
+    tmp_path: Path, name: str, content: bytes, source: str, message: str
+) -> None:
+    (tmp_path / name).write_bytes(content)
+    filters = '[[terrain.filters]]\nkind = "threshold"\n' if source == "image" else ""
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'[terrain.source]\nkind = "{source}"\npath = "{name}"\n{filters}')
+    done = run_limited("generate", str(spec), "-o", str(tmp_path / "s.json"))
+    assert done.returncode in (1, 2) and message in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_map_redrawn_finer_than_the_cap_is_refused(tmp_path: Path) -> None:
+    # A 200 m × 200 m map file redrawn at 1.5 cm is 1.8 × 10^8 cells; the spec's own size check
+    # cannot know the file's size, so the redraw checks it.
+    rows = "." * 2000 + "\n"
+    (tmp_path / "m.map").write_text(f"type octile\nheight 2000\nwidth 2000\nmap\n{rows * 2000}")
+    spec = tmp_path / "s.toml"
+    spec.write_text(
+        '[terrain]\nresolution_m = 0.015\n[terrain.source]\nkind = "map"\npath = "m.map"\n'
+    )
+    done = run_limited("generate", str(spec), "-o", str(tmp_path / "s.json"))
+    assert done.returncode in (1, 2), done.stderr
+    assert "13333 × 13333 cells is more than the 100000000 a map may have" in done.stderr
+
+
+def test_a_barn_grid_claiming_a_huge_shape_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "huge.npy"
+    header = "{'descr': '|u1', 'fortran_order': False, 'shape': (100000, 100000), }"
+    header += " " * (118 - len(header)) + "\n"
+    path.write_bytes(b"\x93NUMPY\x01\x00" + struct.pack("<H", len(header)) + header.encode())
+    with pytest.raises(OSError) as info:
+        sitgen.load_map(path)
+    assert str(info.value).startswith(f"cannot read {path}") or "a map may have" in str(info.value)
+
+
+def test_a_zip_bomb_map_blob_is_refused_unpacked(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    packer = zlib.compressobj(9)
+    megabyte = b"\0" * (1 << 20)
+    blob = b"".join(packer.compress(megabyte) for _ in range(1280)) + packer.flush()
+
+    def bomb(data: dict[str, Any]) -> None:
+        data["map"]["data"] = base64.b64encode(blob).decode()
+
+    path = edited(situation, tmp_path / "bomb.json", bomb)
+    done = run_limited("run", str(path), memory_bytes=1 << 30)
+    one_line_error(done, 2, f"{path}: map.data: holds more than")
+
+
+def test_too_many_steps_and_too_many_workers_are_refused(
+    situation_file: Path, tmp_path: Path
+) -> None:
+    spec = tmp_path / "run.toml"
+    spec.write_text("[sim]\ndt_s = 1e-9\n")
+    done = run_limited("run", str(situation_file), "--spec", str(spec))
+    one_line_error(done, 2, "run.sim.dt_s: 600 s at 0.000000001 s per step is 600000000000 steps")
+    done = run_limited("campaign", "--n", "2", "--workers", "20000", "--db", str(tmp_path / "w.db"))
+    one_line_error(done, 2, "--workers: 20000 is not in [1, ")
+    assert not (tmp_path / "w.db").exists()
+
+
+# A stored failure is a real failure.
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda d: d["robots"][0]["start"].update(x_m=1e308), "robots[0].start: (1e308, "),
+        (lambda d: d["robots"][0]["start"].update(x_m=-3.0), "robots[0].start: (-3.0, "),
+        (lambda d: d["robots"][1]["start"].update(d["robots"][0]["start"]),
+         "robots[0].start: ("),
+        (lambda d: d["robots"][0]["waypoints"].append([1e6, 3.0]),
+         "robots[0].waypoints[%d]: (1000000.0, 3.0) is outside the map"),
+        (lambda d: d["robots"][0].update(waypoints=[]), "robots[0].waypoints: the agent needs"),
+    ],
+)  # fmt: skip
+def test_situations_with_robots_or_routes_where_they_cannot_be_are_refused(
+    situation: sitgen.Situation,
+    tmp_path: Path,
+    edit: Callable[[dict[str, Any]], None],
+    message: str,
+) -> None:
+    path = edited(situation, tmp_path / "bad.json", edit)
+    if "%d" in message:
+        message = message % len(situation.agent.waypoints)
+    done = run_limited("run", str(path), "--allow-edited")
+    one_line_error(done, 2, f"{path}: {message}")
+
+
+def test_a_robot_inside_an_obstacle_is_refused(tmp_path: Path) -> None:
+    s = sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=1)
+    occupied = np.argwhere(s.grid.occupied)
+    row, col = occupied[len(occupied) // 2]
+    res = s.grid.resolution
+    x, y = (col + 0.5) * res, (s.grid.occupied.shape[0] - row - 0.5) * res
+
+    def into_rock(d: dict[str, Any]) -> None:
+        d["robots"][0]["start"].update(x_m=float(x), y_m=float(y))
+
+    path = edited(s, tmp_path / "rock.json", into_rock)
+    done = run_limited("run", str(path), "--allow-edited")
+    assert done.returncode == 2, done.stderr
+    assert "robots[0].start: (" in done.stderr and (
+        "obstacle" in done.stderr or "leaves" in done.stderr
+    )
+
+
+def test_a_tampered_situation_is_refused_unless_allowed(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    def nudge(d: dict[str, Any]) -> None:
+        d["robots"][0]["start"]["heading_rad"] += 0.1
+
+    path = edited(situation, tmp_path / "tampered.json", nudge)
+    done = run_limited("run", str(path), "--time-limit", "5")
+    one_line_error(done, 2, f"{path}: provenance.content_hash: the map and robots hash to")
+    assert "--allow-edited" in done.stderr
+    allowed = run_limited("run", str(path), "--time-limit", "5", "--allow-edited")
+    assert allowed.returncode == 0, allowed.stderr
+
+
+# Errors are one line, and nothing is created by mistake.
+
+
+def test_non_utf8_files_and_non_finite_bounds_are_one_line_errors(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_bytes(b'{"format": "\xff\xfe"}')
+    one_line_error(run_limited("run", str(bad)), 2, f"{bad}: not a situation file: byte 12")
+    spec = tmp_path / "bad.toml"
+    spec.write_bytes(b"n = 3\n# \xff\n")
+    one_line_error(run_limited("campaign", str(spec), "--db", str(tmp_path / "x.db")), 2, str(spec))
+    for bound in ("nan", "inf", "-inf"):
+        spec.write_text(f'[vary]\n"situation.terrain.width_m" = {{ uniform = [20.0, {bound}] }}\n')
+        done = run_limited("campaign", str(spec), "--db", str(tmp_path / "x.db"))
+        one_line_error(
+            done, 2, "vary.'situation.terrain.width_m'.uniform: expected [lo, hi] finite"
+        )
+    assert not (tmp_path / "x.db").exists()
+
+
+@pytest.fixture(scope="module")
+def small_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    db = tmp_path_factory.mktemp("store") / "small.db"
+    done = run_limited("campaign", "--n", "4", "--db", str(db), "--workers", "2")
+    assert done.returncode == 0, done.stderr
+    return db
+
+
+def _copy(db: Path, to: Path) -> Path:
+    with sqlite3.connect(db) as src, sqlite3.connect(to) as dst:
+        src.backup(dst)
+    return to
+
+
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        ("UPDATE meta SET value = 'two' WHERE key = 'schema_version'",
+         "damaged store: schema_version is 'two', not a number"),
+        ("DROP TABLE trajectories", "damaged store: no table trajectories"),
+    ],
+)  # fmt: skip
+def test_a_damaged_store_is_a_one_line_error(
+    small_store: Path, tmp_path: Path, damage: str, message: str
+) -> None:
+    db = _copy(small_store, tmp_path / "damaged.db")
+    with sqlite3.connect(db) as con:
+        con.execute(damage)
+    for command in ("rank", "failures", "report"):
+        one_line_error(run_limited(command, str(db)), 1, f"{db}: {message}")
+
+
+def test_a_truncated_or_foreign_file_is_a_one_line_error(small_store: Path, tmp_path: Path) -> None:
+    half = tmp_path / "half.db"
+    data = _copy(small_store, tmp_path / "full.db").read_bytes()
+    half.write_bytes(data[: len(data) // 2])
+    done = run_limited("rank", str(half))
+    assert done.returncode == 1 and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert done.stderr.startswith("error: "), done.stderr
+    noise = tmp_path / "noise.db"
+    noise.write_bytes(os.urandom(8192))
+    one_line_error(run_limited("rank", str(noise)), 1, f"{noise}: not a sitgen campaign store")
+
+
+def test_a_full_disk_stops_the_campaign_and_keeps_what_was_stored(tmp_path: Path) -> None:
+    db = tmp_path / "full.db"
+    done = run_limited("campaign", "--n", "60", "--db", str(db), file_bytes=3 << 20)
+    one_line_error(done, 1, "campaign store: ")
+    assert "the runs stored before are kept" in done.stderr
+    with sqlite3.connect(db) as con:
+        assert con.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+        runs = con.execute("SELECT count(*) FROM runs").fetchone()[0]
+        kept = con.execute("SELECT count(*) FROM trajectories").fetchone()[0]
+    assert 0 < runs < 60 and kept == runs, "every stored run is whole"
+    resumed = run_limited("campaign", "--n", "60", "--db", str(db), timeout_s=300)
+    assert resumed.returncode == 0 and stored_runs(db) == 60, resumed.stderr
+
+
+def test_two_campaigns_on_one_store_do_not_interleave(tmp_path: Path) -> None:
+    db = tmp_path / "shared.db"
+    first = subprocess.Popen(
+        [*sitgen_command(), "campaign", "--n", "400", "--db", str(db), "--workers", "1"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not (db.exists() and stored_runs(db) > 0) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        second = run_limited("campaign", "--n", "400", "--db", str(db))
+        one_line_error(second, 2, f"{db}: another campaign is writing to this store")
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.wait(timeout=60)
+    assert stored_runs(db) > 0
+
+
+def test_reading_commands_refuse_a_missing_store_and_create_nothing(tmp_path: Path) -> None:
+    db = tmp_path / "typo.db"
+    for args in (
+        ["rank", str(db)],
+        ["failures", str(db)],
+        ["export", str(db)],
+        ["rerun", str(db), "0"],
+        ["show", str(db), "--run", "0"],
+        ["report", str(db)],
+    ):
+        one_line_error(run_limited(*args, cwd=tmp_path), 2, f"{db}: no such campaign store")
+    assert not db.exists()
+    folder = tmp_path / "folder.db"
+    folder.mkdir()
+    one_line_error(run_limited("rank", str(folder)), 2, f"{folder}: is a folder")
+    done = run_limited("campaign", "--n", "1", "--db", str(folder))
+    one_line_error(done, 2, f"{folder}: is a folder, not a campaign store")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def test_a_read_only_folder_for_a_new_store_is_named(tmp_path: Path) -> None:
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        done = run_limited("campaign", "--n", "1", "--db", str(folder / "c.db"))
+        one_line_error(
+            done, 2, f"{folder / 'c.db'}: cannot create the store: {folder} is read-only"
+        )
+    finally:
+        folder.chmod(0o755)
+
+
+# The parsers never fail other than with a one-line SpecError.
+
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats(allow_nan=False) | st.text(max_size=8),
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4)
+    ),
+    max_leaves=12,
+)
+
+
+def _paths(tree: Any, prefix: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """Every path to a value in a JSON tree."""
+    found = [prefix]
+    if isinstance(tree, dict):
+        for k, v in tree.items():
+            found += _paths(v, (*prefix, k))
+    elif isinstance(tree, list):
+        for i, v in enumerate(tree):
+            found += _paths(v, (*prefix, i))
+    return found
+
+
+def _replace(tree: Any, path: tuple[Any, ...], value: Any) -> Any:
+    if not path:
+        return value
+    tree[path[0]] = _replace(tree[path[0]], path[1:], value)
+    return tree
+
+
+def _mutated(base: Any) -> st.SearchStrategy[Any]:
+    paths = _paths(base)
+    return st.tuples(st.sampled_from(paths), json_values).map(
+        lambda pv: _replace(json.loads(json.dumps(base)), pv[0], pv[1])
+    )
+
+
+def _one_line_spec_error_or_ok(call: Callable[[], object]) -> None:
+    try:
+        call()
+    except sitgen.SpecError as e:
+        assert "\n" not in str(e).strip(), str(e)
+
+
+FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
+
+
+@pytest.fixture(scope="module")
+def situation_data(situation: sitgen.Situation) -> dict[str, Any]:
+    data: dict[str, Any] = json.loads(situation.to_json())
+    return data
+
+
+def test_fuzzed_situation_files_parse_or_name_a_field(situation_data: dict[str, Any]) -> None:
+    @FUZZ
+    @given(_mutated(situation_data))
+    def check(data: Any) -> None:
+        _one_line_spec_error_or_ok(lambda: sitgen.Situation(json.dumps(data), verify_hash=True))
+
+    @FUZZ
+    @given(st.text(max_size=300))
+    def check_text(text: str) -> None:
+        _one_line_spec_error_or_ok(lambda: sitgen.Situation(text))
+
+    check()
+    check_text()
+
+
+def test_fuzzed_situation_specs_parse_or_name_a_field() -> None:
+    base = sitgen.load_spec({"terrain": {"preset": "caves"}})
+
+    @FUZZ
+    @given(_mutated(base))
+    def check(spec: Any) -> None:
+        if isinstance(spec, dict):
+            _one_line_spec_error_or_ok(lambda: sitgen.load_spec(spec))
+
+    check()
+
+
+def test_fuzzed_campaign_and_run_specs_parse_or_name_a_field() -> None:
+    base = parse_campaign(None).source
+
+    @FUZZ
+    @given(_mutated(base))
+    def check(spec: Any) -> None:
+        if isinstance(spec, dict):
+            _one_line_spec_error_or_ok(lambda: build_job(campaign_from_data(spec), 0, 0))
+
+    @FUZZ
+    @given(_mutated({"time_limit_s": 600.0, "sim": {"dt_s": 0.1}, "controller": {"name": "vo"}}))
+    def check_run(spec: Any) -> None:
+        _one_line_spec_error_or_ok(lambda: sitgen._core.check_run_spec(json.dumps(spec)))
+
+    check()
+    check_run()
