@@ -1,6 +1,7 @@
 //! Mission planning: the second stage of the pipeline, after Arnold & Alexander (2013) §3.
 //!
-//! 1. *Place robots*: from the exact distance transform of the map, every cell whose centre is
+//! 1. *Place robots*: from the exact distance transform of the map (its edge counting as a wall,
+//!    as it does to the simulator), every cell whose centre is
 //!    farther from every obstacle than the body's enclosing radius plus `clearance_m` (plus half
 //!    a cell diagonal, as an obstacle cell is a square, not a point) can hold a robot in any
 //!    heading without touching anything. Robots are drawn uniformly from those cells, the agent

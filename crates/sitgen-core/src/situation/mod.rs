@@ -30,6 +30,12 @@ use crate::terrain::{self, GenerationFailed};
 /// The format tag of situation files this version writes and reads.
 pub const FORMAT: &str = "sitgen.situation/1";
 
+/// Most robots a situation may hold (the generator places at most 21).
+pub const MAX_ROBOTS: usize = 100;
+
+/// Most waypoints one robot's route may hold.
+pub const MAX_WAYPOINTS: usize = 100_000;
+
 /// The encoding tag of [`EmbeddedMap::data`].
 pub const MAP_ENCODING: &str = "bits-msb-zlib-base64";
 
@@ -281,6 +287,12 @@ impl Situation {
             ));
         }
         let map = self.map.decode()?;
+        if self.robots.len() > MAX_ROBOTS {
+            return Err(SpecError::new(
+                "robots",
+                format!("{} robots; at most {MAX_ROBOTS} allowed", self.robots.len()),
+            ));
+        }
         for (i, r) in self.robots.iter().enumerate() {
             let path = format!("robots[{i}]");
             if r.id as usize != i {
@@ -297,6 +309,15 @@ impl Situation {
                 ));
             }
             r.body.validate(&format!("{path}.body"))?;
+            if r.waypoints.len() > MAX_WAYPOINTS {
+                return Err(SpecError::new(
+                    format!("{path}.waypoints"),
+                    format!(
+                        "{} waypoints; at most {MAX_WAYPOINTS} allowed",
+                        r.waypoints.len()
+                    ),
+                ));
+            }
             for (k, &[x, y]) in r.waypoints.iter().enumerate() {
                 check_route_point(&map, &format!("{path}.waypoints[{k}]"), x, y)?;
             }

@@ -122,3 +122,15 @@ fn a_map_too_large_or_a_blob_that_inflates_past_its_size_is_refused_unpacked() {
         "map.data: holds more than 13 bytes; 10 × 10 cells need 13"
     );
 }
+
+#[test]
+fn too_many_robots_or_waypoints_are_refused() {
+    let mut s = two_robots((2.0, 2.0, 0.0), (2.0, 8.0, 0.0));
+    s.robots[1].waypoints = vec![[8.0, 2.0]; MAX_WAYPOINTS + 1];
+    assert!(load_error(&s).starts_with("robots[1].waypoints: 100001 waypoints; at most 100000"));
+    s.robots.truncate(1);
+    for id in 1..=MAX_ROBOTS as u32 {
+        s.robots.push(robot(id, (2.0, 8.0, 0.0), &[], "straight"));
+    }
+    assert!(load_error(&s).starts_with("robots: 101 robots; at most 100 allowed"));
+}
