@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+import sitgen
+
 ROOT = Path(__file__).resolve().parent.parent
 
 
@@ -46,3 +48,21 @@ def run_cli(*args: str, cwd: Path | None = None) -> Result:
         check=False,
     )
     return Result(done.returncode, done.stdout, done.stderr)
+
+
+@pytest.fixture(scope="module")
+def situation() -> sitgen.Situation:
+    """An open field with two peers and a 15 m route, for runs of any controller."""
+    spec = {
+        "terrain": {"preset": "open_field"},
+        "mission": {"peers_min": 2, "peers_max": 2, "min_route_length_m": 15.0},
+    }
+    return sitgen.generate_situation(spec, seed=1)
+
+
+@pytest.fixture(scope="module")
+def situation_file(situation: sitgen.Situation, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """That situation, saved as a file."""
+    path = tmp_path_factory.mktemp("situation") / "situation.json"
+    situation.save(path)
+    return path

@@ -76,19 +76,6 @@ def stored_runs(db: Path) -> int:
     return count
 
 
-@pytest.fixture(scope="module")
-def situation() -> sitgen.Situation:
-    spec = {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 1, "peers_max": 1}}
-    return sitgen.generate_situation(spec, seed=3)
-
-
-@pytest.fixture(scope="module")
-def situation_file(situation: sitgen.Situation, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("reliability") / "situation.json"
-    situation.save(path)
-    return path
-
-
 def edited(situation: sitgen.Situation, path: Path, edit: Callable[[dict[str, Any]], None]) -> Path:
     data = json.loads(situation.to_json())
     edit(data)

@@ -18,22 +18,6 @@ MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehav
 PY = "python:tests.controllers.pycontrollers"
 
 
-@pytest.fixture(scope="module")
-def situation() -> sitgen.Situation:
-    spec = {
-        "terrain": {"preset": "open_field"},
-        "mission": {"peers_min": 2, "peers_max": 2, "min_route_length_m": 15.0},
-    }
-    return sitgen.generate_situation(spec, seed=1)
-
-
-@pytest.fixture(scope="module")
-def situation_file(situation: sitgen.Situation, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("run") / "situation.json"
-    situation.save(path)
-    return path
-
-
 def test_snd_follow_completes_an_open_field_route() -> None:
     spec = {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 0, "peers_max": 0}}
     situation = sitgen.generate_situation(spec, seed=1)

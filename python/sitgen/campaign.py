@@ -429,22 +429,30 @@ class Executor:
         else:
             yield from self._stream_results(iter(jobs))
 
+    def _take(
+        self, jobs: Iterator[Job], room: int
+    ) -> Generator[tuple[Job, dict[str, Any]], None, list[Job]]:
+        """Up to ``room`` jobs to start (none once stopping; fewer when the jobs run out); a job
+        that could not be built needs no worker, and is yielded with its error on the way."""
+        batch: list[Job] = []
+        while not self._stopping and len(batch) < room:
+            job = next(jobs, None)
+            if job is None:
+                break
+            failed = _failed(job)
+            if failed is not None:
+                yield job, failed
+            else:
+                batch.append(job)
+        return batch
+
     def _stream_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         """Built-in controllers: Rust threads, each job yielded as soon as it is done."""
         stream = self._stream = _core.JobStream(self.workers)
         inflight: dict[int, Job] = {}
         try:
             while True:
-                batch: list[Job] = []
-                while not self._stopping and len(inflight) + len(batch) < self.window:
-                    job = next(jobs, None)
-                    if job is None:
-                        break
-                    failed = _failed(job)
-                    if failed is not None:
-                        yield job, failed
-                    else:
-                        batch.append(job)
+                batch = yield from self._take(jobs, self.window - len(inflight))
                 if batch:
                     inflight.update((j.index, j) for j in batch)
                     stream.submit([(j.index, _core_args(j)) for j in batch])
@@ -481,15 +489,8 @@ class Executor:
         inflight: dict[Future[dict[str, Any]], Job] = {}
         try:
             while True:
-                while not self._stopping and len(inflight) < self.window:
-                    job = next(jobs, None)
-                    if job is None:
-                        break
-                    failed = _failed(job)
-                    if failed is not None:
-                        yield job, failed
-                    else:
-                        inflight[pool.submit(_safe_user_job, job)] = job
+                for job in (yield from self._take(jobs, self.window - len(inflight))):
+                    inflight[pool.submit(_safe_user_job, job)] = job
                 if not inflight:
                     return False
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
@@ -517,19 +518,11 @@ class Executor:
         # Keep a few batches in flight per worker; yield each as it comes back.
         while True:
             while not exhausted and not self._stopping and len(pending) < 2 * self.workers:
-                chunk: list[Job] = []
-                while len(chunk) < batch:
-                    job = next(jobs, None)
-                    if job is None:
-                        exhausted = True
-                        break
-                    failed = _failed(job)
-                    if failed is not None:
-                        yield job, failed
-                    else:
-                        chunk.append(job)
+                chunk = yield from self._take(jobs, batch)
                 if chunk:
                     pending[self._remote.remote([_core_args(j) for j in chunk])] = chunk
+                else:
+                    exhausted = not self._stopping
             if not pending:
                 return
             ready, _ = ray.wait(list(pending), num_returns=1)
