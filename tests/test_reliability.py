@@ -151,6 +151,18 @@ def test_a_campaign_with_an_unknown_controller_fails_before_any_run(
     assert not db.exists(), "nothing is created"
 
 
+def test_every_controller_a_campaign_can_draw_is_checked_before_any_run(tmp_path: Path) -> None:
+    spec = tmp_path / "v.toml"
+    spec.write_text(
+        '[situation.terrain]\npreset = "open_field"\n'
+        '[vary]\n"run.controller.name" = { choice = ["vo", "python:missing_module:X"] }\n'
+    )
+    db = tmp_path / "v.db"
+    done = run_limited("campaign", str(spec), "--n", "0", "--db", str(db))
+    one_line_error(done, 2, "vary.'run.controller.name'.choice: controller `python:missing_module")
+    assert not db.exists()
+
+
 def test_a_controller_named_in_a_situation_spec_is_checked_at_generate(tmp_path: Path) -> None:
     spec = tmp_path / "s.toml"
     spec.write_text('[terrain]\npreset = "caves"\n[mission.agent_controller]\nname = "turbo"\n')
@@ -441,6 +453,21 @@ def test_a_damaged_store_is_a_one_line_error(
         con.execute(damage)
     for command in ("rank", "failures", "report"):
         one_line_error(run_limited(command, str(db)), 1, f"{db}: {message}")
+
+
+def test_runs_stored_by_an_older_sitgen_are_still_shown(small_store: Path, tmp_path: Path) -> None:
+    # Before the map's edge counted as a wall, robots could be placed across it: such stored
+    # runs are drawn as they were run, not refused like a situation file would be.
+    db = _copy(small_store, tmp_path / "old.db")
+    with sqlite3.connect(db) as con:
+        (text,) = con.execute("SELECT situation FROM situations WHERE id = 0").fetchone()
+        data = json.loads(text)
+        data["robots"][0]["start"]["x_m"] = 0.05
+        con.execute("UPDATE situations SET situation = ? WHERE id = 0", (json.dumps(data),))
+    shown = run_limited("show", str(db), "--run", "0", "-o", str(tmp_path / "r.png"))
+    assert shown.returncode == 0, shown.stderr
+    report = run_limited("report", str(db), "-o", str(tmp_path / "report"), "--top", "4")
+    assert report.returncode == 0, report.stderr
 
 
 def test_a_truncated_or_foreign_file_is_a_one_line_error(small_store: Path, tmp_path: Path) -> None:

@@ -288,13 +288,16 @@ def check_campaign(
         if name in checked:
             continue
         checked.add(name)
-        if not name.startswith(("python:", "cmd:")):
-            _core.check_run_spec(json.dumps({"controller": {"name": name}}))
-            continue
         try:
-            check_controller_name(name)
+            if name.startswith(("python:", "cmd:")):
+                check_controller_name(name)
+            else:
+                _core.check_run_spec(json.dumps({"controller": {"name": name}}))
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
+        except _core.SpecError as e:
+            # The core names its own field (run.controller.name); name the spec's instead.
+            raise _core.SpecError(f"{path}: {str(e).partition(': ')[2]}") from None
 
 
 def check_workers(workers: int | None, backend: str) -> int:
@@ -600,6 +603,8 @@ def run_campaign(
     workers = check_workers(workers, backend)
     started = time.perf_counter()
     check_campaign(spec, seed, n, stop)
+    if stop is not None and stop():
+        return CampaignResult(0, 0, True, time.perf_counter() - started)
     user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
     with Store(db, create=True) as store:
         store.lock_for_writing()

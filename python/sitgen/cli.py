@@ -178,7 +178,9 @@ def show(
             raise UsageError(f"run {run_id} has no situation (generation failed)")
         events = [json.loads(line) for line in row["events_jsonl"].splitlines()]
         dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
-        save_situation_figure(Situation(row["situation"]), output, trajectory, events, dt_s)
+        # Drawn as it was run, even where an older sitgen placed a robot across the map's edge.
+        situation = Situation(row["situation"], check_start=False)
+        save_situation_figure(situation, output, trajectory, events, dt_s)
     typer.echo(f"wrote {output}")
 
 
@@ -452,6 +454,8 @@ def campaign(
     )
     if result.interrupted:
         typer.echo("stopped early: run the same command again to finish")
+        if not db.exists():
+            raise typer.Exit(130)
     with Store(db) as store:
         s = summary(store, top)
     typer.echo(

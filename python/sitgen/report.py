@@ -472,7 +472,8 @@ def _run_page(
     row = store.run_row(run_id)
     if row["situation"] is None:
         return None
-    situation = Situation(row["situation"])
+    # Shown as it was run, even where an older sitgen placed a robot across the map's edge.
+    situation = Situation(row["situation"], check_start=False)
     trajectory = store.trajectory(run_id)
     if trajectory is None:
         return None

@@ -48,11 +48,12 @@ class Robot:
 class Situation:
     """A complete situation: map, robots and provenance."""
 
-    def __init__(self, json_text: str, verify_hash: bool = False) -> None:
+    def __init__(self, json_text: str, verify_hash: bool = False, check_start: bool = True) -> None:
         """Check ``json_text`` (raises SpecError naming the bad field) and wrap it: its fields,
-        that every robot starts clear and inside the map, that every route is usable, and with
-        ``verify_hash`` that the map and robots still give the recorded content hash."""
-        self._json = _core.check_situation(json_text, verify_hash)
+        that every route is usable, with ``check_start`` that every robot starts clear and
+        inside the map, and with ``verify_hash`` that the map and robots still give the
+        recorded content hash."""
+        self._json = _core.check_situation(json_text, verify_hash, check_start)
         self._data: dict[str, Any] = json.loads(self._json)
 
     @classmethod
@@ -150,4 +151,5 @@ def generate_situation(spec: SpecLike, seed: int = 0) -> Situation:
     if seed < 0 or seed >= 2**64:
         raise _core.SpecError(f"seed: {seed} is not in [0, 2^64)")
     kind, text = spec_source(spec)
-    return Situation(_core.generate_situation(kind, text, seed))
+    # The core checked where the robots start as it generated them.
+    return Situation(_core.generate_situation(kind, text, seed), check_start=False)

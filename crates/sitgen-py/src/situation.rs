@@ -30,13 +30,16 @@ fn generate_situation(py: Python<'_>, kind: &str, text: &str, seed: u64) -> PyRe
     Ok(s.to_json())
 }
 
-/// Check a situation's JSON (the error names the field): its fields, routes, where its robots
-/// start, and with `verify_hash` its content hash. Returns it re-serialised.
+/// Check a situation's JSON (the error names the field): its fields and routes, with
+/// `check_start` where its robots start, with `verify_hash` its content hash. Returns it
+/// re-serialised.
 #[pyfunction]
-#[pyo3(signature = (json, verify_hash = false))]
-fn check_situation(json: &str, verify_hash: bool) -> PyResult<String> {
+#[pyo3(signature = (json, verify_hash = false, check_start = true))]
+fn check_situation(json: &str, verify_hash: bool, check_start: bool) -> PyResult<String> {
     let s = read(json)?;
-    sitgen_core::sim::check_start(&s).map_err(spec_error)?;
+    if check_start {
+        sitgen_core::sim::check_start(&s).map_err(spec_error)?;
+    }
     if verify_hash {
         s.check_content_hash().map_err(spec_error)?;
     }
