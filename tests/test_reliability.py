@@ -116,6 +116,17 @@ def test_a_controller_that_hangs_exits_or_crashes_is_that_runs_error(
     assert checked.returncode == 1 and "FAIL act" in checked.stdout, checked.stdout
 
 
+def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
+    situation: sitgen.Situation,
+) -> None:
+    from tests.controllers.pycontrollers import Exits, Hangs
+
+    hung = sitgen.run(situation, controller=Hangs(), time_limit=10, step_timeout_s=0.3)
+    assert hung.outcome == "error" and "did not reply within 0.3 s at 0.3 s" in hung.reason
+    exited = sitgen.run(situation, controller=Exits(), time_limit=10)
+    assert exited.outcome == "error" and "called sys.exit(0) at 0.3 s" in exited.reason
+
+
 def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: Path) -> None:
     db = tmp_path / "c.db"
     for controller in (f"{PY}:Exits", f"{PY}:Segfaults", f"{PY}:Hangs"):
