@@ -64,7 +64,6 @@ MAX_WORKERS_PER_CORE = 4
 """Local workers allowed per core: more only adds memory and contention."""
 MAX_RAY_WORKERS = 4096
 """Batches a Ray campaign may keep in flight (twice this many, as ``workers`` says)."""
-CONTROLLER_PATHS = ("run.controller.name", "situation.mission.agent_controller.name")
 
 
 def paper_campaign_text() -> str:
@@ -256,11 +255,10 @@ def stream_jobs(spec: CampaignSpec, seed: int, indices: Iterable[int]) -> Iterat
 def controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
     """Every (field, controller name) the campaign can give its agent."""
     found: list[tuple[str, str]] = []
+    mission = spec.situation.get("mission", {})
     bases = {
-        CONTROLLER_PATHS[0]: spec.run.get("controller", {}).get("name"),
-        CONTROLLER_PATHS[1]: spec.situation.get("mission", {})
-        .get("agent_controller", {})
-        .get("name"),
+        "run.controller.name": spec.run.get("controller", {}).get("name"),
+        "situation.mission.agent_controller.name": mission.get("agent_controller", {}).get("name"),
     }
     for path, base in bases.items():
         if isinstance(base, str):
@@ -288,16 +286,11 @@ def check_campaign(
         if name in checked:
             continue
         checked.add(name)
+        _core.check_controller(name, path)
         try:
-            if name.startswith(("python:", "cmd:")):
-                check_controller_name(name)
-            else:
-                _core.check_run_spec(json.dumps({"controller": {"name": name}}))
+            check_controller_name(name)
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
-        except _core.SpecError as e:
-            # The core names its own field (run.controller.name); name the spec's instead.
-            raise _core.SpecError(f"{path}: {str(e).partition(': ')[2]}") from None
 
 
 def check_workers(workers: int | None, backend: str) -> int:
@@ -363,10 +356,6 @@ def run_user_job(job: Job) -> dict[str, Any]:
         "trajectory": packed,
         "robots": rec.trajectory.shape[1],
     }
-
-
-def is_user(job: Job) -> bool:
-    return job.controller.startswith(("python:", "cmd:"))
 
 
 def _worker_start() -> None:

@@ -17,9 +17,9 @@ from rich.console import Console
 from rich.table import Table
 
 from sitgen import _core
-from sitgen.config import preset_names, preset_spec
+from sitgen.config import preset_names, preset_spec, read_utf8
 from sitgen.situation import Situation, generate_situation
-from sitgen.store import StoreError
+from sitgen.store import StoreError, StoreMissing, require_store
 from sitgen.terrain import Grid, generate_terrain
 
 app = typer.Typer(
@@ -170,7 +170,7 @@ def show(
 
         if not _is_store(source):
             raise UsageError("--run needs a campaign store (.db), not a situation file")
-        _existing_store(source)
+        require_store(source)
         with Store(source) as store:
             row = store.run_row(run_id)
             trajectory = store.trajectory(run_id)
@@ -200,7 +200,7 @@ def report(
     the figure, failure class, timeline, score breakdown and a replay. Opens from disk."""
     from sitgen.report import write_report
 
-    _existing_store(db)
+    require_store(db)
     pages = write_report(db, output, top)
     typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
@@ -227,7 +227,7 @@ def export(
     if _is_store(source):
         from sitgen.rank import export_tables
 
-        _existing_store(source)
+        require_store(source)
         if format == "stage":
             format = "parquet"
         if format not in ("parquet", "csv"):
@@ -255,11 +255,9 @@ def _is_store(path: Path) -> bool:
 def _read_text(path: Path, what: str) -> str:
     """A spec file's text, or a one-line error naming the file."""
     try:
-        return path.read_bytes().decode("utf-8")
+        return read_utf8(path, what)
     except OSError as e:
         raise UsageError(f"{path}: cannot read the {what}: {e.strerror}") from None
-    except UnicodeDecodeError as e:
-        raise UsageError(f"{path}: not a {what}: byte {e.start} is not UTF-8 text") from None
 
 
 def _read_run_spec(path: Path | None) -> dict[str, Any]:
@@ -497,7 +495,7 @@ def rank(
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, csv, json")
-    _existing_store(db)
+    require_store(db)
     try:
         rows = ranked_rows(db, top, failure_class, distinct)
     except FailureFilterError as e:
@@ -532,7 +530,7 @@ def failures(
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json, csv")
-    _existing_store(db)
+    require_store(db)
     with Store(db) as store:
         found = distinct_failures(store)
     if format != "table":
@@ -549,15 +547,6 @@ def failures(
     Console(width=200).print(table)
 
 
-def _existing_store(db: Path) -> None:
-    """Stop with a one-line error unless ``db`` is a file (a mistyped path is not a new,
-    empty store)."""
-    if db.is_dir():
-        raise UsageError(f"{db}: is a folder, not a campaign store")
-    if not db.is_file():
-        raise UsageError(f"{db}: no such campaign store")
-
-
 @app.command()
 def rerun(
     db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
@@ -567,7 +556,7 @@ def rerun(
     identical situation, event log and score. Exits 1 if anything differs."""
     from sitgen.rank import rerun as rerun_run
 
-    _existing_store(db)
+    require_store(db)
     check = rerun_run(db, run_id)
     for line in check.lines:
         typer.echo(line)
@@ -657,7 +646,7 @@ def main() -> None:
     """Entry point: run the command, turning expected errors into one line and an exit code."""
     try:
         app()
-    except (_core.SpecError, UsageError) as e:
+    except (_core.SpecError, UsageError, StoreMissing) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
     except (_core.GenerationFailed, OSError, StoreError) as e:

@@ -49,3 +49,12 @@ def preset_names() -> list[str]:
 def preset_spec(name: str) -> dict[str, Any]:
     """A spec that starts from preset ``name`` with nothing overridden."""
     return {"terrain": {"preset": name}}
+
+
+def read_utf8(path: Path, what: str) -> str:
+    """The text of the file ``what`` (a situation file, a run spec, …); SpecError naming the
+    file and the first byte that is not UTF-8 (an unreadable file raises OSError)."""
+    try:
+        return path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise _core.SpecError(f"{path}: not a {what}: byte {e.start} is not UTF-8 text") from None

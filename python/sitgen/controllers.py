@@ -274,7 +274,7 @@ class ProcessController(UserController):
 
     def _converse(self, message: dict[str, Any], timeout_s: float, when: str) -> dict[str, Any]:
         deadline = time.monotonic() + timeout_s
-        self._write(json.dumps(message).encode() + b"\n", deadline, timeout_s, when)
+        self._write(json.dumps(message).encode() + b"\n", deadline, when)
         line = self._read_line(deadline, timeout_s, when)
         try:
             reply = json.loads(line)
@@ -292,7 +292,7 @@ class ProcessController(UserController):
             raise ControllerError(f"controller {self.name} {reply['error']}")
         return reply
 
-    def _write(self, data: bytes, deadline: float, timeout_s: float, when: str) -> None:
+    def _write(self, data: bytes, deadline: float, when: str) -> None:
         proc = self._proc
         assert proc is not None and proc.stdin is not None
         fd = proc.stdin.fileno()
@@ -301,11 +301,7 @@ class ProcessController(UserController):
             while data:
                 left = deadline - time.monotonic()
                 if left <= 0 or not writable.select(left):
-                    if self._proc is not None and self._proc.poll() is None:
-                        raise ControllerError(
-                            f"controller {self.name} stopped reading its input {when}"
-                        )
-                    raise ControllerError(self._died(when))
+                    raise ControllerError(self._stuck("stopped reading its input", when))
                 try:
                     data = data[os.write(fd, data) :]
                 except BlockingIOError:
@@ -319,7 +315,7 @@ class ProcessController(UserController):
         while b"\n" not in self._buffer:
             left = deadline - time.monotonic()
             if left <= 0 or not self._selector.select(left):
-                raise ControllerError(self._silent(timeout_s, when))
+                raise ControllerError(self._stuck(f"did not reply within {timeout_s:g} s", when))
             try:
                 chunk = os.read(proc.stdout.fileno(), 1 << 16)
             except BlockingIOError:
@@ -330,11 +326,12 @@ class ProcessController(UserController):
         line, _, self._buffer = self._buffer.partition(b"\n")
         return line.strip()
 
-    def _silent(self, timeout_s: float, when: str) -> str:
+    def _stuck(self, how: str, when: str) -> str:
+        """Why a deadline passed: the program died, or it runs on and ``how``."""
         assert self._proc is not None
         if self._proc.poll() is not None:
             return self._died(when)
-        return f"controller {self.name} did not reply within {timeout_s:g} s {when}"
+        return f"controller {self.name} {how} {when}"
 
     def _died(self, when: str) -> str:
         """Why the program stopped answering: its exit code, or that it closed its output and

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
-from sitgen.config import SpecLike, spec_source
+from sitgen.config import SpecLike, read_utf8, spec_source
 from sitgen.terrain import Grid
 
 
@@ -62,12 +62,7 @@ class Situation:
         if it was edited after it was generated (its content hash no longer matches) unless
         ``allow_edited``."""
         path = Path(path)
-        try:
-            text = path.read_bytes().decode("utf-8")
-        except UnicodeDecodeError as e:
-            raise _core.SpecError(
-                f"{path}: not a situation file: byte {e.start} is not UTF-8 text"
-            ) from None
+        text = read_utf8(path, "situation file")
         try:
             return cls(text, verify_hash=not allow_edited)
         except _core.SpecError as e:

@@ -96,6 +96,19 @@ class StoreError(Exception):
     """A store that cannot be used (wrong file, other campaign, newer schema)."""
 
 
+class StoreMissing(StoreError):
+    """No store where one was named: a mistyped path or a folder (bad input, not damage)."""
+
+
+def require_store(path: Path) -> None:
+    """Raise StoreMissing unless ``path`` is a file: reading a mistyped path must not create
+    an empty store."""
+    if path.is_dir():
+        raise StoreMissing(f"{path}: is a folder, not a campaign store")
+    if not path.is_file():
+        raise StoreMissing(f"{path}: no such campaign store")
+
+
 @dataclass(frozen=True)
 class RunRow:
     """One stored run, as produced by a campaign."""
@@ -125,11 +138,9 @@ class Store:
     def __init__(self, path: str | Path, create: bool = False) -> None:
         self.path = Path(path)
         self._lock: Any = None
-        if self.path.is_dir():
-            raise StoreError(f"{self.path}: is a folder, not a campaign store")
-        if not self.path.exists():
-            if not create:
-                raise StoreError(f"{self.path}: no such campaign store")
+        if not create or self.path.is_dir():
+            require_store(self.path)
+        elif not self.path.exists():
             folder = self.path.parent
             if not folder.is_dir():
                 raise StoreError(f"{self.path}: cannot create the store: no folder {folder}")

@@ -46,32 +46,37 @@ class NoAct:
         pass
 
 
-class Hangs(Forward):
+class FailsAt(Forward):
+    """Drives, and from 0.3 s on fails as ``fail`` does."""
+
     def act(self, obs: Any) -> tuple[float, float]:
-        while obs.time > 0.25:
+        if obs.time > 0.25:
+            self.fail()
+        return 0.3, 0.0
+
+    def fail(self) -> None:
+        raise NotImplementedError
+
+
+class Hangs(FailsAt):
+    def fail(self) -> None:
+        while True:
             pass
-        return 0.3, 0.0
 
 
-class Exits(Forward):
-    def act(self, obs: Any) -> tuple[float, float]:
-        if obs.time > 0.25:
-            sys.exit(0)
-        return 0.3, 0.0
+class Exits(FailsAt):
+    def fail(self) -> None:
+        sys.exit(0)
 
 
-class HardExits(Forward):
-    def act(self, obs: Any) -> tuple[float, float]:
-        if obs.time > 0.25:
-            os._exit(7)
-        return 0.3, 0.0
+class HardExits(FailsAt):
+    def fail(self) -> None:
+        os._exit(7)
 
 
-class Segfaults(Forward):
-    def act(self, obs: Any) -> tuple[float, float]:
-        if obs.time > 0.25:
-            ctypes.string_at(0)
-        return 0.3, 0.0
+class Segfaults(FailsAt):
+    def fail(self) -> None:
+        ctypes.string_at(0)
 
 
 class Prints(Forward):

@@ -7,6 +7,8 @@ use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use sitgen_core::control;
+use sitgen_core::mission::ControllerSpec;
 use sitgen_core::monitor;
 use sitgen_core::run::{Run, RunRecord, RunSpec};
 use sitgen_core::situation::Situation;
@@ -143,8 +145,20 @@ fn check_run_spec(spec_json: &str) -> PyResult<String> {
     serde_json::to_string(&spec).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
+/// Check a controller name as run specs do (`control::check`: a built-in name, or a
+/// well-formed `python:`/`cmd:` one); the error names `field`, wherever the name came from.
+#[pyfunction]
+fn check_controller(name: &str, field: &str) -> PyResult<()> {
+    let spec = ControllerSpec {
+        name: name.into(),
+        params: Default::default(),
+    };
+    control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRun>()?;
     m.add_function(wrap_pyfunction!(check_run_spec, m)?)?;
+    m.add_function(wrap_pyfunction!(check_controller, m)?)?;
     Ok(())
 }
