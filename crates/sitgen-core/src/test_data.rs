@@ -25,6 +25,7 @@ pub fn robot(id: u32, start: (f64, f64, f64), waypoints: &[[f64; 2]], controller
         controller: ControllerSpec {
             name: controller.into(),
             params: Default::default(),
+            fault: None,
         },
         at_end: AtEnd::Stop,
     }

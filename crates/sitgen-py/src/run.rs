@@ -152,6 +152,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
     let spec = ControllerSpec {
         name: name.into(),
         params: Default::default(),
+        fault: None,
     };
     control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
 }

@@ -69,6 +69,7 @@
 
 use std::collections::BTreeMap;
 
+use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
 use crate::sim::{integrate, wrap_angle, Observation};
@@ -97,6 +98,7 @@ pub struct Dwa {
     lookahead_m: f64,
     switch_m: f64,
     own_radius_m: f64,
+    fault: Option<Fault>,
     footprint: Footprint,
     route: Option<RouteFollower>,
     /// Per-step buffer, kept to spare allocations.
@@ -148,10 +150,17 @@ impl Dwa {
             lookahead_m: param(params, path, "lookahead_m", 3.0, 100.0)?,
             switch_m: param(params, path, "switch_m", 0.3, 10.0)?,
             own_radius_m: 0.0,
+            fault: None,
             footprint: Footprint::of(&crate::geometry::Body::default()),
             route: None,
             points: Vec::new(),
         })
+    }
+
+    /// This controller with seeded fault `fault` switched on (from the next reset).
+    pub fn with_fault(mut self, fault: Option<Fault>) -> Self {
+        self.fault = fault;
+        self
     }
 
     /// V_s ∩ V_d: the (v, ω) ranges reachable from `velocity` within the window.
@@ -172,7 +181,13 @@ impl Dwa {
     /// Whether the robot can brake to a stop within `dist` at speed `v`: the paper's
     /// v ≤ √(2·dist·v̇_b), less the distance covered while the command holds for one period.
     fn admissible(&self, v: f64, dist: f64) -> bool {
-        v <= (2.0 * (dist - v * self.period_s) * self.accel_m_s2)
+        // Seeded fault `dwa_no_braking_margin`.
+        let hold_s = if Fault::DwaNoBrakingMargin.is(self.fault) {
+            0.0
+        } else {
+            self.period_s
+        };
+        v <= (2.0 * (dist - v * hold_s) * self.accel_m_s2)
             .max(0.0)
             .sqrt()
     }
@@ -526,9 +541,12 @@ fn smooth(g: &[f64], rows: usize, cols: usize) -> Vec<f64> {
 
 impl Controller for Dwa {
     fn reset(&mut self, robot: &Robot) {
-        self.own_radius_m = robot.body.enclosing_radius();
+        self.own_radius_m = fault::own_radius_m(self.fault, robot);
         self.footprint = Footprint::of(&robot.body);
-        self.route = Some(RouteFollower::new(robot, self.switch_m));
+        self.route = Some(RouteFollower::new(
+            robot,
+            fault::switch_m(self.fault, self.switch_m),
+        ));
     }
 
     fn act(&mut self, obs: &Observation) -> Command {
@@ -617,6 +635,7 @@ mod tests {
             params: [("clearance_weight".to_string(), 0.0)]
                 .into_iter()
                 .collect(),
+            fault: None,
         };
         assert!(crate::control::build(&spec, "c").is_ok());
     }
@@ -768,6 +787,7 @@ mod tests {
         let agent = ControllerSpec {
             name: "dwa".into(),
             params: Default::default(),
+            fault: None,
         };
         let mut failures = Vec::new();
         for seed in 1..=10 {
@@ -812,6 +832,7 @@ mod tests {
             let driver = ControllerSpec {
                 name: "dwa".into(),
                 params: Default::default(),
+                fault: None,
             };
             run_situation(&s, &driver, 600, |w| {
                 if w.steps() % 10 == 0 {
@@ -823,6 +844,7 @@ mod tests {
                 let spec = ControllerSpec {
                     name: name.into(),
                     params: Default::default(),
+                    fault: None,
                 };
                 let mut c = crate::control::build(&spec, "c").unwrap();
                 c.reset(&s.robots[0]);

@@ -234,6 +234,7 @@ mod tests {
             controller: ControllerSpec {
                 name: "follow".into(),
                 params: Default::default(),
+                fault: None,
             },
             at_end,
         }
@@ -251,6 +252,7 @@ mod tests {
         ControllerSpec {
             name: "follow".into(),
             params: Default::default(),
+            fault: None,
         }
     }
 

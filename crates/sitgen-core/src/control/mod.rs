@@ -8,6 +8,7 @@
 //! controllers (`python:`, `cmd:`) are driven from the Python layer (`sitgen.run`).
 
 mod dwa;
+pub mod fault;
 mod follow;
 pub mod route;
 pub mod snd;
@@ -43,27 +44,33 @@ pub trait Controller: Send {
 /// Names of the built-in controllers.
 pub const BUILT_IN: &[&str] = &["straight", "snd", "snd_follow", "follow", "vo", "dwa"];
 
-/// The built-in controller a spec names; `path` names the spec in errors.
+/// The built-in controller a spec names, with its seeded fault if it names one; `path` names
+/// the spec in errors.
 pub fn build(spec: &ControllerSpec, path: &str) -> Result<Box<dyn Controller>, SpecError> {
-    let params_path = join(path, "params");
-    match spec.name.as_str() {
-        "straight" => Ok(Box::new(Straight::from_params(&spec.params, &params_path)?)),
-        "snd" => Ok(Box::new(Snd::from_params(&spec.params, &params_path)?)),
-        "snd_follow" => Ok(Box::new(SndFollow::from_params(
-            &spec.params,
-            &params_path,
-        )?)),
-        "follow" => Ok(Box::new(Follow::from_params(&spec.params, &params_path)?)),
-        "vo" => Ok(Box::new(Vo::from_params(&spec.params, &params_path)?)),
-        "dwa" => Ok(Box::new(Dwa::from_params(&spec.params, &params_path)?)),
-        other => Err(SpecError::new(
+    if !BUILT_IN.contains(&spec.name.as_str()) {
+        return Err(SpecError::new(
             join(path, "name"),
             format!(
-                "unknown controller `{other}`; built in: {}",
+                "unknown controller `{}`; built in: {}",
+                spec.name,
                 BUILT_IN.join(", ")
             ),
-        )),
+        ));
     }
+    let f = fault::of(spec, path)?;
+    let params_path = join(path, "params");
+    let (params, p) = (&spec.params, params_path.as_str());
+    // The parameter and logic seams are the controller's own; the observation seam wraps it.
+    let controller: Box<dyn Controller> = match spec.name.as_str() {
+        "straight" => Box::new(Straight::from_params(params, p)?),
+        "snd" => Box::new(Snd::from_params(params, p)?.with_fault(f)),
+        "snd_follow" => Box::new(SndFollow::from_params(params, p)?.with_fault(f)),
+        "follow" => Box::new(Follow::from_params(params, p)?),
+        "vo" => Box::new(Vo::from_params(params, p)?.with_fault(f)),
+        "dwa" => Box::new(Dwa::from_params(params, p)?.with_fault(f)),
+        other => unreachable!("`{other}` is built in but not built"),
+    };
+    Ok(fault::wrap(controller, f))
 }
 
 /// Whether a controller name is run outside the core (by the Python layer): `python:…` or
@@ -77,6 +84,16 @@ pub fn is_external(name: &str) -> bool {
 /// program exists is for the Python layer to check). `path` names the spec in errors.
 pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
     let name_path = join(path, "name");
+    if spec.fault.is_some() && is_external(&spec.name) {
+        return Err(SpecError::new(
+            join(path, "fault"),
+            format!(
+                "`{}` is not a built-in controller; seeded faults exist only in the built-in \
+                 ones (docs/faults.md)",
+                spec.name
+            ),
+        ));
+    }
     if let Some(target) = spec.name.strip_prefix("python:") {
         let (module, class) = target.rsplit_once(':').unwrap_or_default();
         if module.trim().is_empty() || class.trim().is_empty() {

@@ -104,6 +104,7 @@ mod tests {
             controller: ControllerSpec {
                 name: "straight".into(),
                 params: Default::default(),
+                fault: None,
             },
             at_end,
         };

@@ -62,6 +62,7 @@
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, FRAC_PI_6, PI, TAU};
 
+use super::fault::{self, Fault};
 use super::{check_known, Command, Controller};
 use crate::sim::Observation;
 use crate::situation::{Pose, Robot};
@@ -84,6 +85,8 @@ pub struct SndParams {
     pub goal_position_tol: f64,
     /// Radians.
     pub goal_angle_tol: f64,
+    /// A seeded fault switched on (`fault.rs`); `None`: SND as Player has it.
+    pub fault: Option<Fault>,
 }
 
 impl SndParams {
@@ -97,6 +100,7 @@ impl SndParams {
             max_turn_rate: 60f64.to_radians(),
             goal_position_tol: r / 2.0,
             goal_angle_tol: 30f64.to_radians(),
+            fault: None,
         }
     }
 }
@@ -171,6 +175,7 @@ impl SndConfig {
             max_turn_rate: self.max_turn_rate,
             goal_position_tol: self.goal_position_tol.unwrap_or(defaults.goal_position_tol),
             goal_angle_tol: self.goal_angle_tol,
+            fault: None,
         }
     }
 
@@ -684,7 +689,12 @@ pub fn target_sector(
     let l = beams as i64;
     let r = p.robot_radius;
     let corridor = (max_range - r).min(d_goal - r);
-    if d_min < r {
+    let goal_clear = |c0| {
+        // Seeded fault `corridor_test_skipped`.
+        Fault::CorridorTestSkipped.is(p.fault) || corridor_clear(c0, r, corridor, full, table)
+    };
+    // Seeded fault `inside_radius_stop_removed`.
+    if d_min < r && !Fault::InsideRadiusStopRemoved.is(p.fault) {
         return Target {
             case: SndCase::InsideRadius,
             sector: n / 2,
@@ -692,7 +702,7 @@ pub fn target_sector(
         };
     }
     let Some(v) = best else {
-        let clear = corridor_clear(goal_sector, r, corridor, full, table);
+        let clear = goal_clear(goal_sector);
         return Target {
             case: if clear {
                 SndCase::NoValleyGoalClear
@@ -716,7 +726,7 @@ pub fn target_sector(
     let s_srd = wrap(s_r + dir * k, n);
     let s_mid = wrap(s_r + dir * (width / 2 - 1), n);
     let goal_in_front = sectors_between(goal_sector, n / 2, n).abs() < (n / 4).min(l / 2);
-    let s_t = if goal_in_front && corridor_clear(goal_sector, r, corridor, full, table) {
+    let s_t = if goal_in_front && goal_clear(goal_sector) {
         goal_sector
     } else if sectors_between(s_r, s_mid, n).abs() < sectors_between(s_r, s_srd, n).abs() {
         s_mid
@@ -776,9 +786,15 @@ pub fn velocity_command(
     let turn = theta.clamp(-FRAC_PI_2, FRAC_PI_2);
     let w = p.max_turn_rate * 2.0 * turn / PI;
     let aim = turn.clamp(-FRAC_PI_4, FRAC_PI_4);
+    let clearance = if Fault::SpeedIgnoresClearance.is(p.fault) {
+        // Seeded fault `speed_ignores_clearance`.
+        1.0
+    } else {
+        ((d_min - p.robot_radius) / p.obstacle_avoid_dist).clamp(0.0, 1.0)
+    };
     let v = p.max_speed
         * (2.0 * d_goal).clamp(0.0, 1.0)
-        * ((d_min - p.robot_radius) / p.obstacle_avoid_dist).clamp(0.0, 1.0)
+        * clearance
         * ((FRAC_PI_6 - aim.abs()) / FRAC_PI_6).clamp(0.0, 1.0);
     ((v, w), theta)
 }
@@ -852,16 +868,26 @@ pub fn snd_step_into(
 
     let r = p.robot_radius;
     full_circle(ranges, n, max_range, &mut out.full);
+    if Fault::SectorOffByOne.is(p.fault) {
+        // Seeded fault `sector_off_by_one`: D[s] = r[s − N/2 + L/2 − 1].
+        out.full.rotate_right(1);
+    }
     out.d_min = nearness_diagram(&out.full, max_range, r, &mut out.pnd);
     out.ds = safety_distance(out.d_min, r, p.obstacle_avoid_dist);
     find_gaps(&out.full, &out.pnd, beams, p.min_gap_width, &mut out.gaps);
+    // Seeded fault `corner_clearance_halved`: the corner test's 2.2R becomes 1.1R.
+    let corner_r = if Fault::CornerClearanceHalved.is(p.fault) {
+        r / 2.0
+    } else {
+        r
+    };
     find_valleys(
         &out.gaps,
         &out.full,
         s_g,
         &out.table,
         max_range,
-        r,
+        corner_r,
         &mut out.valleys,
     );
     out.best = choose_valley(&out.valleys, s_g, n, beams as i64 >= n);
@@ -880,6 +906,10 @@ pub fn snd_step_into(
         out.s_srd = Some(s_srd);
         out.s_mid = Some(s_mid);
         out.s_ao = smooth_deviation(&out.full, out.s_t, out.ds, r);
+        if Fault::DeviationSignFlipped.is(p.fault) {
+            // Seeded fault `deviation_sign_flipped`.
+            out.s_ao = -out.s_ao;
+        }
         out.s_theta = heading_sector(out.s_t, out.s_ao, n);
     }
     let (command, theta) = velocity_command(out.s_theta, n, res, d_goal_raw, out.d_min, p);
@@ -915,6 +945,7 @@ pub(crate) fn final_goal(robot: &Robot) -> Option<Goal> {
 #[derive(Debug, Clone)]
 pub struct Snd {
     config: SndConfig,
+    fault: Option<Fault>,
     params: Option<SndParams>,
     goal: Option<Goal>,
     /// At the goal with the heading within tolerance: Player blocks until a new goal.
@@ -933,6 +964,7 @@ impl Snd {
     pub fn from_config(config: SndConfig) -> Self {
         Self {
             config,
+            fault: None,
             params: None,
             goal: None,
             waiting: false,
@@ -942,9 +974,17 @@ impl Snd {
 
     /// Take `robot`'s body (for the defaults depending on R) and forget any goal.
     pub fn start(&mut self, robot: &Robot) {
-        self.params = Some(self.config.resolve(robot.body.enclosing_radius()));
+        let mut params = self.config.resolve(robot.body.enclosing_radius());
+        fault::adjust_snd(self.fault, &mut params);
+        self.params = Some(params);
         self.goal = None;
         self.waiting = false;
+    }
+
+    /// This navigator with seeded fault `fault` switched on (from the next start).
+    pub fn with_fault(mut self, fault: Option<Fault>) -> Self {
+        self.fault = fault;
+        self
     }
 
     /// Set a new goal, as Player's `CMD_POS` does: it also wakes a navigator waiting at the

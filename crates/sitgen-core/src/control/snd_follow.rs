@@ -26,6 +26,7 @@
 
 use std::collections::BTreeMap;
 
+use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::snd::{final_goal, Goal, Snd, SndConfig, SND_PARAMS};
 use super::{check_known, Command, Controller};
@@ -37,6 +38,7 @@ use crate::spec::{join, SpecError};
 #[derive(Debug, Clone)]
 pub struct SndFollow {
     snd: Snd,
+    fault: Option<Fault>,
     switch_m: Option<f64>,
     route: Option<RouteFollower>,
     /// The waypoint SND is driving to (the start position before the first).
@@ -57,11 +59,19 @@ impl SndFollow {
             .transpose()?;
         Ok(Self {
             snd: Snd::from_config(SndConfig::read(params, path)?),
+            fault: None,
             switch_m,
             route: None,
             target: (0.0, 0.0),
             last: None,
         })
+    }
+
+    /// This follower with seeded fault `fault` switched on (from the next reset).
+    pub fn with_fault(mut self, fault: Option<Fault>) -> Self {
+        self.snd = self.snd.with_fault(fault);
+        self.fault = fault;
+        self
     }
 
     /// The SND navigator, for inspecting its last decision.
@@ -77,7 +87,10 @@ impl SndFollow {
     /// The switching distance in force (after reset).
     pub fn switch_m(&self) -> Option<f64> {
         let tol = self.snd.params()?.goal_position_tol;
-        Some(self.switch_m.unwrap_or(tol.max(0.5)))
+        Some(fault::switch_m(
+            self.fault,
+            self.switch_m.unwrap_or(tol.max(0.5)),
+        ))
     }
 }
 
@@ -135,6 +148,7 @@ mod tests {
         ControllerSpec {
             name: "snd_follow".into(),
             params: Default::default(),
+            fault: None,
         }
     }
 
@@ -275,6 +289,7 @@ mod tests {
         let spec = |params: &[(&str, f64)]| ControllerSpec {
             name: "snd_follow".into(),
             params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
+            fault: None,
         };
         let err = |p: &[(&str, f64)]| {
             crate::control::build(&spec(p), "mission.agent_controller")

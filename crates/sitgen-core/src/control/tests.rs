@@ -1,4 +1,5 @@
 use super::*;
+use crate::grid::{Map, OccupancyGrid};
 use crate::sim::{SimSpec, World};
 use crate::situation::{self, Role, Situation};
 use crate::spec::from_toml_str;
@@ -43,6 +44,25 @@ pub(crate) fn run_situation(
     world
 }
 
+/// A `w` × `h` m map at `res` m with a one-cell wall round the edge (the laser does not see
+/// the map's edge) and the cells whose centres satisfy `wall(x, y)`.
+pub(crate) fn map(w: f64, h: f64, res: f64, wall: impl Fn(f64, f64) -> bool) -> Map {
+    let (cols, rows) = ((w / res).round() as usize, (h / res).round() as usize);
+    let mut grid = OccupancyGrid::filled(rows, cols, false);
+    let map_res = res;
+    for row in 0..rows {
+        for col in 0..cols {
+            let (x, y) = ((col as f64 + 0.5) * res, ((rows - row) as f64 - 0.5) * res);
+            let edge = row == 0 || col == 0 || row == rows - 1 || col == cols - 1;
+            grid.set(row, col, edge || wall(x, y));
+        }
+    }
+    Map {
+        grid,
+        resolution_m: map_res,
+    }
+}
+
 /// Generate the situation `spec_text` describes with `seed` and run every robot with `straight`.
 fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
     let spec = from_toml_str(spec_text).unwrap();
@@ -50,6 +70,7 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
     let straight = ControllerSpec {
         name: "straight".into(),
         params: Default::default(),
+        fault: None,
     };
     run_situation(&s, &straight, steps, |_| false)
 }
@@ -82,6 +103,7 @@ pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> Str
     let spec = ControllerSpec {
         name: name.into(),
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
+        fault: None,
     };
     build(&spec, path)
         .err()

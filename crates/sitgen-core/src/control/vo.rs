@@ -51,6 +51,7 @@
 
 use std::collections::BTreeMap;
 
+use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
 use crate::sim::Observation;
@@ -90,6 +91,7 @@ pub struct Vo {
     /// Largest heading change a candidate may ask for, radians.
     reach: f64,
     own_radius_m: f64,
+    fault: Option<Fault>,
     route: Option<RouteFollower>,
     /// Per-step buffers, kept to spare allocations.
     obstacles: Vec<Obstacle>,
@@ -127,10 +129,19 @@ impl Vo {
             grid: reachable_velocities(speed_m_s, reach),
             reach,
             own_radius_m: 0.0,
+            fault: None,
             route: None,
             obstacles: Vec::new(),
             candidates: Vec::new(),
         })
+    }
+}
+
+impl Vo {
+    /// This controller with seeded fault `fault` switched on (from the next reset).
+    pub fn with_fault(mut self, fault: Option<Fault>) -> Self {
+        self.fault = fault;
+        self
     }
 }
 
@@ -161,6 +172,7 @@ fn obstacles(
     own_radius_m: f64,
     other_radius_m: f64,
     reach_m: f64,
+    fault: Option<Fault>,
     out: &mut Vec<Obstacle>,
 ) {
     out.clear();
@@ -168,9 +180,15 @@ fn obstacles(
     let to_robot = |(x, y): Vector| (c * x + s * y, -s * x + c * y);
     for t in &obs.tracks {
         let centre = to_robot((t.position.0 - obs.pose.x_m, t.position.1 - obs.pose.y_m));
+        // Seeded fault `vo_static_peers`.
+        let velocity = if Fault::VoStaticPeers.is(fault) {
+            (0.0, 0.0)
+        } else {
+            to_robot(t.velocity)
+        };
         out.push(Obstacle {
             centre,
-            velocity: to_robot(t.velocity),
+            velocity,
             combined_radius: own_radius_m + other_radius_m,
         });
     }
@@ -279,7 +297,10 @@ impl Vo {
 impl Controller for Vo {
     fn reset(&mut self, robot: &Robot) {
         self.own_radius_m = robot.body.enclosing_radius();
-        self.route = Some(RouteFollower::new(robot, self.switch_m));
+        self.route = Some(RouteFollower::new(
+            robot,
+            fault::switch_m(self.fault, self.switch_m),
+        ));
     }
 
     fn act(&mut self, obs: &Observation) -> Command {
@@ -300,11 +321,18 @@ impl Controller for Vo {
         let other_radius_m = self.other_radius_m.unwrap_or(self.own_radius_m);
         // A static point farther than this cannot be reached within the horizon.
         let reach_m = self.own_radius_m + self.speed_m_s * self.horizon_s;
+        // Seeded fault `vo_point_robot`: the discs grown by the other's radius only.
+        let grown_by = if Fault::VoPointRobot.is(self.fault) {
+            0.0
+        } else {
+            self.own_radius_m
+        };
         obstacles(
             obs,
-            self.own_radius_m,
+            grown_by,
             other_radius_m,
             reach_m,
+            self.fault,
             &mut self.obstacles,
         );
         self.candidates.clear();
@@ -344,6 +372,7 @@ mod tests {
         ControllerSpec {
             name: name.into(),
             params: Default::default(),
+            fault: None,
         }
     }
 

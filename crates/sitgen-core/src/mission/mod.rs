@@ -66,6 +66,10 @@ pub struct ControllerSpec {
     /// Parameters by name, in the controller's documented units. Default: none.
     #[serde(default)]
     pub params: std::collections::BTreeMap<String, f64>,
+    /// A seeded fault to switch on in a built-in controller (`docs/faults.md`); default none,
+    /// the controller as it is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fault: Option<String>,
 }
 
 impl ControllerSpec {
@@ -73,6 +77,7 @@ impl ControllerSpec {
         Self {
             name: name.into(),
             params: Default::default(),
+            fault: None,
         }
     }
 }

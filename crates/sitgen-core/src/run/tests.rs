@@ -17,6 +17,7 @@ pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
         controller: controller.map(|name| ControllerSpec {
             name: name.into(),
             params: Default::default(),
+            fault: None,
         }),
         time_limit_s,
         ..RunSpec::default()

@@ -10,9 +10,9 @@ use std::f64::consts::PI;
 use proptest::prelude::*;
 
 use super::*;
-use crate::control::tests::run_situation;
+use crate::control::tests::{map, run_situation};
 use crate::geometry::Body;
-use crate::grid::{Map, OccupancyGrid};
+use crate::grid::Map;
 use crate::mission::{AtEnd, ControllerSpec};
 use crate::sim::laser::LaserSpec;
 use crate::sim::World;
@@ -413,6 +413,7 @@ fn parameters_are_checked_and_named() {
     let spec = |params: &[(&str, f64)]| ControllerSpec {
         name: "snd".into(),
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
+        fault: None,
     };
     let err = |p: &[(&str, f64)]| {
         crate::control::build(&spec(p), "agent")
@@ -442,25 +443,6 @@ fn parameters_are_checked_and_named() {
 // ---------------------------------------------------------------------------------------------
 // Driving in the simulator.
 
-/// A `w` × `h` m map at `res` m with a one-cell wall round the edge (the laser does not see
-/// the map's edge) and the cells whose centres satisfy `wall(x, y)`.
-fn map(w: f64, h: f64, res: f64, wall: impl Fn(f64, f64) -> bool) -> Map {
-    let (cols, rows) = ((w / res).round() as usize, (h / res).round() as usize);
-    let mut grid = OccupancyGrid::filled(rows, cols, false);
-    let map_res = res;
-    for row in 0..rows {
-        for col in 0..cols {
-            let (x, y) = ((col as f64 + 0.5) * res, ((rows - row) as f64 - 0.5) * res);
-            let edge = row == 0 || col == 0 || row == rows - 1 || col == cols - 1;
-            grid.set(row, col, edge || wall(x, y));
-        }
-    }
-    Map {
-        grid,
-        resolution_m: map_res,
-    }
-}
-
 /// A situation with the agent alone at `start` (facing +x) on `map` with `waypoints`.
 fn alone(map: &Map, start: (f64, f64), waypoints: Vec<[f64; 2]>) -> Situation {
     let agent = Robot {
@@ -483,6 +465,7 @@ fn named(name: &str) -> ControllerSpec {
     ControllerSpec {
         name: name.into(),
         params: Default::default(),
+        fault: None,
     }
 }
 

@@ -1,0 +1,415 @@
+//! # Seeded faults
+//!
+//! **What it does.** A catalogue of named defects that can be switched on in the built-in
+//! controllers with a controller spec's `fault` field (`[run.controller] name = "snd_follow"`,
+//! `fault = "mirrored_scan"`). Each stands for a class of bug real navigation code has. With no
+//! fault a controller is exactly itself: every seam below is a no-op for `None`.
+//!
+//! **Why.** Run scores say how bad a run looked, not how good a way of generating situations is
+//! at finding bugs. The proportion of known faults a strategy finds at a budget (its kill rate)
+//! does (Arnold & Alexander 2013, §6, after Nguyen et al.); `sitgen faults` measures it and
+//! `docs/faults.md` gives the kill rule.
+//!
+//! **Where a fault acts.** In one of three seams, each named here so that the catalogue and
+//! every place it reaches into a controller can be found from this file:
+//! - *observation*: [`wrap`] puts the controller behind [`Seeded`], which changes what it is
+//!   given to see (`mirrored_scan`, `stale_scan`, `narrow_fov`);
+//! - *parameters*: the controller's resolved parameters are changed once, at reset
+//!   ([`adjust_snd`], [`switch_m`], [`own_radius_m`]);
+//! - *logic*: one changed line in the algorithm, at a `Seeded fault` comment that names it
+//!   (`snd.rs`, `vo.rs`, `dwa.rs`), tested with [`Fault::is`].
+//!
+//! **Parameters.** `fault`: a fault id from [`CATALOGUE`] that lists the controller; default
+//! none.
+//!
+//! **Source.** The bug classes follow Nguyen et al.'s use of seeded faults to compare test
+//! generators; the SND faults follow its steps in `reference/algorithms.md` §1 (one of them,
+//! `turn_rate_in_radians`, is Player ≥ 3.1's own unit bug, §1.2).
+
+use std::f64::consts::FRAC_PI_4;
+
+use super::snd::SndParams;
+use super::{Command, Controller};
+use crate::mission::ControllerSpec;
+use crate::sim::Observation;
+use crate::situation::Robot;
+use crate::spec::{join, SpecError};
+
+/// A seeded fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Fault {
+    /// SND: beams one sector off in the full circle.
+    SectorOffByOne,
+    /// Scan read in reverse order.
+    MirroredScan,
+    /// SND: turn rate read as radians per second.
+    TurnRateInRadians,
+    /// SND: Ds_max halved.
+    SafetyDistanceHalved,
+    /// SND: the goal-corridor test always passes.
+    CorridorTestSkipped,
+    /// SND: no stop for an obstacle inside the robot radius.
+    InsideRadiusStopRemoved,
+    /// The previous step's scan.
+    StaleScan,
+    /// A 90° field of view.
+    NarrowFov,
+    /// Waypoints reached at four times the switching distance.
+    SwitchDistanceTooLarge,
+    /// SND: the smooth deviation's sign flipped.
+    DeviationSignFlipped,
+    /// SND: speed without the clearance factor.
+    SpeedIgnoresClearance,
+    /// SND: Player's default 0.25 m robot radius.
+    PlayerDefaultRadius,
+    /// SND: the valley corner test at half its clearance.
+    CornerClearanceHalved,
+    /// VO: peers taken as standing still.
+    VoStaticPeers,
+    /// VO: its own radius left out.
+    VoPointRobot,
+    /// DWA: braking without the control period.
+    DwaNoBrakingMargin,
+    /// DWA: the robot a point.
+    DwaPointRobot,
+}
+
+/// A fault's entry in the catalogue.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FaultInfo {
+    /// The fault.
+    pub fault: Fault,
+    /// Its id, as specs write it.
+    pub id: &'static str,
+    /// The built-in controllers it can be switched on in.
+    pub controllers: &'static [&'static str],
+    /// What it changes.
+    pub changes: &'static str,
+    /// The real bug class it stands for.
+    pub stands_for: &'static str,
+}
+
+const SND: &[&str] = &["snd", "snd_follow"];
+const LASER: &[&str] = &["snd", "snd_follow", "vo", "dwa"];
+const ROUTE: &[&str] = &["snd_follow", "vo", "dwa"];
+
+/// Every fault, in a fixed order (ids are stable; the order is the one reports list them in).
+pub const CATALOGUE: [FaultInfo; 17] = [
+    FaultInfo {
+        fault: Fault::SectorOffByOne,
+        id: "sector_off_by_one",
+        controllers: SND,
+        changes: "every beam lands one sector counter-clockwise of its own in SND's full circle",
+        stands_for: "off-by-one in an index mapping",
+    },
+    FaultInfo {
+        fault: Fault::MirroredScan,
+        id: "mirrored_scan",
+        controllers: LASER,
+        changes:
+            "the scan's ranges are read in reverse order: what lies right is taken to lie left",
+        stands_for: "a frame or handedness convention mismatch between a driver and its user",
+    },
+    FaultInfo {
+        fault: Fault::TurnRateInRadians,
+        id: "turn_rate_in_radians",
+        controllers: SND,
+        changes: "max_turn_rate_deg_s is taken as radians per second (60 becomes 3438°/s)",
+        stands_for: "a unit mix-up (Player ≥ 3.1's SND has this very bug)",
+    },
+    FaultInfo {
+        fault: Fault::SafetyDistanceHalved,
+        id: "safety_distance_halved",
+        controllers: SND,
+        changes: "Ds_max (obstacle_avoid_dist) is halved: SND deviates later and slows less near \
+                  obstacles",
+        stands_for: "a wrong constant or a parameter tuned for another robot",
+    },
+    FaultInfo {
+        fault: Fault::CorridorTestSkipped,
+        id: "corridor_test_skipped",
+        controllers: SND,
+        changes: "the goal-corridor test always passes: SND heads for the goal whenever it lies \
+                  ahead, however blocked the way",
+        stands_for: "a missing check (a guard deleted or short-circuited)",
+    },
+    FaultInfo {
+        fault: Fault::InsideRadiusStopRemoved,
+        id: "inside_radius_stop_removed",
+        controllers: SND,
+        changes: "step 7's stop for an obstacle inside the robot radius is gone: SND steers on by \
+                  valleys",
+        stands_for: "a removed safety interlock",
+    },
+    FaultInfo {
+        fault: Fault::StaleScan,
+        id: "stale_scan",
+        controllers: LASER,
+        changes: "the controller acts on the previous step's scan and tracks with the current pose",
+        stands_for: "stale sensor data (a buffering or threading bug, latency not accounted for)",
+    },
+    FaultInfo {
+        fault: Fault::NarrowFov,
+        id: "narrow_fov",
+        controllers: LASER,
+        changes: "beams and tracks more than 45° off the heading are dropped: a 90° laser in \
+                  place of 180°",
+        stands_for: "a sensor misconfigured (the driver's field of view narrower than the device)",
+    },
+    FaultInfo {
+        fault: Fault::SwitchDistanceTooLarge,
+        id: "switch_distance_too_large",
+        controllers: ROUTE,
+        changes: "a waypoint counts as reached at four times the switching distance: corners are \
+                  cut",
+        stands_for: "a mis-tuned arrival tolerance",
+    },
+    FaultInfo {
+        fault: Fault::DeviationSignFlipped,
+        id: "deviation_sign_flipped",
+        controllers: SND,
+        changes: "the smooth deviation S_ao pushes toward nearby obstacles instead of away",
+        stands_for: "a sign error",
+    },
+    FaultInfo {
+        fault: Fault::SpeedIgnoresClearance,
+        id: "speed_ignores_clearance",
+        controllers: SND,
+        changes: "the speed law drops its clearance factor: full speed up to obstacles",
+        stands_for: "a missing term in a control law",
+    },
+    FaultInfo {
+        fault: Fault::PlayerDefaultRadius,
+        id: "player_default_radius",
+        controllers: SND,
+        changes: "R is Player's default 0.25 m, not the body's enclosing radius (0.438 m for the \
+                  Pioneer 3-AT), and the gap and safety distances that default to multiples of \
+                  R follow it",
+        stands_for: "a configuration default that does not fit the robot",
+    },
+    FaultInfo {
+        fault: Fault::CornerClearanceHalved,
+        id: "corner_clearance_halved",
+        controllers: SND,
+        changes: "the valley corner test asks for 1.1 R instead of 2.2 R: SND heads for openings \
+                  its body cannot pass",
+        stands_for: "a wrong constant",
+    },
+    FaultInfo {
+        fault: Fault::VoStaticPeers,
+        id: "vo_static_peers",
+        controllers: &["vo"],
+        changes: "tracked robots' velocities are taken as zero: peers are treated as standing \
+                  obstacles",
+        stands_for: "an input not wired through (the velocity estimate dropped)",
+    },
+    FaultInfo {
+        fault: Fault::VoPointRobot,
+        id: "vo_point_robot",
+        controllers: &["vo"],
+        changes: "the robot's own radius is left out of every velocity obstacle",
+        stands_for: "the robot's footprint ignored (the Minkowski sum omitted)",
+    },
+    FaultInfo {
+        fault: Fault::DwaNoBrakingMargin,
+        id: "dwa_no_braking_margin",
+        controllers: &["dwa"],
+        changes: "admissibility forgets that a command holds for a control period: the whole \
+                  clearance counts as braking distance",
+        stands_for: "a discrete-time effect ignored in a safety bound",
+    },
+    FaultInfo {
+        fault: Fault::DwaPointRobot,
+        id: "dwa_point_robot",
+        controllers: &["dwa"],
+        changes: "the robot is a point: its disc has radius 0, so arcs are cleared for its centre \
+                  only",
+        stands_for: "the robot's footprint ignored",
+    },
+];
+
+impl Fault {
+    /// Its catalogue entry.
+    pub fn info(self) -> &'static FaultInfo {
+        CATALOGUE
+            .iter()
+            .find(|i| i.fault == self)
+            .expect("every fault is in the catalogue")
+    }
+
+    /// Its id.
+    pub fn id(self) -> &'static str {
+        self.info().id
+    }
+
+    /// The fault with id `id`.
+    pub fn from_id(id: &str) -> Option<Self> {
+        CATALOGUE.iter().find(|i| i.id == id).map(|i| i.fault)
+    }
+
+    /// Whether `fault` (a controller's, possibly none) is this one: the test at every logic
+    /// seam.
+    pub fn is(self, fault: Option<Fault>) -> bool {
+        fault == Some(self)
+    }
+}
+
+/// The ids of the faults controller `name` has, in catalogue order.
+pub fn faults_of(name: &str) -> Vec<&'static str> {
+    CATALOGUE
+        .iter()
+        .filter(|i| i.controllers.contains(&name))
+        .map(|i| i.id)
+        .collect()
+}
+
+/// The fault a controller spec switches on, checked against its controller; `path` names the
+/// spec in errors.
+pub fn of(spec: &ControllerSpec, path: &str) -> Result<Option<Fault>, SpecError> {
+    let Some(id) = spec.fault.as_deref() else {
+        return Ok(None);
+    };
+    let field = join(path, "fault");
+    let Some(fault) = Fault::from_id(id) else {
+        let ids: Vec<&str> = CATALOGUE.iter().map(|i| i.id).collect();
+        return Err(SpecError::new(
+            field,
+            format!("unknown fault `{id}`; expected one of {}", ids.join(", ")),
+        ));
+    };
+    if !fault.info().controllers.contains(&spec.name.as_str()) {
+        let own = faults_of(&spec.name);
+        let has = if own.is_empty() {
+            "it has none".to_string()
+        } else {
+            format!("its faults: {}", own.join(", "))
+        };
+        return Err(SpecError::new(
+            field,
+            format!(
+                "`{id}` is not a fault of controller `{}` ({has}); `{id}` is one of {}'s",
+                spec.name,
+                fault.info().controllers.join(", ")
+            ),
+        ));
+    }
+    Ok(Some(fault))
+}
+
+/// Parameter seam: SND's resolved parameters under `fault`.
+pub fn adjust_snd(fault: Option<Fault>, p: &mut SndParams) {
+    match fault {
+        Some(Fault::TurnRateInRadians) => p.max_turn_rate = p.max_turn_rate.to_degrees(),
+        Some(Fault::SafetyDistanceHalved) => p.obstacle_avoid_dist /= 2.0,
+        Some(Fault::PlayerDefaultRadius) => {
+            *p = SndParams {
+                max_speed: p.max_speed,
+                max_turn_rate: p.max_turn_rate,
+                goal_angle_tol: p.goal_angle_tol,
+                ..SndParams::with_radius(PLAYER_ROBOT_RADIUS_M)
+            }
+        }
+        _ => {}
+    }
+    p.fault = fault;
+}
+
+/// Player's `snd` default `robot_radius`, metres.
+const PLAYER_ROBOT_RADIUS_M: f64 = 0.25;
+
+/// Parameter seam: the waypoint switching distance under `fault`.
+pub fn switch_m(fault: Option<Fault>, switch_m: f64) -> f64 {
+    if Fault::SwitchDistanceTooLarge.is(fault) {
+        4.0 * switch_m
+    } else {
+        switch_m
+    }
+}
+
+/// Parameter seam: the robot's own radius, as a disc-model avoider takes it, under `fault`.
+pub fn own_radius_m(fault: Option<Fault>, robot: &Robot) -> f64 {
+    if Fault::DwaPointRobot.is(fault) {
+        0.0
+    } else {
+        robot.body.enclosing_radius()
+    }
+}
+
+/// Half the field of view `narrow_fov` leaves, radians.
+const NARROW_HALF_FOV: f64 = FRAC_PI_4;
+
+/// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees.
+pub fn wrap(controller: Box<dyn Controller>, fault: Option<Fault>) -> Box<dyn Controller> {
+    match fault {
+        Some(f @ (Fault::MirroredScan | Fault::StaleScan | Fault::NarrowFov)) => Box::new(Seeded {
+            inner: controller,
+            fault: f,
+            last: None,
+        }),
+        _ => controller,
+    }
+}
+
+/// A controller given a faulty view of the world.
+pub struct Seeded {
+    inner: Box<dyn Controller>,
+    fault: Fault,
+    /// The previous observation (`stale_scan`).
+    last: Option<Observation>,
+}
+
+impl Seeded {
+    /// What the controller sees of `obs`.
+    fn view(&mut self, obs: &Observation) -> Observation {
+        let mut seen = obs.clone();
+        match self.fault {
+            Fault::MirroredScan => seen.ranges.reverse(),
+            Fault::StaleScan => {
+                if let Some(last) = self.last.replace(obs.clone()) {
+                    seen.ranges = last.ranges;
+                    seen.angles = last.angles;
+                    seen.tracks = last.tracks;
+                }
+            }
+            Fault::NarrowFov => {
+                let keep: Vec<bool> = obs
+                    .angles
+                    .iter()
+                    .map(|a| a.abs() <= NARROW_HALF_FOV + 1e-9)
+                    .collect();
+                let kept = |v: &[f64]| -> Vec<f64> {
+                    v.iter()
+                        .zip(&keep)
+                        .filter(|(_, &k)| k)
+                        .map(|(&x, _)| x)
+                        .collect()
+                };
+                seen.ranges = kept(&obs.ranges);
+                seen.angles = kept(&obs.angles);
+                let pose = obs.pose;
+                seen.tracks.retain(|t| {
+                    let bearing =
+                        (t.position.1 - pose.y_m).atan2(t.position.0 - pose.x_m) - pose.heading_rad;
+                    bearing.sin().atan2(bearing.cos()).abs() <= NARROW_HALF_FOV
+                });
+            }
+            _ => {}
+        }
+        seen
+    }
+}
+
+impl Controller for Seeded {
+    fn reset(&mut self, robot: &Robot) {
+        self.last = None;
+        self.inner.reset(robot);
+    }
+
+    fn act(&mut self, obs: &Observation) -> Command {
+        let seen = self.view(obs);
+        self.inner.act(&seen)
+    }
+}
+
+#[cfg(test)]
+mod tests;
