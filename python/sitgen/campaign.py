@@ -195,10 +195,13 @@ class Job:
 
     @property
     def controller(self) -> str:
-        """The agent's controller: the run spec's, else the situation's mission's."""
+        """The agent's controller: the run spec's, else the situation's mission's; a seeded
+        fault follows its name after a ``+``."""
         mission = self.situation.get("mission", {}).get("agent_controller", {})
-        name: str = self.run.get("controller", {}).get("name", mission.get("name", "snd_follow"))
-        return name
+        controller = self.run.get("controller", mission)
+        name: str = controller.get("name", "snd_follow")
+        fault = controller.get("fault")
+        return f"{name}+{fault}" if fault else name
 
 
 def build_job(spec: CampaignSpec, seed: int, index: int) -> Job:

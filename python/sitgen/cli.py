@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import sqlite3
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -365,6 +367,46 @@ def check_controller_command(
         raise typer.Exit(EXIT_FAILED)
 
 
+@contextmanager
+def _progress(label: str, total: int, unit: str) -> Iterator[Callable[[int, int], None]]:
+    """A progress bar on a terminal (or with SITGEN_PROGRESS set): yields the
+    ``on_progress(done, total)`` to call, which also shows the rate of this call's work."""
+    import os
+    import time
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    started = time.perf_counter()
+    with Progress(
+        TextColumn(f"[bold]{label}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
+    ) as progress:
+        task = progress.add_task(unit, total=total, rate="")
+        first: list[int] = []
+
+        def on_progress(done: int, total: int) -> None:
+            if not first:
+                first.append(done)
+            elapsed = time.perf_counter() - started
+            rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
+            progress.update(task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s")
+
+        yield on_progress
+
+
 @app.command()
 def campaign(
     spec: Annotated[
@@ -389,48 +431,13 @@ def campaign(
 ) -> None:
     """Generate N randomised situations, run them all, store everything, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
-    import os
-    import time
-
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
     from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign, summary
     from sitgen.store import Store, StoreError
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
     total_n = parsed.n if n is None else n
-    started = time.perf_counter()
-    with (
-        Progress(
-            TextColumn("[bold]campaign"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[rate]}"),
-            TimeElapsedColumn(),
-            TextColumn("ETA"),
-            TimeRemainingColumn(),
-            disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
-        ) as progress,
-        StopOnInterrupt() as stop,
-    ):
-        task = progress.add_task("runs", total=total_n, rate="")
-        first: list[int] = []
-
-        def on_progress(done: int, total: int) -> None:
-            if not first:
-                first.append(done)
-            elapsed = time.perf_counter() - started
-            rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
-            progress.update(task, completed=done, total=total, rate=f"{rate:.1f} runs/s")
-
+    with _progress("campaign", total_n, "runs") as on_progress, StopOnInterrupt() as stop:
         try:
             result = run_campaign(
                 parsed,
@@ -469,6 +476,98 @@ def campaign(
             f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
             f"{f['description']}"
         )
+    if result.interrupted:
+        raise typer.Exit(130)
+
+
+@app.command()
+def faults(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    budget: Annotated[
+        int, typer.Option("--budget", "-n", min=1, help="Situations to generate and run.")
+    ] = 100,
+    seed: Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)] = 0,
+    db: Annotated[Path, typer.Option("--db", help="Evaluation store (SQLite).")] = Path(
+        "faults.db"
+    ),
+    strategy: Annotated[
+        str, typer.Option("--strategy", help="How situations are drawn: random.")
+    ] = "random",
+    fault_ids: Annotated[
+        str | None,
+        typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: Annotated[
+        int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
+    ] = None,
+    backend: Annotated[str, typer.Option("--backend", help="local or ray.")] = "local",
+    address: Annotated[
+        str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
+    ] = None,
+) -> None:
+    """Measure fault-finding power: run the agent's controller and each of its seeded faults
+    (docs/faults.md) on the same situations, and report which faults were killed, after how
+    many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
+    from sitgen.campaign import StopOnInterrupt, parse_campaign
+    from sitgen.faults import (
+        fault_status,
+        report_from,
+        run_faults,
+        summary_lines,
+        write_fault_report,
+    )
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    chosen = None if fault_ids is None else [f.strip() for f in fault_ids.split(",") if f.strip()]
+    text = None if spec is None else _read_text(spec, "campaign spec")
+    parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
+    with _progress("faults", budget, "situations") as on_progress, StopOnInterrupt() as stop:
+        try:
+            result = run_faults(
+                parsed,
+                db,
+                seed=seed,
+                budget=budget,
+                faults=chosen,
+                strategy=strategy,
+                workers=workers,
+                backend=backend,
+                address=address,
+                on_progress=on_progress,
+                stop=stop,
+            )
+        except StoreError as e:
+            raise UsageError(str(e)) from None
+    if result.interrupted:
+        typer.echo(
+            f"stopped early after {result.situations} of {budget} situations: run the same "
+            "command again to finish",
+            err=True,
+        )
+        if not db.exists():
+            raise typer.Exit(130)
+    report = report_from(db)
+    if format == "json":
+        write_fault_report(report, sys.stdout)
+    else:
+        table = Table(title=f"{db}: seeded faults of {report.controller}")
+        for column in ("fault", "result", "killing run", "stands for"):
+            table.add_column(column)
+        for row in report.faults:
+            table.add_row(
+                row.id,
+                fault_status(row, report.situations),
+                "" if row.run is None else f"{row.run} (correct: {row.correct_run})",
+                row.stands_for,
+            )
+        Console(width=200).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
     if result.interrupted:
         raise typer.Exit(130)
 

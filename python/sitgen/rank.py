@@ -139,12 +139,9 @@ def rerun(db: str | Path, run_id: int) -> Rerun:
     lines.append(
         f"situation {'identical' if same_situation else 'DIFFERS'}: {situation.content_hash}"
     )
-    record = run(
-        situation,
-        controller=stored["controller"],
-        seed=stored["run_seed"],
-        spec=stored["run_spec"],
-    )
+    # The stored run spec names the controller if the campaign gave one (with its parameters
+    # and any seeded fault); otherwise the situation's own drives, as it did.
+    record = run(situation, seed=stored["run_seed"], spec=stored["run_spec"])
     same_log = record.events_jsonl == stored["events_jsonl"]
     events = len(stored["events_jsonl"].splitlines())
     lines.append(f"event log {'identical' if same_log else 'DIFFERS'} ({events} events)")

@@ -154,7 +154,7 @@ def run(
         trajectory=out["trajectory"],
         steps=record["steps"],
         time_s=record["time_s"],
-        controller=name or situation.agent.controller["name"],
+        controller=name or (run_spec.get("controller") or situation.agent.controller)["name"],
         seed=seed,
         events_jsonl=out["events_jsonl"],
         events_text=out["events_text"],
@@ -171,7 +171,8 @@ def _drive(
 ) -> None:
     """Step a run whose agent is a user controller, turning its failures into the outcome."""
     if controller is None:
-        controller = situation.agent.controller["name"]
+        named = run_spec.get("controller") or situation.agent.controller
+        controller = named["name"]
     assert is_user_controller(controller)
     try:
         user = load_controller(controller, step_timeout_s)

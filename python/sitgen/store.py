@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -85,6 +85,21 @@ CREATE TABLE IF NOT EXISTS trajectories (
     rows INTEGER NOT NULL,
     encoding TEXT NOT NULL,
     data BLOB NOT NULL
+);
+"""
+
+FAULT_SCHEMA = """
+CREATE TABLE IF NOT EXISTS fault_evaluation (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    plan TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS fault_kills (
+    fault TEXT PRIMARY KEY,
+    situation INTEGER NOT NULL,
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    by TEXT NOT NULL,
+    classes TEXT NOT NULL,
+    score_delta REAL NOT NULL
 );
 """
 
@@ -158,7 +173,7 @@ class Store:
             self._check_tables()
         if version is None:
             with self.db:
-                self.db.executescript(SCHEMA)
+                self.db.executescript(SCHEMA + FAULT_SCHEMA)
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
                     (str(SCHEMA_VERSION),),
@@ -193,6 +208,10 @@ class Store:
                     "CREATE INDEX IF NOT EXISTS runs_by_failure_class "
                     "ON runs (failure_class, score DESC, id)"
                 )
+            if version < 3:
+                # Version 3 adds fault evaluations (sitgen faults): two tables, empty for a
+                # campaign.
+                self.db.executescript(FAULT_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -267,9 +286,16 @@ class Store:
         }
 
     def start_campaign(
-        self, spec: dict[str, Any], seed: int, n: int, version: str, created_at: str
+        self,
+        spec: dict[str, Any],
+        seed: int,
+        n: int,
+        version: str,
+        created_at: str,
+        evaluation: dict[str, Any] | None = None,
     ) -> None:
-        """Record the campaign, or check that the store holds this one (then resume it)."""
+        """Record the campaign (with ``evaluation``, the plan of a fault evaluation), or check
+        that the store holds this one (then resume it)."""
         stored = self.campaign()
         if stored is None:
             with self.db:
@@ -278,7 +304,24 @@ class Store:
                     "VALUES (1, ?, ?, ?, ?, ?)",
                     (json.dumps(spec, sort_keys=True), seed, n, version, created_at),
                 )
+                if evaluation is not None:
+                    self.db.execute(
+                        "INSERT INTO fault_evaluation (id, plan) VALUES (1, ?)",
+                        (json.dumps(evaluation, sort_keys=True),),
+                    )
             return
+        row = self.db.execute("SELECT plan FROM fault_evaluation WHERE id = 1").fetchone()
+        stored_plan = None if row is None else json.loads(row[0])
+        if stored_plan != json.loads(json.dumps(evaluation, sort_keys=True)):
+            held = "a campaign" if stored_plan is None else "a fault evaluation"
+            asked = "a campaign" if evaluation is None else "a fault evaluation"
+            differs = f"it holds {held}" if (stored_plan is None) != (evaluation is None) else (
+                "its controller, faults or strategy differ"
+            )
+            raise StoreError(
+                f"{self.path} holds another {held.split(' ', 1)[1]} ({differs}); give a new --db "
+                f"to start {asked}, or the same options to resume it"
+            )
         same_spec = stored["spec"] == json.loads(json.dumps(spec, sort_keys=True))
         if not same_spec or stored["seed"] != seed:
             differs = "its spec differs" if not same_spec else f"its seed is {stored['seed']}"
@@ -289,6 +332,16 @@ class Store:
         if n > stored["n"]:
             with self.db:
                 self.db.execute("UPDATE campaign SET n = ? WHERE id = 1", (n,))
+
+    def record_kills(self, kills: dict[str, tuple[int, int, Any]]) -> None:
+        """Store each fault's first kill: fault → (situation, killing run, :class:`Kill`)."""
+        with self.db:
+            for fault, (situation, run_id, k) in kills.items():
+                self.db.execute(
+                    "INSERT OR REPLACE INTO fault_kills (fault, situation, run_id, by, classes, "
+                    "score_delta) VALUES (?, ?, ?, ?, ?, ?)",
+                    (fault, situation, run_id, k.by, json.dumps(list(k.classes)), k.score_delta),
+                )
 
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}

@@ -3,6 +3,7 @@
 
 mod campaign;
 mod failure;
+mod fault;
 mod interchange;
 mod mission;
 mod run;
@@ -41,5 +42,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     run::register(m)?;
     campaign::register(m)?;
     failure::register(m)?;
+    fault::register(m)?;
     Ok(())
 }

@@ -243,6 +243,16 @@ fn oscillating_at(events: &[Event], agent: u32, t_s: f64) -> bool {
     })
 }
 
+/// Every class a run's events show, most severe first (what a kill compares: a class of a
+/// faulty run that the correct run does not show is a new failure).
+pub fn classes(events: &[Event], agent: u32) -> Vec<FailureClass> {
+    let found: std::collections::BTreeSet<FailureClass> = events
+        .iter()
+        .filter_map(|e| class_of(e, events, agent))
+        .collect();
+    found.into_iter().collect()
+}
+
 /// The failure of a run: the most severe class among its events, `None` if it has no scored
 /// failure.
 pub fn classify(events: &[Event], agent: u32) -> Option<Failure> {
