@@ -104,10 +104,14 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
     assert done.returncode == 1 and "score DIFFERS" in done.stdout
 
 
-def _start_campaign(spec: Path, db: Path, *extra: str) -> subprocess.Popen[str]:
+def start_command(
+    spec: Path, db: Path, *extra: str, command: str = "campaign"
+) -> subprocess.Popen[str]:
+    """``sitgen campaign`` (or another command that takes a spec and a store), in the
+    background."""
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     return subprocess.Popen(
-        [*sitgen_command(), "campaign", str(spec), "--db", str(db), *extra],
+        [*sitgen_command(), command, str(spec), "--db", str(db), *extra],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -115,7 +119,7 @@ def _start_campaign(spec: Path, db: Path, *extra: str) -> subprocess.Popen[str]:
     )
 
 
-def _wait_for_runs(db: Path, at_least: int, proc: subprocess.Popen[str]) -> int:
+def wait_for_runs(db: Path, at_least: int, proc: subprocess.Popen[str]) -> int:
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         try:
@@ -135,8 +139,8 @@ def test_an_interrupted_campaign_resumes_to_the_same_table(tmp_path: Path, how: 
     reference = tmp_path / "reference.db"
     assert run_cli("campaign", str(spec), "--db", str(reference), "--seed", "5").returncode == 0
     db = tmp_path / "interrupted.db"
-    proc = _start_campaign(spec, db, "--seed", "5", "--workers", "1")
-    stored = _wait_for_runs(db, 3, proc)
+    proc = start_command(spec, db, "--seed", "5", "--workers", "1")
+    stored = wait_for_runs(db, 3, proc)
     proc.send_signal(how)
     out, _ = proc.communicate(timeout=120)
     if how == signal.SIGINT:

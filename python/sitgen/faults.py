@@ -308,10 +308,7 @@ def run_faults(
                 on_progress(first, budget)
             alive = _alive_before(store, plan, first)
             jobs = [
-                j
-                for i in chunk
-                for j in _jobs(spec, seed, i, plan, alive)
-                if j.index not in done
+                j for i in chunk for j in _jobs(spec, seed, i, plan, alive) if j.index not in done
             ]
             rows = []
             for job, result in executor.results(jobs):
@@ -469,22 +466,24 @@ def fault_report(store: Store) -> FaultReport:
     )
     for fault in plan["faults"]:
         entry = info.get(fault, {"changes": "(not in this sitgen's catalogue)", "stands_for": ""})
+        row = FaultRow(
+            id=fault,
+            killed=fault in kills,
+            runs_to_first_kill=None,
+            by=None,
+            classes=[],
+            run=None,
+            correct_run=None,
+            score_delta=None,
+            possibly_equivalent=fault not in kills and situations >= POSSIBLY_EQUIVALENT_AFTER,
+            changes=entry["changes"],
+            stands_for=entry["stands_for"],
+        )
         if fault in kills:
-            situation, run_id, by, classes, delta = kills[fault]
-            report.faults.append(
-                FaultRow(
-                    fault, True, situation + 1, by, classes, run_id,
-                    situation * RUN_STRIDE, delta, False, entry["changes"], entry["stands_for"],
-                )  # fmt: skip
-            )
-        else:
-            report.faults.append(
-                FaultRow(
-                    fault, False, None, None, [], None, None, None,
-                    situations >= POSSIBLY_EQUIVALENT_AFTER, entry["changes"],
-                    entry["stands_for"],
-                )  # fmt: skip
-            )
+            situation, row.run, row.by, row.classes, row.score_delta = kills[fault]
+            row.runs_to_first_kill = situation + 1
+            row.correct_run = situation * RUN_STRIDE
+        report.faults.append(row)
     return report
 
 

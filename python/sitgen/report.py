@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from sitgen.failures import DistinctFailure, classes, distinct_failures
+from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
 from sitgen.situation import Situation
 from sitgen.store import Store, main_events
@@ -181,8 +182,41 @@ def _distinct_section(
     return "".join(body)
 
 
+def _faults_section(report: FaultReport, pages: set[int]) -> str:
+    """A fault evaluation's results: the kill rate and its curve, then one row per fault with
+    what it changes, what it stands for, and the faulty and correct runs that killed it."""
+
+    def link(run_id: int | None) -> str:
+        if run_id is None:
+            return ""
+        return f"<a href='run-{run_id}.html'>{run_id}</a>" if run_id in pages else str(run_id)
+
+    body = ["<section id='faults'><h2>Seeded faults</h2><p>"]
+    body += [html.escape(line) + "<br>" for line in summary_lines(report)]
+    body.append(
+        "</p><p class='muted'>A fault is killed at the first situation where its run fails with "
+        "a failure class the correct run does not show, or scores worse by more than the "
+        "margin (docs/faults.md).</p><table><tr><th>fault</th><th>result</th><th>killing run"
+        "</th><th>correct run</th><th>changes</th><th>stands for</th></tr>"
+    )
+    for f in report.faults:
+        body.append(
+            f"<tr data-fault='{html.escape(f.id)}' data-killed='{str(f.killed).lower()}'>"
+            f"<td><code>{html.escape(f.id)}</code></td>"
+            f"<td>{html.escape(fault_status(f, report.situations))}</td>"
+            f"<td class='num'>{link(f.run)}</td><td class='num'>{link(f.correct_run)}</td>"
+            f"<td>{html.escape(f.changes)}</td><td>{html.escape(f.stands_for)}</td></tr>"
+        )
+    body.append("</table></section>")
+    return "".join(body)
+
+
 def _index(
-    store: Store, rows: list[dict[str, Any]], failures: list[DistinctFailure], pages: set[int]
+    store: Store,
+    rows: list[dict[str, Any]],
+    failures: list[DistinctFailure],
+    pages: set[int],
+    faults: FaultReport | None = None,
 ) -> str:
     campaign = store.campaign() or {}
     scores = [r["score"] for r in rows]
@@ -224,7 +258,11 @@ def _index(
     ]
     spec = json.dumps(campaign.get("spec", {}), indent=2, sort_keys=True)
     ranks = {r["run"]: rank for rank, r in enumerate(rows, 1)}
-    body = ["<h1>sitgen campaign report</h1>", _distinct_section(failures, pages, ranks, len(rows))]
+    title = "sitgen campaign report" if faults is None else "sitgen fault evaluation report"
+    body = [f"<h1>{title}</h1>"]
+    if faults is not None:
+        body.append(_faults_section(faults, pages))
+    body.append(_distinct_section(failures, pages, ranks, len(rows)))
     body.append("<h2>Campaign</h2><table class='facts'>")
     body += [f"<tr><td>{k}</td><td>{html.escape(str(v))}</td></tr>" for k, v in facts]
     body.append("</table><details><summary>campaign spec</summary><pre>")
@@ -664,6 +702,10 @@ def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
         failures = distinct_failures(store)
         part_of = {run_id: f for f in failures for run_id in f.run_ids}
         wanted = [r["run"] for r in ranked[: max(0, top)]] + [f.representative for f in failures]
+        faults = fault_report(store) if evaluation(store) is not None else None
+        if faults is not None:
+            # Each kill is shown as its faulty run beside the correct run on the same situation.
+            wanted += [r for f in faults.faults for r in (f.run, f.correct_run) if r is not None]
         pages: set[int] = set()
         for run_id in dict.fromkeys(wanted):
             made = _run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
@@ -676,5 +718,5 @@ def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
             pages.add(run_id)
             written.append(path)
         index = out / "index.html"
-        index.write_text(_index(store, ranked, failures, pages))
+        index.write_text(_index(store, ranked, failures, pages, faults))
     return [index, *written]

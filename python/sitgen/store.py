@@ -315,8 +315,10 @@ class Store:
         if stored_plan != json.loads(json.dumps(evaluation, sort_keys=True)):
             held = "a campaign" if stored_plan is None else "a fault evaluation"
             asked = "a campaign" if evaluation is None else "a fault evaluation"
-            differs = f"it holds {held}" if (stored_plan is None) != (evaluation is None) else (
-                "its controller, faults or strategy differ"
+            differs = (
+                f"it holds {held}"
+                if (stored_plan is None) != (evaluation is None)
+                else ("its controller, faults or strategy differ")
             )
             raise StoreError(
                 f"{self.path} holds another {held.split(' ', 1)[1]} ({differs}); give a new --db "
