@@ -494,8 +494,17 @@ def faults(
         "faults.db"
     ),
     strategy: Annotated[
-        str, typer.Option("--strategy", help="How situations are drawn: random.")
+        str,
+        typer.Option(
+            "--strategy",
+            help="How situations are drawn: random (the campaign's generation) or barn (the 300 "
+            "BARN worlds, shuffled by the seed).",
+        ),
     ] = "random",
+    barn_dir: Annotated[
+        Path | None,
+        typer.Option("--barn-dir", help="The BARN data folder (with --strategy barn)."),
+    ] = None,
     fault_ids: Annotated[
         str | None,
         typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
@@ -540,6 +549,7 @@ def faults(
                 address=address,
                 on_progress=on_progress,
                 stop=stop,
+                barn_dir=barn_dir,
             )
         except StoreError as e:
             raise UsageError(str(e)) from None

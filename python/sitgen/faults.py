@@ -29,6 +29,8 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
+import numpy as np
+
 from sitgen import _core
 from sitgen.campaign import (
     CampaignSpec,
@@ -41,6 +43,7 @@ from sitgen.campaign import (
     controller_names,
     job_seed,
 )
+from sitgen.maps import BARN_WORLDS, barn_situation
 from sitgen.store import Store, StoreError
 
 KILL_MARGIN_POINTS = 100.0
@@ -55,8 +58,10 @@ CHUNK = 16
 """Situations run between two kill checks."""
 RUN_STRIDE = 64
 """Run ids per situation: the correct run and up to 63 faults."""
-STRATEGIES = ("random",)
-"""How situations are drawn: ``random`` is the campaign's own generation (the paper's)."""
+STRATEGIES = ("random", "barn")
+"""How situations are drawn: ``random`` is the campaign's own generation (the paper's);
+``barn`` takes the 300 BARN worlds (a fixed, hand-curated benchmark, no peers) in an order
+shuffled by the seed, with the campaign's run spec."""
 CURVE_BUDGETS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
 """Budgets at which the kill-rate curve is given (and the evaluation's own)."""
 
@@ -211,19 +216,51 @@ def fault_slot(fault: str) -> int:
     return 1 + [f["id"] for f in catalogue()].index(fault)
 
 
-def _jobs(spec: CampaignSpec, seed: int, i: int, plan: FaultPlan, faults: list[str]) -> list[Job]:
+class Situations:
+    """Situation ``i`` of an evaluation, as the job a campaign would run there."""
+
+    def __init__(
+        self, spec: CampaignSpec, seed: int, strategy: str, barn_dir: Path | None = None
+    ) -> None:
+        self.spec, self.seed, self.strategy = spec, seed, strategy
+        self.barn_dir = barn_dir
+        self.order: list[int] = []
+        if strategy == "barn":
+            if barn_dir is None or not (barn_dir / "barn_paths.txt").is_file():
+                raise _core.SpecError(
+                    f"--barn-dir: {barn_dir} holds no BARN data (barn_grids_300x30x30.npy, "
+                    "barn_paths.txt); give ../shared/data/barn"
+                )
+            rng = np.random.Generator(np.random.PCG64(seed))
+            self.order = [int(k) for k in rng.permutation(BARN_WORLDS)]
+
+    def most(self) -> int:
+        """How many situations there are."""
+        return BARN_WORLDS if self.strategy == "barn" else 1_000_000
+
+    def job(self, i: int) -> Job:
+        """Situation ``i``'s job; one whose spec cannot be built carries its error."""
+        if self.strategy == "barn":
+            assert self.barn_dir is not None
+            world = barn_situation(self.barn_dir, self.order[i])
+            situation = json.loads(world.to_json())
+            return Job(i, job_seed(self.seed, i), situation, copy.deepcopy(self.spec.run))
+        try:
+            return build_job(self.spec, self.seed, i)
+        except _core.SpecError as e:
+            spec = self.spec
+            situation, run = copy.deepcopy(spec.situation), copy.deepcopy(spec.run)
+            return Job(i, job_seed(self.seed, i), situation, run, f"spec: {e}")
+
+
+def _jobs(situations: Situations, i: int, plan: FaultPlan, faults: list[str]) -> list[Job]:
     """Situation ``i``'s runs: the correct controller's, then each fault's."""
-    try:
-        base = build_job(spec, seed, i)
-        error = None
-    except _core.SpecError as e:
-        base = Job(i, job_seed(seed, i), copy.deepcopy(spec.situation), copy.deepcopy(spec.run))
-        error = f"spec: {e}"
+    base = situations.job(i)
     jobs = []
     for slot, fault in [(0, None), *((fault_slot(f), f) for f in faults)]:
         controller = dict(plan.controller, **({"fault": fault} if fault else {}))
         run = dict(base.run, controller=controller)
-        jobs.append(Job(i * RUN_STRIDE + slot, base.seed, base.situation, run, error))
+        jobs.append(Job(i * RUN_STRIDE + slot, base.seed, base.situation, run, base.error))
     return jobs
 
 
@@ -280,6 +317,7 @@ def run_faults(
     address: str | None = None,
     on_progress: Callable[[int, int], None] | None = None,
     stop: Callable[[], bool] | None = None,
+    barn_dir: Path | None = None,
 ) -> FaultsResult:
     """Evaluate (or resume evaluating) ``spec``'s agent controller under ``faults`` on
     ``budget`` situations, into store ``db``. ``on_progress(situations done, budget)``;
@@ -289,8 +327,15 @@ def run_faults(
         raise _core.SpecError(f"--budget: {budget} is not in [1, 1000000]")
     workers = check_workers(workers, backend)
     plan = plan_faults(spec, faults, strategy)
+    situations = Situations(spec, seed, strategy, barn_dir)
+    if budget > situations.most():
+        raise _core.SpecError(
+            f"--budget: {budget} is more than the {situations.most()} situations of "
+            f"strategy {strategy}"
+        )
     started = time.perf_counter()
-    check_campaign(spec, seed, budget, stop)
+    # A benchmark's situations are given: only the campaign's controllers need checking.
+    check_campaign(spec, seed, budget if strategy == "random" else 0, stop)
     if stop is not None and stop():
         return FaultsResult(0, 0, True, time.perf_counter() - started)
     with Store(db, create=True) as store:
@@ -308,7 +353,7 @@ def run_faults(
                 on_progress(first, budget)
             alive = _alive_before(store, plan, first)
             jobs = [
-                j for i in chunk for j in _jobs(spec, seed, i, plan, alive) if j.index not in done
+                j for i in chunk for j in _jobs(situations, i, plan, alive) if j.index not in done
             ]
             rows = []
             for job, result in executor.results(jobs):
@@ -513,7 +558,7 @@ def summary_lines(report: FaultReport) -> list[str]:
     """The kill rate and its curve, in words."""
     curve = ", ".join(f"{c['budget']:g}: {c['kill_rate']:.0%}" for c in report.curve())
     return [
-        f"{report.controller}, {report.strategy} generation, seed {report.seed}: "
+        f"{report.controller}, {report.strategy} situations, seed {report.seed}: "
         f"{sum(f.killed for f in report.faults)} of {len(report.faults)} faults killed in "
         f"{report.situations} situations (kill rate {report.kill_rate:.0%})",
         f"kill rate by budget: {curve}",

@@ -7,12 +7,16 @@ core) and BARN grids (``.npy``, here with numpy). :func:`shortest_path` is the p
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
 from sitgen.terrain import Grid
+
+if TYPE_CHECKING:
+    from sitgen.situation import Situation
 
 BARN_RESOLUTION_M = 0.15
 """BARN's cell size (Perille et al., 2020)."""
@@ -78,3 +82,59 @@ def shortest_path(
     None when there is no path."""
     blocked = grid.occupied if isinstance(grid, Grid) else grid
     return _core.shortest_path(np.ascontiguousarray(blocked, dtype=bool), start, goal)
+
+
+BARN_WORLDS = 300
+"""Worlds in the BARN benchmark."""
+
+
+def barn_situation(data_dir: str | Path, index: int) -> Situation:
+    """BARN world ``index`` (0-299) from the BARN data folder (``barn_grids_300x30x30.npy`` and
+    ``barn_paths.txt``, as in ``../shared/data/barn``) as a situation: the world in its challenge
+    course, a Jackal agent following the world's official path to the challenge's goal, no peers
+    (the core's ``interchange::barn``). Raises OSError naming the file that is missing or
+    malformed."""
+    from sitgen.situation import Situation
+
+    data_dir = Path(data_dir)
+    if not 0 <= index < BARN_WORLDS:
+        raise _core.SpecError(f"index: {index} is not in [0, {BARN_WORLDS})")
+    grids = _barn_grids(data_dir)
+    path = _barn_paths(data_dir).get(index)
+    if path is None:
+        raise OSError(f"{data_dir / 'barn_paths.txt'}: no path for world {index}")
+    grid = np.ascontiguousarray(grids[index] != 0, dtype=np.uint8)
+    return Situation(_core.barn_situation(grid.tobytes(), path, index), check_start=False)
+
+
+def _barn_grids(data_dir: Path) -> npt.NDArray[np.uint8]:
+    file = data_dir / "barn_grids_300x30x30.npy"
+    try:
+        grids: npt.NDArray[np.uint8] = np.load(file, allow_pickle=False)
+    except (OSError, ValueError) as e:
+        raise OSError(f"cannot read {file}: {e}") from None
+    if grids.shape != (BARN_WORLDS, 30, 30):
+        raise OSError(f"{file}: expected shape ({BARN_WORLDS}, 30, 30), found {grids.shape}")
+    return grids
+
+
+def _barn_paths(data_dir: Path) -> dict[int, list[tuple[int, int]]]:
+    """``barn_paths.txt``: ``world N: r,c r,c …`` per line (``#`` comments)."""
+    file = data_dir / "barn_paths.txt"
+    try:
+        text = file.read_text()
+    except OSError as e:
+        raise OSError(f"cannot read {file}: {e.strerror}") from None
+    paths: dict[int, list[tuple[int, int]]] = {}
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        try:
+            head, _, cells = line.partition(":")
+            world = int(head.removeprefix("world").strip())
+            paths[world] = [
+                (int(r), int(c)) for r, c in (cell.split(",") for cell in cells.split())
+            ]
+        except ValueError:
+            raise OSError(f"{file}: line {number}: expected `world N: r,c r,c …`") from None
+    return paths

@@ -124,13 +124,18 @@ def rerun(db: str | Path, run_id: int) -> Rerun:
     """Regenerate run ``run_id``'s situation from its spec and seed, run it again, and compare
     the situation's content hash, the event log (bytes) and the score with what is stored."""
     from sitgen.run import run
-    from sitgen.situation import generate_situation
+    from sitgen.situation import Situation, generate_situation
 
     with Store(db) as store:
         stored = store.run_row(run_id)
     lines = [f"run {run_id}: situation seed {stored['situation_seed']}, {stored['controller']}"]
     try:
-        situation = generate_situation(stored["situation_spec"], seed=stored["situation_seed"])
+        spec = stored["situation_spec"]
+        situation = (
+            Situation(json.dumps(spec), check_start=False)
+            if "format" in spec  # given whole, not generated
+            else generate_situation(spec, seed=stored["situation_seed"])
+        )
     except _core.GenerationFailed as e:
         same = stored["content_hash"] is None
         lines.append(f"generation fails again: {e}" if same else f"generation now fails: {e}")

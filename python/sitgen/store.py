@@ -362,9 +362,13 @@ class Store:
 
     def _add_run(self, row: RunRow) -> None:
         situation = json.loads(row.situation_json) if row.situation_json else None
-        terrain = row.situation_spec.get("terrain", {}).get("preset") or row.situation_spec.get(
-            "terrain", {}
-        ).get("source", {}).get("kind")
+        spec = row.situation_spec
+        # A situation given whole (a benchmark world) has no terrain spec to name it by.
+        terrain = (
+            spec.get("terrain", {}).get("preset")
+            or spec.get("terrain", {}).get("source", {}).get("kind")
+            or ("given" if "format" in spec else None)
+        )
         self.db.execute(
             "INSERT INTO situations (id, seed, spec, terrain, peers, content_hash, situation) "
             "VALUES (?, ?, ?, ?, ?, ?, ?)",

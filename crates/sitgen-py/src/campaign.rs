@@ -9,15 +9,26 @@ use pyo3::exceptions::PyStopIteration;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use rayon::prelude::*;
-use sitgen_core::run::{pack_trajectory, run_batch, run_job, Job, JobResult, RunSpec};
+use sitgen_core::run::{
+    pack_trajectory, run_batch, run_job, Job, JobResult, JobSituation, RunSpec,
+};
+use sitgen_core::situation::Situation;
 use sitgen_core::spec;
 
-/// Parse one job; errors name the job and the field.
+/// Parse one job; errors name the job and the field. The situation JSON is a situation spec,
+/// or a whole situation (it has a `format`), which is checked as a situation file is.
 fn job(
     index: usize,
     (spec_json, situation_seed, run_json, run_seed): &JobTuple,
 ) -> Result<Job, String> {
-    let situation = spec::from_json_str(spec_json).map_err(|e| format!("job {index}: {e}"))?;
+    let named = |e: spec::SpecError| format!("job {index}: {e}");
+    let is_situation = serde_json::from_str::<serde_json::Value>(spec_json)
+        .is_ok_and(|v| v.get("format").is_some());
+    let situation = if is_situation {
+        JobSituation::Given(Box::new(Situation::from_json(spec_json).map_err(named)?))
+    } else {
+        JobSituation::Spec(spec::from_json_str(spec_json).map_err(named)?)
+    };
     let run = RunSpec::from_json(run_json, "run").map_err(|e| format!("job {index}: {e}"))?;
     Ok(Job {
         situation,

@@ -6,7 +6,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyOSError;
 use pyo3::prelude::*;
 use sitgen_core::grid::{Map, OccupancyGrid};
-use sitgen_core::interchange::{image, maps, ros};
+use sitgen_core::interchange::{barn, image, maps, ros};
 
 fn to_map(occupied: &PyReadonlyArray2<'_, bool>, resolution_m: f64) -> PyResult<Map> {
     let shape = occupied.shape();
@@ -65,7 +65,17 @@ fn load_map<'py>(
     Ok((occupied.into_any(), loaded.map.resolution_m, (x, y, yaw)))
 }
 
+/// BARN world `index` as a situation (JSON): `grid` its 30 × 30 cells row-major with BARN's
+/// (row, column) indices (non-zero: obstacle), `path` its official path as (row, column).
+#[pyfunction]
+fn barn_situation(grid: &[u8], path: Vec<(usize, usize)>, index: u64) -> PyResult<String> {
+    let situation = barn::barn_situation(grid, &path, index)
+        .map_err(|e| crate::SpecError::new_err(e.to_string()))?;
+    Ok(situation.to_json())
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(barn_situation, m)?)?;
     m.add_function(wrap_pyfunction!(write_map, m)?)?;
     m.add_function(wrap_pyfunction!(load_map, m)?)?;
     Ok(())

@@ -1,6 +1,7 @@
-//! Maps in and out of files: images (PNG/PGM), ROS map_server YAML, MovingAI `.map`, and
-//! situations out to Player/Stage world files.
+//! Maps in and out of files: images (PNG/PGM), ROS map_server YAML, MovingAI `.map`, BARN
+//! worlds as situations, and situations out to Player/Stage world files.
 
+pub mod barn;
 pub mod image;
 pub mod maps;
 pub mod movingai;

@@ -365,14 +365,23 @@ pub(crate) mod tests;
 /// One run of a campaign: a situation to generate and how to run it.
 #[derive(Debug, Clone)]
 pub struct Job {
-    /// The situation spec.
-    pub situation: crate::spec::SituationSpec,
-    /// Its master seed.
+    /// The situation: generated from a spec, or given whole.
+    pub situation: JobSituation,
+    /// Its master seed (for a spec).
     pub situation_seed: u64,
     /// How to run it.
     pub run: RunSpec,
     /// The run's sensor-noise seed.
     pub run_seed: u64,
+}
+
+/// Where a job's situation comes from.
+#[derive(Debug, Clone)]
+pub enum JobSituation {
+    /// Generated from this spec with the job's situation seed.
+    Spec(crate::spec::SituationSpec),
+    /// Given whole (a fixed benchmark world, a situation file), already checked.
+    Given(Box<Situation>),
 }
 
 /// A finished job: the situation generated and the run's record, or why there is none.
@@ -381,8 +390,14 @@ pub type JobResult = Result<(Situation, RunRecord), String>;
 /// Generate and run one job.
 pub fn run_job(job: &Job) -> JobResult {
     // `run` checks where the robots start (Run::new), as it does for every situation.
-    let (situation, _) = crate::situation::generate(&job.situation, job.situation_seed)
-        .map_err(|e| format!("generation failed: {e}"))?;
+    let situation = match &job.situation {
+        JobSituation::Spec(spec) => {
+            crate::situation::generate(spec, job.situation_seed)
+                .map_err(|e| format!("generation failed: {e}"))?
+                .0
+        }
+        JobSituation::Given(situation) => (**situation).clone(),
+    };
     let record = run(&situation, &job.run, job.run_seed).map_err(|e| e.to_string())?;
     Ok((situation, record))
 }
