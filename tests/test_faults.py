@@ -275,3 +275,45 @@ def test_every_controller_with_avoidance_has_its_faults() -> None:
     assert len(faults_of("snd_follow")) >= 10 and len(faults_of("snd")) >= 10
     assert len(faults_of("vo")) >= 2 and len(faults_of("dwa")) >= 2
     assert faults_of("straight") == [] and faults_of("follow") == []
+
+
+def test_the_documented_catalogue_is_the_catalogue() -> None:
+    """docs/faults.md's table row for each fault gives the catalogue's own controllers and
+    text, and lists no other fault."""
+    doc = (ROOT / "docs" / "faults.md").read_text()
+    table = doc.split("## The catalogue")[1].split("## The kill rule")[0]
+    rows = {
+        line.split("|")[1].strip().strip("`"): [c.strip() for c in line.split("|")[2:-1]]
+        for line in table.splitlines()
+        if line.startswith("| `")
+    }
+    catalogue = _core.fault_catalogue()
+    assert sorted(rows) == sorted(f["id"] for f in catalogue)
+    for f in catalogue:
+        controllers, _seam, changes, stands_for = rows[f["id"]]
+        assert controllers == ", ".join(f["controllers"]), f["id"]
+        # The catalogue's text, with names of code set as code.
+        assert (changes.replace("`", ""), stands_for) == (f["changes"], f["stands_for"]), f["id"]
+
+
+def test_barn_worlds_are_a_strategy_of_their_own(tmp_path: Path, shared_data: Path) -> None:
+    from sitgen.maps import barn_situation
+
+    world = barn_situation(shared_data / "barn", 0)
+    assert [r.role for r in world.robots] == ["agent"]
+    assert world.agent.body["model"] == "jackal" and world.agent.waypoints[-1] == (2.25, 13.0)
+    spec = write_spec(tmp_path, "[run]\ntime_limit_s = 100.0\n")
+    db = tmp_path / "barn.db"
+    args = ("faults", str(spec), "--strategy", "barn", "--budget", "3", "--db", str(db))
+    done = run_cli(*args, "--barn-dir", str(shared_data / "barn"), "--format", "json")
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["strategy"] == "barn" and report["situations"] == 3
+    with sqlite3.connect(db) as c:
+        terrains = {t for (t,) in c.execute("SELECT terrain FROM situations")}
+    assert terrains == {"given"}
+    assert run_cli("rerun", str(db), "0").returncode == 0
+    missing = run_cli(*args, "--barn-dir", str(tmp_path))
+    assert missing.returncode == 2 and "--barn-dir:" in missing.stderr
+    more = run_cli(*args[:-4], "--budget", "301", "--db", str(tmp_path / "x.db"))
+    assert more.returncode == 2, more.stderr
