@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 from rich.console import Console
@@ -23,6 +23,11 @@ from sitgen.config import preset_names, preset_spec, read_utf8
 from sitgen.situation import Situation, generate_situation
 from sitgen.store import StoreError, StoreMissing, require_store
 from sitgen.terrain import Grid, generate_terrain
+
+if TYPE_CHECKING:
+    from sitgen.campaign import CampaignSpec
+
+T = TypeVar("T")
 
 app = typer.Typer(
     name="sitgen",
@@ -38,6 +43,14 @@ DEFAULT_PRESET = "rocky_desert"
 """The preset used when a command gets neither a spec nor --preset."""
 
 SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")]
+CampaignSeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)]
+WorkersOption = Annotated[
+    int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
+]
+BackendOption = Annotated[str, typer.Option("--backend", help="local or ray.")]
+AddressOption = Annotated[
+    str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
+]
 AllowEditedOption = Annotated[
     bool,
     typer.Option(
@@ -407,6 +420,31 @@ def _progress(label: str, total: int, unit: str) -> Iterator[Callable[[int, int]
         yield on_progress
 
 
+def _campaign_spec(spec: Path | None) -> CampaignSpec:
+    """The campaign spec in file ``spec``, or the paper's."""
+    from sitgen.campaign import parse_campaign
+
+    text = None if spec is None else _read_text(spec, "campaign spec")
+    return parse_campaign(text, str(spec) if spec else "paper campaign")
+
+
+def _stored(
+    label: str,
+    total: int,
+    unit: str,
+    work: Callable[[Callable[[int, int], None], Callable[[], bool]], T],
+) -> T:
+    """``work(on_progress, stop)`` with a progress bar and Ctrl-C asking it to stop; a store
+    it cannot use is bad input."""
+    from sitgen.campaign import StopOnInterrupt
+
+    with _progress(label, total, unit) as on_progress, StopOnInterrupt() as stop:
+        try:
+            return work(on_progress, stop)
+        except StoreError as e:
+            raise UsageError(str(e)) from None
+
+
 @app.command()
 def campaign(
     spec: Annotated[
@@ -416,42 +454,38 @@ def campaign(
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
-    seed: Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)] = 0,
+    seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Campaign store (SQLite).")] = Path(
         "campaign.db"
     ),
-    workers: Annotated[
-        int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
-    ] = None,
-    backend: Annotated[str, typer.Option("--backend", help="local or ray.")] = "local",
-    address: Annotated[
-        str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
-    ] = None,
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
     top: Annotated[int, typer.Option("--top", help="Top runs in the summary.")] = 5,
 ) -> None:
     """Generate N randomised situations, run them all, store everything, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
-    from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign, summary
-    from sitgen.store import Store, StoreError
+    from sitgen.campaign import run_campaign, summary
+    from sitgen.store import Store
 
-    text = None if spec is None else _read_text(spec, "campaign spec")
-    parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
+    parsed = _campaign_spec(spec)
     total_n = parsed.n if n is None else n
-    with _progress("campaign", total_n, "runs") as on_progress, StopOnInterrupt() as stop:
-        try:
-            result = run_campaign(
-                parsed,
-                db,
-                seed=seed,
-                n=n,
-                workers=workers,
-                backend=backend,
-                address=address,
-                on_progress=on_progress,
-                stop=stop,
-            )
-        except StoreError as e:
-            raise UsageError(str(e)) from None
+    result = _stored(
+        "campaign",
+        total_n,
+        "runs",
+        lambda on_progress, stop: run_campaign(
+            parsed,
+            db,
+            seed=seed,
+            n=n,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=on_progress,
+            stop=stop,
+        ),
+    )
     rate = result.ran / result.wall_s if result.wall_s > 0 else 0.0
     typer.echo(
         f"{db}: {result.ran} runs in {result.wall_s:.1f} s ({rate:.1f} runs/s), "
@@ -489,7 +523,7 @@ def faults(
     budget: Annotated[
         int, typer.Option("--budget", "-n", min=1, help="Situations to generate and run.")
     ] = 100,
-    seed: Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)] = 0,
+    seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Evaluation store (SQLite).")] = Path(
         "faults.db"
     ),
@@ -510,18 +544,13 @@ def faults(
         typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
     ] = None,
     format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
-    workers: Annotated[
-        int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
-    ] = None,
-    backend: Annotated[str, typer.Option("--backend", help="local or ray.")] = "local",
-    address: Annotated[
-        str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
-    ] = None,
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
 ) -> None:
     """Measure fault-finding power: run the agent's controller and each of its seeded faults
     (docs/faults.md) on the same situations, and report which faults were killed, after how
     many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
-    from sitgen.campaign import StopOnInterrupt, parse_campaign
     from sitgen.faults import (
         fault_status,
         report_from,
@@ -533,26 +562,25 @@ def faults(
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
     chosen = None if fault_ids is None else [f.strip() for f in fault_ids.split(",") if f.strip()]
-    text = None if spec is None else _read_text(spec, "campaign spec")
-    parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
-    with _progress("faults", budget, "situations") as on_progress, StopOnInterrupt() as stop:
-        try:
-            result = run_faults(
-                parsed,
-                db,
-                seed=seed,
-                budget=budget,
-                faults=chosen,
-                strategy=strategy,
-                workers=workers,
-                backend=backend,
-                address=address,
-                on_progress=on_progress,
-                stop=stop,
-                barn_dir=barn_dir,
-            )
-        except StoreError as e:
-            raise UsageError(str(e)) from None
+    result = _stored(
+        "faults",
+        budget,
+        "situations",
+        lambda on_progress, stop: run_faults(
+            _campaign_spec(spec),
+            db,
+            seed=seed,
+            budget=budget,
+            faults=chosen,
+            strategy=strategy,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=on_progress,
+            stop=stop,
+            barn_dir=barn_dir,
+        ),
+    )
     if result.interrupted:
         typer.echo(
             f"stopped early after {result.situations} of {budget} situations: run the same "
