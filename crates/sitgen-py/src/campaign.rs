@@ -27,7 +27,7 @@ fn job(
     let situation = if is_situation {
         JobSituation::Given(Box::new(Situation::from_json(spec_json).map_err(named)?))
     } else {
-        JobSituation::Spec(spec::from_json_str(spec_json).map_err(named)?)
+        JobSituation::Spec(Box::new(spec::from_json_str(spec_json).map_err(named)?))
     };
     let run = RunSpec::from_json(run_json, "run").map_err(|e| format!("job {index}: {e}"))?;
     Ok(Job {

@@ -174,9 +174,13 @@ mod tests {
     #[test]
     fn a_grid_of_the_wrong_size_or_a_path_off_it_is_named() {
         let (grid, path) = open();
-        let e = barn_situation(&grid[1..], &path, 0).unwrap_err().to_string();
+        let e = barn_situation(&grid[1..], &path, 0)
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("grid: 899 cells"), "{e}");
-        let e = barn_situation(&grid, &[(30, 0)], 0).unwrap_err().to_string();
+        let e = barn_situation(&grid, &[(30, 0)], 0)
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("path: cell (30, 0)"), "{e}");
     }
 }

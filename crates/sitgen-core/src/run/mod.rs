@@ -379,7 +379,7 @@ pub struct Job {
 #[derive(Debug, Clone)]
 pub enum JobSituation {
     /// Generated from this spec with the job's situation seed.
-    Spec(crate::spec::SituationSpec),
+    Spec(Box<crate::spec::SituationSpec>),
     /// Given whole (a fixed benchmark world, a situation file), already checked.
     Given(Box<Situation>),
 }
