@@ -1,5 +1,6 @@
 """Fault-finding power benchmark: the kill rate of each way of generating situations at budgets
-50, 100, 200 and 500, the median over 5 seeds (``make bench-faults``).
+50, 100, 200 and 500 (and 5, 10, 20, where strategies still differ), the median over 5 seeds,
+and each fault's median runs to first kill (``make bench-faults``).
 
 Strategies: ``random`` is the paper's campaign (its random generation, 0-5 peers, 600 s runs);
 ``barn`` is the 300 BARN worlds from ``../shared/data/barn`` with no peers and the BARN
@@ -31,7 +32,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 SHARED = Path(
     os.environ.get("SITGEN_SHARED_DATA", Path(__file__).resolve().parents[2] / "shared" / "data")
 )
-BUDGETS = (50, 100, 200, 500)
+BUDGETS = (5, 10, 20, 50, 100, 200, 500)
 BARN_TIME_LIMIT_S = 100.0
 """The BARN challenge's time limit."""
 
@@ -92,9 +93,25 @@ def main() -> None:
     for strategy, result in out["strategies"].items():
         cells = "".join(f"{result['median_kill_rate'][str(b)]:>8.0%}" for b in budgets)
         print(f"{strategy:10}{cells}   {', '.join(result['never_killed']) or '-'}")
+    print("\nmedian runs to first kill (- : killed in fewer than half the seeds)")
+    print(f"{'fault':28}" + "".join(f"{s:>10}" for s in out["strategies"]))
+    for fault in out["strategies"]["random"]["runs_to_first_kill"]:
+        cells = "".join(
+            f"{_median_runs(r['runs_to_first_kill'].get(fault, [])):>10}"
+            for r in out["strategies"].values()
+        )
+        print(f"{fault:28}{cells}")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "faults.json").write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {RESULTS / 'faults.json'}")
+
+
+def _median_runs(runs: list[int | None]) -> str:
+    """The median runs to first kill, a fault never killed counting as infinitely many."""
+    if not runs:
+        return "n/a"
+    median = statistics.median(float("inf") if r is None else r for r in runs)
+    return "-" if median == float("inf") else f"{median:g}"
 
 
 def _first(report: FaultReport, fault: str) -> int | None:
