@@ -275,6 +275,8 @@ def test_every_controller_with_avoidance_has_its_faults() -> None:
     assert len(faults_of("snd_follow")) >= 10 and len(faults_of("snd")) >= 10
     assert len(faults_of("vo")) >= 2 and len(faults_of("dwa")) >= 2
     assert faults_of("straight") == [] and faults_of("follow") == []
+    # Run ids leave room for the correct run and every fault of the catalogue.
+    assert len(_core.fault_catalogue()) < RUN_STRIDE
 
 
 def test_the_documented_catalogue_is_the_catalogue() -> None:
