@@ -575,6 +575,11 @@ class CampaignResult:
     wall_s: float
 
 
+def started_at() -> str:
+    """Now, as a store records when a campaign started (UTC, ISO 8601, seconds)."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
 def run_campaign(
     spec: CampaignSpec,
     db: str | Path,
@@ -600,13 +605,7 @@ def run_campaign(
     user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
     with Store(db, create=True) as store:
         store.lock_for_writing()
-        store.start_campaign(
-            spec.source,
-            seed,
-            n,
-            _core.__version__,
-            datetime.now(UTC).isoformat(timespec="seconds"),
-        )
+        store.start_campaign(spec.source, seed, n, _core.__version__, started_at())
         done = store.done_ids()
         todo = n - sum(1 for i in done if i < n)
         if on_progress:

@@ -21,11 +21,12 @@ and the same command resumes it. Runs are stored like a campaign's (``rank``, ``
 from __future__ import annotations
 
 import copy
+import dataclasses
+import functools
 import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -37,13 +38,14 @@ from sitgen.campaign import (
     Executor,
     Job,
     _row,
-    build_job,
     check_campaign,
     check_workers,
     controller_names,
     job_seed,
+    started_at,
+    stream_jobs,
 )
-from sitgen.maps import BARN_WORLDS, barn_situation
+from sitgen.maps import BARN_WORLDS, BarnWorlds
 from sitgen.store import Store, StoreError
 
 KILL_MARGIN_POINTS = 100.0
@@ -62,14 +64,22 @@ STRATEGIES = ("random", "barn")
 """How situations are drawn: ``random`` is the campaign's own generation (the paper's);
 ``barn`` takes the 300 BARN worlds (a fixed, hand-curated benchmark, no peers) in an order
 shuffled by the seed, with the campaign's run spec."""
+MAX_BUDGET = 1_000_000
+"""Most situations an evaluation may ask for (``random``; ``barn`` has 300)."""
 CURVE_BUDGETS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
 """Budgets at which the kill-rate curve is given (and the evaluation's own)."""
 
 
-def catalogue() -> list[dict[str, Any]]:
+@functools.cache
+def catalogue() -> tuple[dict[str, Any], ...]:
     """Every seeded fault (``id``, ``controllers``, ``changes``, ``stands_for``), in catalogue
-    order."""
-    return _core.fault_catalogue()
+    order (read from the core once)."""
+    return tuple(_core.fault_catalogue())
+
+
+@functools.cache
+def _slots() -> dict[str, int]:
+    return {f["id"]: 1 + k for k, f in enumerate(catalogue())}
 
 
 def faults_of(controller: str) -> list[str]:
@@ -213,7 +223,7 @@ def plan_faults(
 
 def fault_slot(fault: str) -> int:
     """The fault's position in the run ids of a situation (1 + its catalogue position)."""
-    return 1 + [f["id"] for f in catalogue()].index(fault)
+    return _slots()[fault]
 
 
 class Situations:
@@ -223,34 +233,28 @@ class Situations:
         self, spec: CampaignSpec, seed: int, strategy: str, barn_dir: Path | None = None
     ) -> None:
         self.spec, self.seed, self.strategy = spec, seed, strategy
-        self.barn_dir = barn_dir
+        self.barn: BarnWorlds | None = None
         self.order: list[int] = []
         if strategy == "barn":
-            if barn_dir is None or not (barn_dir / "barn_paths.txt").is_file():
+            try:
+                self.barn = BarnWorlds(barn_dir or Path("."))
+            except OSError as e:
                 raise _core.SpecError(
-                    f"--barn-dir: {barn_dir} holds no BARN data (barn_grids_300x30x30.npy, "
-                    "barn_paths.txt); give ../shared/data/barn"
-                )
+                    f"--barn-dir: {barn_dir} holds no BARN data ({e}); give ../shared/data/barn"
+                ) from None
             rng = np.random.Generator(np.random.PCG64(seed))
             self.order = [int(k) for k in rng.permutation(BARN_WORLDS)]
 
     def most(self) -> int:
         """How many situations there are."""
-        return BARN_WORLDS if self.strategy == "barn" else 1_000_000
+        return BARN_WORLDS if self.strategy == "barn" else MAX_BUDGET
 
     def job(self, i: int) -> Job:
         """Situation ``i``'s job; one whose spec cannot be built carries its error."""
-        if self.strategy == "barn":
-            assert self.barn_dir is not None
-            world = barn_situation(self.barn_dir, self.order[i])
-            situation = json.loads(world.to_json())
+        if self.barn is not None:
+            situation = json.loads(self.barn.situation(self.order[i]).to_json())
             return Job(i, job_seed(self.seed, i), situation, copy.deepcopy(self.spec.run))
-        try:
-            return build_job(self.spec, self.seed, i)
-        except _core.SpecError as e:
-            spec = self.spec
-            situation, run = copy.deepcopy(spec.situation), copy.deepcopy(spec.run)
-            return Job(i, job_seed(self.seed, i), situation, run, f"spec: {e}")
+        return next(stream_jobs(self.spec, self.seed, [i]))
 
 
 def _jobs(situations: Situations, i: int, plan: FaultPlan, faults: list[str]) -> list[Job]:
@@ -323,8 +327,8 @@ def run_faults(
     ``budget`` situations, into store ``db``. ``on_progress(situations done, budget)``;
     ``stop()`` is checked after every run and ends the evaluation after the chunk in flight's
     runs are abandoned (they are run again on resume)."""
-    if not 1 <= budget <= 1_000_000:
-        raise _core.SpecError(f"--budget: {budget} is not in [1, 1000000]")
+    if not 1 <= budget <= MAX_BUDGET:
+        raise _core.SpecError(f"--budget: {budget} is not in [1, {MAX_BUDGET}]")
     workers = check_workers(workers, backend)
     plan = plan_faults(spec, faults, strategy)
     situations = Situations(spec, seed, strategy, barn_dir)
@@ -341,16 +345,16 @@ def run_faults(
     with Store(db, create=True) as store:
         store.lock_for_writing()
         store.start_campaign(
-            spec.source, seed, budget, _core.__version__, _now(), evaluation=plan.as_dict()
+            spec.source, seed, budget, _core.__version__, started_at(), evaluation=plan.as_dict()
         )
         done = store.done_ids()
         executor = Executor(workers, backend, address)
         ran = 0
         interrupted = False
+        if on_progress:
+            on_progress(0, budget)
         for first in range(0, budget, CHUNK):
             chunk = range(first, min(first + CHUNK, budget))
-            if on_progress:
-                on_progress(first, budget)
             alive = _alive_before(store, plan, first)
             jobs = [
                 j for i in chunk for j in _jobs(situations, i, plan, alive) if j.index not in done
@@ -378,16 +382,8 @@ def run_faults(
             if stop is not None and stop():
                 interrupted = chunk.stop < budget
                 break
-    return FaultsResult(ran, _situations(db), interrupted, time.perf_counter() - started)
-
-
-def _now() -> str:
-    return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-def _situations(db: str | Path) -> int:
-    with Store(db) as store:
-        return _evaluated(store)
+        evaluated = _evaluated(store)
+    return FaultsResult(ran, evaluated, interrupted, time.perf_counter() - started)
 
 
 def _evaluated(store: Store) -> int:
@@ -421,19 +417,7 @@ class FaultRow:
     stands_for: str
 
     def as_dict(self) -> dict[str, Any]:
-        return {
-            "id": self.id,
-            "killed": self.killed,
-            "runs_to_first_kill": self.runs_to_first_kill,
-            "by": self.by,
-            "classes": self.classes,
-            "run": self.run,
-            "correct_run": self.correct_run,
-            "score_delta": self.score_delta,
-            "possibly_equivalent": self.possibly_equivalent,
-            "changes": self.changes,
-            "stands_for": self.stands_for,
-        }
+        return dataclasses.asdict(self)
 
 
 @dataclass

@@ -94,17 +94,29 @@ def barn_situation(data_dir: str | Path, index: int) -> Situation:
     course, a Jackal agent following the world's official path to the challenge's goal, no peers
     (the core's ``interchange::barn``). Raises OSError naming the file that is missing or
     malformed."""
-    from sitgen.situation import Situation
+    return BarnWorlds(data_dir).situation(index)
 
-    data_dir = Path(data_dir)
-    if not 0 <= index < BARN_WORLDS:
-        raise _core.SpecError(f"index: {index} is not in [0, {BARN_WORLDS})")
-    grids = _barn_grids(data_dir)
-    path = _barn_paths(data_dir).get(index)
-    if path is None:
-        raise OSError(f"{data_dir / 'barn_paths.txt'}: no path for world {index}")
-    grid = np.ascontiguousarray(grids[index] != 0, dtype=np.uint8)
-    return Situation(_core.barn_situation(grid.tobytes(), path, index), check_start=False)
+
+class BarnWorlds:
+    """The BARN data folder, read once: each world as a situation on demand."""
+
+    def __init__(self, data_dir: str | Path) -> None:
+        data_dir = Path(data_dir)
+        self.grids = _barn_grids(data_dir)
+        self.paths = _barn_paths(data_dir)
+        self.paths_file = data_dir / "barn_paths.txt"
+
+    def situation(self, index: int) -> Situation:
+        """World ``index`` (0-299) as a situation."""
+        from sitgen.situation import Situation
+
+        if not 0 <= index < BARN_WORLDS:
+            raise _core.SpecError(f"index: {index} is not in [0, {BARN_WORLDS})")
+        path = self.paths.get(index)
+        if path is None:
+            raise OSError(f"{self.paths_file}: no path for world {index}")
+        grid = np.ascontiguousarray(self.grids[index] != 0, dtype=np.uint8)
+        return Situation(_core.barn_situation(grid.tobytes(), path, index), check_start=False)
 
 
 def _barn_grids(data_dir: Path) -> npt.NDArray[np.uint8]:

@@ -313,16 +313,15 @@ class Store:
         row = self.db.execute("SELECT plan FROM fault_evaluation WHERE id = 1").fetchone()
         stored_plan = None if row is None else json.loads(row[0])
         if stored_plan != json.loads(json.dumps(evaluation, sort_keys=True)):
-            held = "a campaign" if stored_plan is None else "a fault evaluation"
-            asked = "a campaign" if evaluation is None else "a fault evaluation"
+            held = "campaign" if stored_plan is None else "fault evaluation"
             differs = (
-                f"it holds {held}"
-                if (stored_plan is None) != (evaluation is None)
-                else ("its controller, faults or strategy differ")
+                "its controller, faults or strategy differ"
+                if stored_plan is not None and evaluation is not None
+                else f"it holds a {held}"
             )
             raise StoreError(
-                f"{self.path} holds another {held.split(' ', 1)[1]} ({differs}); give a new --db "
-                f"to start {asked}, or the same options to resume it"
+                f"{self.path} holds another {held} ({differs}); give a new --db to start this "
+                "one, or the same options to resume it"
             )
         same_spec = stored["spec"] == json.loads(json.dumps(spec, sort_keys=True))
         if not same_spec or stored["seed"] != seed:

@@ -133,17 +133,6 @@ fn every_fault_changes_what_each_of_its_controllers_does_on_a_hand_built_situati
     }
 }
 
-#[test]
-fn without_a_fault_a_controller_is_itself() {
-    // Built through the fault path with no fault, each controller drives exactly as before.
-    for (_, s) in situations() {
-        for name in ["snd", "snd_follow", "vo", "dwa"] {
-            let plain = poses(&s, &spec(name, None), None);
-            assert_eq!(poses(&s, &spec(name, None), Some(&plain)), plain, "{name}");
-        }
-    }
-}
-
 /// One SND step with fault `fault` on `ranges` (the SICK geometry, goal 5 m ahead, R = 0.25).
 fn step(fault: Option<Fault>, ranges: &[f64]) -> crate::control::snd::SndDecision {
     let mut p = SndParams::with_radius(0.25);
