@@ -22,6 +22,7 @@ pub mod monitor;
 pub mod rng;
 pub mod run;
 pub mod scoring;
+pub mod shrink;
 pub mod sim;
 pub mod situation;
 pub mod spec;

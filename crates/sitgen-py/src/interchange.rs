@@ -8,7 +8,7 @@ use pyo3::prelude::*;
 use sitgen_core::grid::{Map, OccupancyGrid};
 use sitgen_core::interchange::{barn, image, maps, ros};
 
-fn to_map(occupied: &PyReadonlyArray2<'_, bool>, resolution_m: f64) -> PyResult<Map> {
+pub(crate) fn to_map(occupied: &PyReadonlyArray2<'_, bool>, resolution_m: f64) -> PyResult<Map> {
     let shape = occupied.shape();
     let cells = occupied.as_array().iter().copied().collect();
     Ok(Map {

@@ -7,6 +7,7 @@ mod fault;
 mod interchange;
 mod mission;
 mod run;
+mod shrink;
 mod sim;
 mod situation;
 mod spec;
@@ -43,5 +44,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     campaign::register(m)?;
     failure::register(m)?;
     fault::register(m)?;
+    shrink::register(m)?;
     Ok(())
 }

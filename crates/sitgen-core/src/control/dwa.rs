@@ -540,6 +540,10 @@ fn smooth(g: &[f64], rows: usize, cols: usize) -> Vec<f64> {
 }
 
 impl Controller for Dwa {
+    fn route(&self) -> Option<&RouteFollower> {
+        self.route.as_ref()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.own_radius_m = fault::own_radius_m(self.fault, robot);
         self.footprint = Footprint::of(&robot.body);

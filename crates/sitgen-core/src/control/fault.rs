@@ -400,6 +400,10 @@ impl Seeded {
 }
 
 impl Controller for Seeded {
+    fn route(&self) -> Option<&super::route::RouteFollower> {
+        self.inner.route()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.last = None;
         self.inner.reset(robot);

@@ -157,6 +157,10 @@ impl Follow {
 }
 
 impl Controller for Follow {
+    fn route(&self) -> Option<&RouteFollower> {
+        self.route.as_ref()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         let start = (robot.start.x_m, robot.start.y_m);
         self.leg = (start, start);

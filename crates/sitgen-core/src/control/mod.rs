@@ -39,6 +39,11 @@ pub trait Controller: Send {
     fn reset(&mut self, robot: &Robot);
     /// The command for this step.
     fn act(&mut self, obs: &Observation) -> Command;
+    /// Where the controller is on its route, for controllers that follow one (so that a run
+    /// can be restarted part-way with the rest of each route); `None` for those that do not.
+    fn route(&self) -> Option<&route::RouteFollower> {
+        None
+    }
 }
 
 /// Names of the built-in controllers.

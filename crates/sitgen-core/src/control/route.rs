@@ -41,6 +41,25 @@ impl RouteFollower {
         self.next
     }
 
+    /// The waypoints still ahead, in driving order, for a robot restarted where it stands: a
+    /// `stop` or `reverse` route's points from the one headed for to the end of this pass; a
+    /// `loop` route's whole cycle rotated to begin at the one headed for (so that its legs
+    /// stay the ones it drove). Empty once a `stop` route is complete.
+    pub fn remaining(&self) -> Vec<(f64, f64)> {
+        if self.finished {
+            return Vec::new();
+        }
+        match (self.forward, self.at_end) {
+            (true, AtEnd::Loop) => self.points[self.next..]
+                .iter()
+                .chain(&self.points[1..self.next])
+                .copied()
+                .collect(),
+            (true, _) => self.points[self.next..].to_vec(),
+            (false, _) => self.points[..=self.next].iter().rev().copied().collect(),
+        }
+    }
+
     /// Whether a `stop` route is complete.
     pub fn finished(&self) -> bool {
         self.finished
@@ -109,6 +128,25 @@ mod tests {
             at_end,
         };
         RouteFollower::new(&robot, 0.1)
+    }
+
+    #[test]
+    fn remaining_is_the_route_ahead_in_driving_order() {
+        let mut r = route(AtEnd::Stop);
+        assert_eq!(r.remaining(), vec![(1.0, 0.0), (2.0, 0.0)]);
+        r.target((1.0, 0.0));
+        assert_eq!(r.remaining(), vec![(2.0, 0.0)]);
+        r.target((2.0, 0.0));
+        assert!(r.remaining().is_empty());
+
+        let mut r = route(AtEnd::Loop);
+        r.target((1.0, 0.0));
+        assert_eq!(r.remaining(), vec![(2.0, 0.0), (1.0, 0.0)]);
+
+        let mut r = route(AtEnd::Reverse);
+        r.target((1.0, 0.0));
+        r.target((2.0, 0.0));
+        assert_eq!(r.remaining(), vec![(1.0, 0.0), (0.0, 0.0)]);
     }
 
     #[test]

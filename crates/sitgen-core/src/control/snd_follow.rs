@@ -79,11 +79,6 @@ impl SndFollow {
         &self.snd
     }
 
-    /// The route follower (after reset).
-    pub fn route(&self) -> Option<&RouteFollower> {
-        self.route.as_ref()
-    }
-
     /// The switching distance in force (after reset).
     pub fn switch_m(&self) -> Option<f64> {
         let tol = self.snd.params()?.goal_position_tol;
@@ -95,6 +90,10 @@ impl SndFollow {
 }
 
 impl Controller for SndFollow {
+    fn route(&self) -> Option<&RouteFollower> {
+        self.route.as_ref()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.snd.start(robot);
         let switch_m = self.switch_m().expect("SND has its parameters after start");

@@ -52,6 +52,10 @@ impl Straight {
 }
 
 impl Controller for Straight {
+    fn route(&self) -> Option<&RouteFollower> {
+        self.route.as_ref()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.route = Some(RouteFollower::new(robot, self.switch_m));
     }

@@ -295,6 +295,10 @@ impl Vo {
 }
 
 impl Controller for Vo {
+    fn route(&self) -> Option<&RouteFollower> {
+        self.route.as_ref()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.own_radius_m = robot.body.enclosing_radius();
         self.route = Some(RouteFollower::new(

@@ -56,10 +56,7 @@ impl<'a> Plan<'a> {
         let placeable: Vec<u32> = (0..d2.len() as u32)
             .filter(|&i| d2[i as usize].sqrt() * res > place_beyond)
             .collect();
-        let blocked: Vec<bool> = d2
-            .iter()
-            .map(|&d| d.sqrt() * res <= spec.plan_margin_m)
-            .collect();
+        let blocked = blocked_within(&d2, res, spec.plan_margin_m);
         let free: Vec<u32> = (0..blocked.len() as u32)
             .filter(|&i| !blocked[i as usize])
             .collect();
@@ -95,16 +92,7 @@ impl<'a> Plan<'a> {
 
     /// Whether the straight segment between two world points crosses no blocked cell.
     fn segment_clear(&self, a: (f64, f64), b: (f64, f64)) -> bool {
-        let g = &self.map.grid;
-        let res = self.map.resolution_m;
-        let to_cells = |(x, y): (f64, f64)| (x / res, g.rows as f64 - y / res);
-        for_each_cell(to_cells(a), to_cells(b), |u, v| {
-            u >= 0
-                && v >= 0
-                && (u as usize) < g.cols
-                && (v as usize) < g.rows
-                && !self.blocked[v as usize * g.cols + u as usize]
-        })
+        segment_clear(self.map, &self.blocked, a, b)
     }
 
     /// How far a straight line from `from` in `direction` (radians) stays on free cells of the
@@ -132,6 +120,55 @@ impl<'a> Plan<'a> {
         (u >= 0.0 && v >= 0.0 && (u as usize) < g.cols && (v as usize) < g.rows)
             .then_some((u as usize, v as usize))
     }
+}
+
+/// The cells of the map dilated by `margin_m` (from the squared distances `d2`, in cells, to
+/// the nearest obstacle or the edge): those that planning treats as blocked.
+fn blocked_within(d2: &[f64], resolution_m: f64, margin_m: f64) -> Vec<bool> {
+    d2.iter()
+        .map(|&d| d.sqrt() * resolution_m <= margin_m)
+        .collect()
+}
+
+/// Whether the straight segment between two world points crosses no `blocked` cell of `map`.
+fn segment_clear(map: &Map, blocked: &[bool], a: (f64, f64), b: (f64, f64)) -> bool {
+    let g = &map.grid;
+    let res = map.resolution_m;
+    let to_cells = |(x, y): (f64, f64)| (x / res, g.rows as f64 - y / res);
+    for_each_cell(to_cells(a), to_cells(b), |u, v| {
+        u >= 0
+            && v >= 0
+            && (u as usize) < g.cols
+            && (v as usize) < g.rows
+            && !blocked[v as usize * g.cols + u as usize]
+    })
+}
+
+/// Check that every peer leg (start → waypoints, and a `loop` route's closing leg) is clear on
+/// `map` dilated by `margin_m`, as the generator draws them; the error names the first that
+/// is not.
+pub fn check_peer_legs(map: &Map, margin_m: f64, robots: &[Robot]) -> Result<(), String> {
+    let blocked = blocked_within(
+        &squared_distance_with_edge(&map.grid),
+        map.resolution_m,
+        margin_m,
+    );
+    for r in robots.iter().filter(|r| r.role == Role::Peer) {
+        let mut points = vec![(r.start.x_m, r.start.y_m)];
+        points.extend(r.waypoints.iter().map(|w| (w[0], w[1])));
+        if r.at_end == AtEnd::Loop && points.len() > 2 {
+            points.push(points[1]);
+        }
+        for (k, leg) in points.windows(2).enumerate() {
+            if !segment_clear(map, &blocked, leg[0], leg[1]) {
+                return Err(format!(
+                    "robots[{}]: leg {k} from ({:.2}, {:.2}) to ({:.2}, {:.2}) is not clear of obstacles by {margin_m} m",
+                    r.id, leg[0].0, leg[0].1, leg[1].0, leg[1].1
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Place the robots and plan their routes on `map`. The agent (placement and route) draws

@@ -238,6 +238,35 @@ impl Run {
             .map_or(0, |m| m.waypoints_reached(self.agent))
     }
 
+    /// `situation`'s robots as they stand now (the situation this run was started with): each
+    /// at its pose, at rest, with the rest of its route as its controller's route follower
+    /// has it (or, for a controller that follows none, the waypoints the monitor has not yet
+    /// seen it reach), so that a run of them carries on from here.
+    pub fn robots_now(&self, situation: &Situation) -> Vec<crate::situation::Robot> {
+        let monitor = self
+            .monitor
+            .as_ref()
+            .expect("the monitor lives until the end");
+        situation
+            .robots
+            .iter()
+            .zip(self.world.robots())
+            .zip(&self.controllers)
+            .map(|((r, state), controller)| {
+                let ahead = match controller.as_ref().and_then(|c| c.route()) {
+                    Some(route) => route.remaining().into_iter().map(|(x, y)| [x, y]).collect(),
+                    None => r.waypoints[monitor.waypoints_reached(r.id).min(r.waypoints.len())..]
+                        .to_vec(),
+                };
+                crate::situation::Robot {
+                    start: state.pose,
+                    waypoints: ahead,
+                    ..r.clone()
+                }
+            })
+            .collect()
+    }
+
     /// Whether the run has ended.
     pub fn ended(&self) -> bool {
         self.ended.is_some()
@@ -405,12 +434,22 @@ pub fn run_job(job: &Job) -> JobResult {
 /// Run `jobs` on `threads` threads; results in job order, each independent of the others and
 /// of the thread count.
 pub fn run_batch(jobs: &[Job], threads: usize) -> Vec<JobResult> {
+    par_map(jobs, threads, run_job)
+}
+
+/// `f` of every item on a pool of `threads` threads; results in item order, whatever the
+/// thread count.
+pub fn par_map<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync + Send,
+) -> Vec<R> {
     use rayon::prelude::*;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()
         .expect("a thread pool");
-    pool.install(|| jobs.par_iter().map(run_job).collect())
+    pool.install(|| items.par_iter().map(f).collect())
 }
 
 /// A trajectory as zlib-compressed little-endian f32 (x, y, heading per robot per step): a

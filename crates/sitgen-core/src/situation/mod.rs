@@ -123,6 +123,10 @@ pub struct Provenance {
     pub sitgen_version: String,
     /// `sha256:` + hex digest of the map and robots.
     pub content_hash: String,
+    /// For a situation shrunk from another (`sitgen shrink`), that one's content hash: the
+    /// spec and seed above made the original, not this one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shrunk_from: Option<String>,
 }
 
 /// What the content hash covers.
@@ -220,9 +224,29 @@ impl Situation {
                 seed,
                 sitgen_version: crate::VERSION.into(),
                 content_hash: String::new(),
+                shrunk_from: None,
             },
         };
         s.provenance.content_hash = s.content_hash();
+        s
+    }
+
+    /// A situation shrunk from this one: `map` and `robots` in place of its own, the provenance
+    /// kept and marked as shrunk from this one's content (the original's original, if this one
+    /// was itself shrunk), and a content hash of its own.
+    pub fn shrunk(&self, map: &Map, robots: Vec<Robot>) -> Self {
+        let mut s = Self::new(
+            map,
+            robots,
+            self.provenance.spec.clone(),
+            self.provenance.seed,
+        );
+        s.provenance.shrunk_from = Some(
+            self.provenance
+                .shrunk_from
+                .clone()
+                .unwrap_or_else(|| self.provenance.content_hash.clone()),
+        );
         s
     }
 
