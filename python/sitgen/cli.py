@@ -276,12 +276,23 @@ def _read_text(path: Path, what: str) -> str:
 
 
 def _read_run_spec(path: Path | None) -> dict[str, Any]:
+    """A run spec file: TOML, or JSON (``.json``, as ``sitgen shrink`` writes beside a shrunk
+    situation)."""
     if path is None:
         return {}
     import tomllib
 
+    text = _read_text(path, "run spec")
+    if path.suffix == ".json":
+        try:
+            spec = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise _core.SpecError(f"{path}: JSON syntax error: {e}") from None
+        if not isinstance(spec, dict):
+            raise _core.SpecError(f"{path}: a run spec is a JSON object, not {type(spec).__name__}")
+        return spec
     try:
-        return tomllib.loads(_read_text(path, "run spec"))
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise _core.SpecError(f"{path}: TOML syntax error: {e}") from None
 
@@ -608,6 +619,144 @@ def faults(
             typer.echo(line)
     if result.interrupted:
         raise typer.Exit(130)
+
+
+@app.command()
+def shrink(
+    source: Annotated[Path, typer.Argument(help="Campaign store (.db) or situation file (JSON).")],
+    run_id: Annotated[
+        int | None, typer.Argument(help="The run to shrink (with a campaign store).")
+    ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option(
+            "--output",
+            "-o",
+            help="The minimal situation (JSON); its run spec and figure are written beside it. "
+            "Default: run-RUN.min.json, or SITUATION.min.json.",
+        ),
+    ] = None,
+    controller: Annotated[
+        str | None,
+        typer.Option("--controller", "-c", help="With a situation file: the agent's controller."),
+    ] = None,
+    failure_class: Annotated[
+        str | None,
+        typer.Option(
+            "--class",
+            help="Keep this failure class among those the run shows (default: keep the run's "
+            "class).",
+        ),
+    ] = None,
+    time_limit: Annotated[
+        float | None,
+        typer.Option("--time-limit", help="With a situation file: simulated seconds (600)."),
+    ] = None,
+    spec: Annotated[
+        Path | None,
+        typer.Option("--spec", help="With a situation file: run spec (TOML or JSON)."),
+    ] = None,
+    seed: Annotated[
+        int, typer.Option("--seed", "-s", min=0, help="With a situation file: sensor-noise seed.")
+    ] = 0,
+    max_probes: Annotated[
+        int, typer.Option("--max-probes", min=1, help="Runs one shrink may make.")
+    ] = 500,
+    workers: WorkersOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    allow_edited: AllowEditedOption = False,
+) -> None:
+    """Shrink a failing run to the smallest situation found that still fails with the same
+    failure class for the same controller and run spec (docs/shrink.md): write it, its run
+    spec and a figure of the original beside it, and print what shrank. With a campaign store
+    the result is also kept in the store (its report shows it)."""
+    from sitgen.failures import check_class
+    from sitgen.shrink import ShrinkError, run_spec_for, save_side_by_side, shrink_run
+    from sitgen.shrink import shrink as shrink_situation
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    if failure_class is not None:
+        check_class(failure_class)
+    is_store = source.suffix == ".db" or (source.exists() and _is_sqlite(source))
+    with _progress("shrink", max_probes, "probes") as on_progress:
+        try:
+            if is_store:
+                if run_id is None:
+                    raise UsageError(f"{source}: give the run to shrink: sitgen shrink DB RUN")
+                if controller or time_limit is not None or spec is not None:
+                    raise UsageError(
+                        "--controller, --time-limit and --spec are for a situation file; a "
+                        "stored run is shrunk with its own controller and run spec"
+                    )
+                require_store(source)
+                result = shrink_run(source, run_id, workers, max_probes, failure_class, on_progress)
+            else:
+                if run_id is not None:
+                    raise UsageError(f"{source}: a run id is for a campaign store (.db)")
+                result = shrink_situation(
+                    Situation.load(source, allow_edited),
+                    run_spec_for(controller, time_limit, _read_run_spec(spec)),
+                    seed,
+                    failure_class,
+                    workers,
+                    max_probes,
+                    on_progress,
+                )
+        except ShrinkError as e:
+            what = f"run {run_id}" if is_store else str(source)
+            raise UsageError(f"{what}: {e}") from None
+        except StoreError as e:
+            raise UsageError(str(e)) from None
+    if output is None:
+        output = Path(f"run-{run_id}.min.json") if is_store else source.with_suffix(".min.json")
+    run_spec_path = output.with_suffix(".run.json")
+    figure_path = output.with_suffix(".png")
+    output.parent.mkdir(parents=True, exist_ok=True)
+    result.minimal.save(output)
+    run_spec_path.write_text(json.dumps(result.run_spec, indent=2, sort_keys=True) + "\n")
+    save_side_by_side(result, figure_path)
+    rerun = f"sitgen run {output} --spec {run_spec_path} --seed {result.run_seed}"
+    if format == "json":
+        summary = result.summary()
+        summary.update(
+            situation=str(output), run_spec=str(run_spec_path), figure=str(figure_path), rerun=rerun
+        )
+        typer.echo(json.dumps(summary, indent=2))
+        return
+    before, after = result.before, result.after
+    table = Table(title=f"shrunk: {result.failure_class}")
+    for column in ("", "before", "after"):
+        table.add_column(column, justify="left" if not column else "right")
+    table.add_row("peers", str(before.peers), str(after.peers))
+    table.add_row("obstacle cells", str(before.obstacle_cells), str(after.obstacle_cells))
+    table.add_row("route length", f"{before.route_length_m:.1f} m", f"{after.route_length_m:.1f} m")
+    table.add_row(
+        "time to failure", f"{before.time_to_failure_s:.1f} s", f"{after.time_to_failure_s:.1f} s"
+    )
+    table.add_row(
+        "map",
+        f"{before.map_m[0]:g} × {before.map_m[1]:g} m",
+        f"{after.map_m[0]:g} × {after.map_m[1]:g} m",
+    )
+    Console().print(table)
+    budget = " (the probe budget ran out: --max-probes)" if result.exhausted else ""
+    typer.echo(
+        f"{result.probes} probes ({result.skipped} invalid candidates skipped) in "
+        f"{result.wall_s:.1f} s{budget}"
+    )
+    for step in result.reductions:
+        typer.echo(f"  {step}")
+    typer.echo(f"wrote {output}, {run_spec_path}, {figure_path} (original left, minimal right)")
+    typer.echo(f"rerun: {rerun}")
+
+
+def _is_sqlite(path: Path) -> bool:
+    try:
+        with path.open("rb") as f:
+            return f.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
 
 
 @app.command()

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -103,6 +103,23 @@ CREATE TABLE IF NOT EXISTS fault_kills (
 );
 """
 
+SHRINK_SCHEMA = """
+CREATE TABLE IF NOT EXISTS shrinks (
+    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
+    failure_class TEXT NOT NULL,
+    situation TEXT NOT NULL,
+    run_spec TEXT NOT NULL,
+    run_seed INTEGER NOT NULL,
+    before TEXT NOT NULL,
+    after TEXT NOT NULL,
+    reductions TEXT NOT NULL,
+    probes INTEGER NOT NULL,
+    skipped INTEGER NOT NULL,
+    wall_s REAL NOT NULL,
+    sitgen_version TEXT NOT NULL
+);
+"""
+
 TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
@@ -173,7 +190,7 @@ class Store:
             self._check_tables()
         if version is None:
             with self.db:
-                self.db.executescript(SCHEMA + FAULT_SCHEMA)
+                self.db.executescript(SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA)
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
                     (str(SCHEMA_VERSION),),
@@ -212,6 +229,9 @@ class Store:
                 # Version 3 adds fault evaluations (sitgen faults): two tables, empty for a
                 # campaign.
                 self.db.executescript(FAULT_SCHEMA)
+            if version < 4:
+                # Version 4 adds shrink results (sitgen shrink): one table, empty until then.
+                self.db.executescript(SHRINK_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -343,6 +363,28 @@ class Store:
                     "score_delta) VALUES (?, ?, ?, ?, ?, ?)",
                     (fault, situation, run_id, k.by, json.dumps(list(k.classes)), k.score_delta),
                 )
+
+    def record_shrink(self, run_id: int, row: dict[str, Any]) -> None:
+        """Store (or replace) the shrink result of run ``run_id``: the columns of ``shrinks``."""
+        columns = ["run_id", *row]
+        with self.db:
+            self.db.execute(
+                f"INSERT OR REPLACE INTO shrinks ({', '.join(columns)}) "
+                f"VALUES ({', '.join('?' for _ in columns)})",
+                (run_id, *row.values()),
+            )
+
+    def shrink(self, run_id: int) -> dict[str, Any] | None:
+        """Run ``run_id``'s shrink result (JSON columns parsed), or None."""
+        cursor = self.db.execute("SELECT * FROM shrinks WHERE run_id = ?", (run_id,))
+        row = cursor.fetchone()
+        if row is None:
+            return None
+        names = [d[0] for d in cursor.description]
+        out = dict(zip(names, row, strict=True))
+        for key in ("run_spec", "before", "after", "reductions"):
+            out[key] = json.loads(out[key])
+        return out
 
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
