@@ -473,6 +473,15 @@ def campaign(
     backend: BackendOption = "local",
     address: AddressOption = None,
     top: Annotated[int, typer.Option("--top", help="Top runs in the summary.")] = 5,
+    shrink_top: Annotated[
+        int,
+        typer.Option(
+            "--shrink-top",
+            min=0,
+            help="At the end, shrink the representatives of the top K distinct failures "
+            "(sitgen shrink; kept in the store).",
+        ),
+    ] = 0,
 ) -> None:
     """Generate N randomised situations, run them all, store everything, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
@@ -523,6 +532,26 @@ def campaign(
         )
     if result.interrupted:
         raise typer.Exit(130)
+    if shrink_top:
+        _shrink_top(db, shrink_top, workers)
+
+
+def _shrink_top(db: Path, k: int, workers: int | None) -> None:
+    """Shrink the top ``k`` distinct failures' representatives and print what shrank."""
+    from sitgen.shrink import shrink_top
+
+    typer.echo(f"shrinking the top {k} distinct failures (sitgen shrink {db} RUN):")
+    for run_id, r in shrink_top(db, k, workers):
+        if r is None:
+            typer.echo(f"  run {run_id:>5}  already shrunk")
+            continue
+        a, b = r.before, r.after
+        typer.echo(
+            f"  run {run_id:>5}  shrunk {r.failure_class}: peers {a.peers} → {b.peers}, "
+            f"obstacle cells {a.obstacle_cells} → {b.obstacle_cells}, failure after "
+            f"{a.time_to_failure_s:.1f} → {b.time_to_failure_s:.1f} s ({r.probes} probes, "
+            f"{r.wall_s:.1f} s)"
+        )
 
 
 @app.command()
@@ -670,14 +699,17 @@ def shrink(
     failure class for the same controller and run spec (docs/shrink.md): write it, its run
     spec and a figure of the original beside it, and print what shrank. With a campaign store
     the result is also kept in the store (its report shows it)."""
-    from sitgen.failures import check_class
+    from sitgen.failures import FailureFilterError, check_class
     from sitgen.shrink import ShrinkError, run_spec_for, save_side_by_side, shrink_run
     from sitgen.shrink import shrink as shrink_situation
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
     if failure_class is not None:
-        check_class(failure_class)
+        try:
+            check_class(failure_class)
+        except FailureFilterError as e:
+            raise UsageError(str(e)) from None
     is_store = source.suffix == ".db" or (source.exists() and _is_sqlite(source))
     with _progress("shrink", max_probes, "probes") as on_progress:
         try:

@@ -597,6 +597,7 @@ def _run_page(
     )
     if deciding:
         body.append("<p>Marked: the events that decided the failure class.</p>")
+    body.append(_minimal_section(store, run_id, out))
     body.append(
         f"<h2>Rerun</h2><p><code>sitgen rerun {html.escape(db_name)} {run_id}</code> regenerates "
         "the situation from its spec and seed, runs it again and confirms the same event log."
@@ -604,6 +605,49 @@ def _run_page(
     )
     scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
     return _page(f"sitgen run {run_id}", "".join(body), scripts), script
+
+
+def _minimal_section(store: Store, run_id: int, out: Path) -> str:
+    """The run's shrink, if the store keeps one: what shrank, the minimal situation's figure
+    (with its run), and the files and command that rerun it."""
+    shrunk = store.shrink(run_id)
+    if shrunk is None:
+        return ""
+    from sitgen.run import run
+
+    name = f"run-{run_id}-min"
+    minimal = Situation(shrunk["situation"])
+    minimal.save(out / f"{name}.json")
+    (out / f"{name}.run.json").write_text(json.dumps(shrunk["run_spec"], indent=2) + "\n")
+    record = run(minimal, seed=shrunk["run_seed"], spec=shrunk["run_spec"])
+    dt_s = float(shrunk["run_spec"].get("sim", {}).get("dt_s", 0.1))
+    save_situation_figure(minimal, out / f"{name}.png", record.trajectory, record.events, dt_s)
+    a, b = shrunk["before"], shrunk["after"]
+    rows = [
+        ("peers", a["peers"], b["peers"]),
+        ("obstacle cells", a["obstacle_cells"], b["obstacle_cells"]),
+        ("route length", f"{a['route_length_m']:.1f} m", f"{b['route_length_m']:.1f} m"),
+        (
+            "time to failure",
+            f"{a['time_to_failure_s']:.1f} s",
+            f"{b['time_to_failure_s']:.1f} s",
+        ),
+        ("map", "{:g} × {:g} m".format(*a["map_m"]), "{:g} × {:g} m".format(*b["map_m"])),
+    ]
+    table = "".join(
+        f"<tr><td>{what}</td><td class='num'>{x}</td><td class='num'>{y}</td></tr>"
+        for what, x, y in rows
+    )
+    command = f"sitgen run {name}.json --spec {name}.run.json --seed {shrunk['run_seed']}"
+    return (
+        f"<section id='minimal'><h2>Minimal repro</h2><p>The smallest situation found that "
+        f"still fails as <b>{html.escape(shrunk['failure_class'])}</b> with the same controller "
+        f"and run spec ({shrunk['probes']} probes, docs/shrink.md):</p>"
+        f"<table><tr><th></th><th>before</th><th>after</th></tr>{table}</table>"
+        f"<img class='figure' src='{name}.png' alt='minimal situation of run {run_id}'>"
+        f"<p><a href='{name}.json'>{name}.json</a>, <a href='{name}.run.json'>{name}.run.json"
+        f"</a>; in this folder: <code>{html.escape(command)}</code></p></section>"
+    )
 
 
 FEATURE_WORDS = {

@@ -69,6 +69,9 @@ rotation centre passed, started at or is to drive to: the narrowest that still f
 (a margin too narrow for a body is a candidate the start check skips)."""
 
 
+NOTHING_TO_SHRINK = "the run does not fail (it has no failure class): nothing to shrink"
+
+
 class ShrinkError(ValueError):
     """A situation that cannot be shrunk (it does not fail, or not the way asked)."""
 
@@ -452,7 +455,7 @@ class Shrinker:
         if self.target.met(probe):
             return
         if probe["class"] is None:
-            raise ShrinkError("the run does not fail (it has no failure class): nothing to shrink")
+            raise ShrinkError(NOTHING_TO_SHRINK)
         shown = ", ".join(k for k, _ in probe["first_s"])
         raise ShrinkError(
             f"--class: the run fails as {probe['class']}, and its events show {shown}, "
@@ -550,6 +553,8 @@ def shrink(
     )
     if failure_class is None:
         first = shrinker.probe(shrinker.start)
+        if first["ok"] and first["class"] is None:
+            raise ShrinkError(NOTHING_TO_SHRINK)
         shrinker.target = Target(first.get("class") or "")
     minimal, reductions = shrinker.shrink()
     return ShrinkResult(
@@ -568,6 +573,24 @@ def shrink(
     )
 
 
+def shrink_top(
+    db: str | Path,
+    k: int,
+    workers: int | None = None,
+    max_probes: int = MAX_PROBES,
+) -> list[tuple[int, ShrinkResult | None]]:
+    """Shrink the representatives of the campaign's top ``k`` distinct failures (those not
+    shrunk already, so that a resumed campaign does not shrink them again). Returns (run,
+    result) for each, None where the store already held its shrink."""
+    from sitgen.failures import distinct_failures
+    from sitgen.store import Store
+
+    with Store(db) as store:
+        runs = [f.representative for f in distinct_failures(store)[: max(0, k)]]
+        done = {r for r in runs if store.shrink(r) is not None}
+    return [(r, None if r in done else shrink_run(db, r, workers, max_probes)) for r in runs]
+
+
 def shrink_run(
     db: str | Path,
     run_id: int,
@@ -583,9 +606,9 @@ def shrink_run(
     with Store(db) as store:
         row = store.run_row(run_id)
     if row["failure"] is None:
-        raise ShrinkError(f"run {run_id} has no failure class: nothing to shrink")
+        raise ShrinkError(NOTHING_TO_SHRINK)
     if row["situation"] is None:
-        raise ShrinkError(f"run {run_id}: its situation was not generated, so it cannot be shrunk")
+        raise ShrinkError("its situation was not generated, so there is nothing to shrink")
     result = shrink(
         Situation(row["situation"], check_start=False),
         row["run_spec"],

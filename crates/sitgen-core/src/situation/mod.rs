@@ -232,8 +232,7 @@ impl Situation {
     }
 
     /// A situation shrunk from this one: `map` and `robots` in place of its own, the provenance
-    /// kept and marked as shrunk from this one's content (the original's original, if this one
-    /// was itself shrunk), and a content hash of its own.
+    /// kept and marked as shrunk from this one's content hash, and a content hash of its own.
     pub fn shrunk(&self, map: &Map, robots: Vec<Robot>) -> Self {
         let mut s = Self::new(
             map,
@@ -241,12 +240,7 @@ impl Situation {
             self.provenance.spec.clone(),
             self.provenance.seed,
         );
-        s.provenance.shrunk_from = Some(
-            self.provenance
-                .shrunk_from
-                .clone()
-                .unwrap_or_else(|| self.provenance.content_hash.clone()),
-        );
+        s.provenance.shrunk_from = Some(self.provenance.content_hash.clone());
         s
     }
 
@@ -290,6 +284,9 @@ impl Situation {
     pub fn from_json(text: &str) -> Result<Self, SpecError> {
         let mut de = serde_json::Deserializer::from_str(text);
         let s: Situation = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            if e.inner().is_syntax() || e.inner().is_eof() {
+                return SpecError::new("", format!("not JSON: {}", e.inner()));
+            }
             let path = e.path().to_string();
             let path = if path == "." { String::new() } else { path };
             SpecError::new(path, e.inner().to_string())
