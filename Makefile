@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -39,6 +39,9 @@ bench: install-test
 # Kill rate of snd_follow's seeded faults by generation strategy (about 15 minutes on 2 cores).
 bench-faults: install-test
 	$(BIN)/python benches/faults.py
+
+bench-shrink: install-test
+	$(BIN)/python benches/shrink.py
 
 # IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
 # with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).

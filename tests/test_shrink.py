@@ -232,6 +232,10 @@ def test_a_user_controller_is_refused(head_on: Situation, tmp_path: Path) -> Non
     head_on.save(path)
     done = run_cli("shrink", str(path), "-c", "python:tests.controllers.pycontrollers:Forward")
     assert done.returncode == 2 and "built-in controllers only" in done.stderr
+    done = run_cli("shrink", str(path), "--max-probes", "0")
+    assert done.returncode == 2 and "--max-probes: 0 is not in [1, 1000000]" in done.stderr
+    done = run_cli("shrink", str(path), "--workers", "100000")
+    assert done.returncode == 2 and "--workers: 100000 is not in" in done.stderr
 
 
 # --- a campaign's runs

@@ -689,7 +689,7 @@ def shrink(
         int, typer.Option("--seed", "-s", min=0, help="With a situation file: sensor-noise seed.")
     ] = 0,
     max_probes: Annotated[
-        int, typer.Option("--max-probes", min=1, help="Runs one shrink may make.")
+        int, typer.Option("--max-probes", help="Runs one shrink may make (default 500).")
     ] = 500,
     workers: WorkersOption = None,
     format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",

@@ -33,7 +33,6 @@ import hashlib
 import itertools
 import json
 import math
-import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -45,12 +44,16 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from sitgen import _core
+from sitgen.campaign import check_workers
 from sitgen.controllers import is_user_controller
 from sitgen.situation import Situation
 
 MAX_PROBES = 500
 """Probes (runs) one shrink may make by default; shrinking stops where the budget ends, with
 the smallest situation found so far."""
+
+MOST_PROBES = 1_000_000
+"""The largest budget one shrink may be given (docs/limits.md)."""
 
 PASSES = 3
 """Rounds of all reductions at most (a round that reduces nothing ends shrinking earlier)."""
@@ -539,15 +542,16 @@ def shrink(
             f"controller {named!r}: shrinking runs built-in controllers only (its probes run "
             "in Rust); run the situation with a built-in controller"
         )
-    if max_probes < 1:
-        raise ShrinkError(f"--max-probes: {max_probes}; expected at least 1")
+    if not 1 <= max_probes <= MOST_PROBES:
+        raise ShrinkError(f"--max-probes: {max_probes} is not in [1, {MOST_PROBES}]")
+    threads = check_workers(workers, "local")
     started = time.perf_counter()
     shrinker = Shrinker(
         situation,
         run_spec,
         run_seed,
         Target(failure_class or "", shown=failure_class is not None),
-        workers or os.cpu_count() or 1,
+        threads,
         max_probes,
         on_progress,
     )
