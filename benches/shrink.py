@@ -73,9 +73,7 @@ def main() -> None:
                 + ("" if same else "  RERUN DIFFERS")
             )
     medians = {
-        f"{m}_reduction": statistics.median(
-            reduction(r["before"][m], r["after"][m]) for r in rows
-        )
+        f"{m}_reduction": statistics.median(reduction(r["before"][m], r["after"][m]) for r in rows)
         for m in MEASURES
     }
     medians["probes"] = statistics.median(r["probes"] for r in rows)

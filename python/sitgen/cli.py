@@ -700,7 +700,8 @@ def shrink(
     spec and a figure of the original beside it, and print what shrank. With a campaign store
     the result is also kept in the store (its report shows it)."""
     from sitgen.failures import FailureFilterError, check_class
-    from sitgen.shrink import ShrinkError, run_spec_for, save_side_by_side, shrink_run
+    from sitgen.run import run_spec_with
+    from sitgen.shrink import ShrinkError, save_side_by_side, shrink_run
     from sitgen.shrink import shrink as shrink_situation
 
     if format not in ("table", "json"):
@@ -728,7 +729,7 @@ def shrink(
                     raise UsageError(f"{source}: a run id is for a campaign store (.db)")
                 result = shrink_situation(
                     Situation.load(source, allow_edited),
-                    run_spec_for(controller, time_limit, _read_run_spec(spec)),
+                    run_spec_with(_read_run_spec(spec), time_limit, controller),
                     seed,
                     failure_class,
                     workers,

@@ -112,6 +112,22 @@ def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dic
     }
 
 
+def run_spec_with(
+    spec: Mapping[str, Any] | None,
+    time_limit: float | None = None,
+    controller: str | None = None,
+    params: Mapping[str, float] | None = None,
+) -> dict[str, Any]:
+    """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
+    with ``params``) given on top, as ``sitgen run``'s options give them."""
+    run_spec: dict[str, Any] = dict(spec or {})
+    if time_limit is not None:
+        run_spec["time_limit_s"] = time_limit
+    if controller:
+        run_spec["controller"] = {"name": controller, "params": dict(params or {})}
+    return run_spec
+
+
 def run(
     situation: Situation | str | Path,
     controller: Any = None,
@@ -132,12 +148,8 @@ def run(
     """
     if not isinstance(situation, Situation):
         situation = Situation.load(situation)
-    run_spec: dict[str, Any] = dict(spec or {})
-    if time_limit is not None:
-        run_spec["time_limit_s"] = time_limit
     name = _controller_name(controller)
-    if name:
-        run_spec["controller"] = {"name": name, "params": dict(params or {})}
+    run_spec = run_spec_with(spec, time_limit, name, params)
     core = _core.Run(situation.to_json(), json.dumps(run_spec), seed)
     if core.agent_is_external:
         _drive(core, controller, situation, run_spec, step_timeout_s)

@@ -126,7 +126,8 @@ class ShrinkResult:
     before: Measure
     after: Measure
     probes: int
-    """Runs made (the original's and every valid candidate's)."""
+    """Runs made: the original's, every valid candidate's, and the runs that find where
+    robots stood or drove (a restart's partial run counts as one)."""
     skipped: int
     """Invalid candidates skipped without a run."""
     wall_s: float
@@ -442,6 +443,8 @@ class Shrinker:
         for _ in range(PASSES):
             changed = False
             for name, method in self.REDUCTIONS:
+                # Restarts and path runs count as probes too; stop once they use the budget.
+                self.exhausted |= self.probes >= self.max_probes
                 if self.exhausted:
                     break
                 smaller = getattr(self, method)(c)
@@ -508,19 +511,6 @@ def _shift(robot: dict[str, Any], dx: float, dy: float) -> dict[str, Any]:
         "start": {**start, "x_m": start["x_m"] + dx, "y_m": start["y_m"] + dy},
         "waypoints": [[x + dx, y + dy] for x, y in robot["waypoints"]],
     }
-
-
-def run_spec_for(
-    controller: str | None, time_limit: float | None, spec: dict[str, Any] | None
-) -> dict[str, Any]:
-    """The run spec of ``sitgen run``'s options: ``spec`` with the time limit and controller
-    given."""
-    run_spec: dict[str, Any] = dict(spec or {})
-    if time_limit is not None:
-        run_spec["time_limit_s"] = time_limit
-    if controller:
-        run_spec["controller"] = {"name": controller, "params": {}}
-    return run_spec
 
 
 def shrink(
