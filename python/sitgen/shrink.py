@@ -200,7 +200,8 @@ def ddmin(items: Sequence[Any], fails: Callable[[list[list[Any]]], list[bool]]) 
         if found is not None:
             current, n = found, 2
             continue
-        complements = [[x for x in current if x not in chunk] for chunk in chunks]
+        dropped = [set(chunk) for chunk in chunks]
+        complements = [[x for x in current if x not in d] for d in dropped]
         found = _first(complements if len(chunks) > 2 else [], fails)
         if found is not None:
             current, n = found, max(n - 1, 2)
