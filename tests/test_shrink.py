@@ -305,3 +305,10 @@ def test_sitgen_shrink_of_a_stored_run_and_its_report(campaign: Path, tmp_path: 
     assert "id='minimal'" in page and f"run-{failing}-min.json" in page
     assert (report / f"run-{failing}-min.json").exists()
     assert (report / f"run-{failing}-min.png").stat().st_size > 0
+    index = (report / "index.html").read_text()
+    shrunk_cards = index.count("class='minimal'")
+    with sqlite3.connect(campaign) as db:
+        representatives_shrunk = db.execute("SELECT count(*) FROM shrinks").fetchone()[0]
+    # The cards of shrunk representatives link their minimal repro (the stored run above may
+    # or may not be a representative).
+    assert 1 <= shrunk_cards <= representatives_shrunk

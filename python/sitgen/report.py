@@ -141,10 +141,15 @@ INDEX_SCRIPT = """
 
 
 def _distinct_section(
-    failures: list[DistinctFailure], pages: set[int], ranks: dict[int, int], total: int
+    failures: list[DistinctFailure],
+    pages: set[int],
+    ranks: dict[int, int],
+    total: int,
+    shrunk: dict[int, dict[str, Any]],
 ) -> str:
     """One card per distinct failure, most dangerous first: its sentence, runs, share, best
-    score and its representative run's figure, linked to the run's page."""
+    score and its representative run's figure, linked to the run's page (and to its minimal
+    repro where the representative was shrunk)."""
     body = ["<section id='distinct'><h2>Distinct failures</h2>"]
     if not failures:
         body.append("<p id='no-failures'>No failures: no run has a failure class.</p></section>")
@@ -165,6 +170,13 @@ def _distinct_section(
                 f"alt='situation figure of run {run_id}'></a>"
             )
             link = f"<a class='representative' href='run-{run_id}.html'>{where} →</a>"
+            if run_id in shrunk:
+                after = shrunk[run_id]
+                link += (
+                    f"; <a class='minimal' href='run-{run_id}.html#minimal'>minimal repro</a>: "
+                    f"{after['peers']} peer{'s' if after['peers'] != 1 else ''}, fails after "
+                    f"{after['time_to_failure_s']:.1f} s"
+                )
         else:
             figure = ""
             link = f"<span class='representative'>{where} (no stored trajectory)</span>"
@@ -262,7 +274,11 @@ def _index(
     body = [f"<h1>{title}</h1>"]
     if faults is not None:
         body.append(_faults_section(faults, pages))
-    body.append(_distinct_section(failures, pages, ranks, len(rows)))
+    shrunk = {
+        run_id: json.loads(after)
+        for run_id, after in store.db.execute("SELECT run_id, after FROM shrinks")
+    }
+    body.append(_distinct_section(failures, pages, ranks, len(rows), shrunk))
     body.append("<h2>Campaign</h2><table class='facts'>")
     body += [f"<tr><td>{k}</td><td>{html.escape(str(v))}</td></tr>" for k, v in facts]
     body.append("</table><details><summary>campaign spec</summary><pre>")
