@@ -47,12 +47,32 @@ impl SpecError {
 
 impl fmt::Display for SpecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.path.is_empty() {
-            write!(f, "{}", self.message)
+        let (path, message) = (one_line(&self.path), one_line(&self.message));
+        if path.is_empty() {
+            write!(f, "{message}")
         } else {
-            write!(f, "{}: {}", self.path, self.message)
+            write!(f, "{path}: {message}")
         }
     }
+}
+
+/// `text` with control characters escaped (`\n`, `\u{1b}`): a field name or value quoted from a
+/// file may hold them, and an error stays one line.
+fn one_line(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.chars().any(char::is_control) {
+        return text.into();
+    }
+    text.chars()
+        .flat_map(|c| {
+            let escaped: Vec<char> = if c.is_control() {
+                c.escape_default().collect()
+            } else {
+                vec![c]
+            };
+            escaped
+        })
+        .collect::<String>()
+        .into()
 }
 
 impl std::error::Error for SpecError {}
@@ -150,3 +170,17 @@ macro_rules! kind_tagged {
     };
 }
 pub(crate) use kind_tagged;
+
+#[cfg(test)]
+mod tests {
+    use super::SpecError;
+
+    #[test]
+    fn an_error_quoting_a_newline_stays_one_line() {
+        let e = SpecError::new("robots[0]", "unknown field `\n\t`, expected `id`");
+        assert_eq!(
+            e.to_string(),
+            "robots[0]: unknown field `\\n\\t`, expected `id`"
+        );
+    }
+}
