@@ -258,13 +258,16 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_campaign_shrink_top_keeps_the_representatives_shrinks(campaign: Path) -> None:
     with sqlite3.connect(campaign) as db:
         rows = db.execute(
-            "SELECT run_id, failure_class, situation, run_spec, run_seed, after FROM shrinks"
+            "SELECT run_id, failure_class, situation, run_spec, run_seed, before, after "
+            "FROM shrinks"
         ).fetchall()
         classes = dict(db.execute("SELECT id, failure_class FROM runs"))
     assert 1 <= len(rows) <= 2
-    for run_id, failure_class, situation, run_spec, run_seed, after in rows:
+    for run_id, failure_class, situation, run_spec, run_seed, before, after in rows:
         assert classes[run_id] == failure_class
-        assert json.loads(after)["peers"] >= 0
+        a, b = json.loads(before), json.loads(after)
+        assert b["peers"] <= a["peers"] and b["obstacle_cells"] <= a["obstacle_cells"]
+        assert b["time_to_failure_s"] <= a["time_to_failure_s"]
         record = sitgen.run(Situation(situation), spec=json.loads(run_spec), seed=run_seed)
         assert record.failure is not None and record.failure["class"] == failure_class
     # Run again, the campaign is complete and its shrinks are not redone.

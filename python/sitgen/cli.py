@@ -51,6 +51,28 @@ BackendOption = Annotated[str, typer.Option("--backend", help="local or ray.")]
 AddressOption = Annotated[
     str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
 ]
+ControllerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--controller",
+        "-c",
+        help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS or "
+        "'cmd:PROGRAM ARGS'. Default: the situation's.",
+    ),
+]
+TimeLimitOption = Annotated[
+    float | None,
+    typer.Option("--time-limit", help="Simulated seconds before a timeout (default 600)."),
+]
+SensorSeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Sensor-noise seed.")]
+RunSpecOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--spec",
+        help="Run spec (TOML, or JSON as sitgen shrink writes): time_limit_s and the sim, "
+        "monitor and scoring tables.",
+    ),
+]
 AllowEditedOption = Annotated[
     bool,
     typer.Option(
@@ -300,24 +322,10 @@ def _read_run_spec(path: Path | None) -> dict[str, Any]:
 @app.command("run")
 def run_command(
     situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
-    controller: Annotated[
-        str | None,
-        typer.Option(
-            "--controller",
-            "-c",
-            help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS or "
-            "'cmd:PROGRAM ARGS'. Default: the situation's.",
-        ),
-    ] = None,
-    time_limit: Annotated[
-        float | None,
-        typer.Option("--time-limit", help="Simulated seconds before a timeout (default 600)."),
-    ] = None,
-    seed: Annotated[int, typer.Option("--seed", "-s", min=0, help="Sensor-noise seed.")] = 0,
-    spec: Annotated[
-        Path | None,
-        typer.Option("--spec", help="Run spec (TOML): time_limit_s, [sim], [monitor], [scoring]."),
-    ] = None,
+    controller: ControllerOption = None,
+    time_limit: TimeLimitOption = None,
+    seed: SensorSeedOption = 0,
+    spec: RunSpecOption = None,
     events: Annotated[
         Path | None, typer.Option("--events", help="Write the event log here (JSON Lines).")
     ] = None,
@@ -665,10 +673,7 @@ def shrink(
             "Default: run-RUN.min.json, or SITUATION.min.json.",
         ),
     ] = None,
-    controller: Annotated[
-        str | None,
-        typer.Option("--controller", "-c", help="With a situation file: the agent's controller."),
-    ] = None,
+    controller: ControllerOption = None,
     failure_class: Annotated[
         str | None,
         typer.Option(
@@ -677,17 +682,9 @@ def shrink(
             "class).",
         ),
     ] = None,
-    time_limit: Annotated[
-        float | None,
-        typer.Option("--time-limit", help="With a situation file: simulated seconds (600)."),
-    ] = None,
-    spec: Annotated[
-        Path | None,
-        typer.Option("--spec", help="With a situation file: run spec (TOML or JSON)."),
-    ] = None,
-    seed: Annotated[
-        int, typer.Option("--seed", "-s", min=0, help="With a situation file: sensor-noise seed.")
-    ] = 0,
+    time_limit: TimeLimitOption = None,
+    spec: RunSpecOption = None,
+    seed: SensorSeedOption = 0,
     max_probes: Annotated[
         int, typer.Option("--max-probes", help="Runs one shrink may make (default 500).")
     ] = 500,
@@ -698,7 +695,8 @@ def shrink(
     """Shrink a failing run to the smallest situation found that still fails with the same
     failure class for the same controller and run spec (docs/shrink.md): write it, its run
     spec and a figure of the original beside it, and print what shrank. With a campaign store
-    the result is also kept in the store (its report shows it)."""
+    the result is also kept in the store (its report shows it). --controller, --time-limit,
+    --spec and --seed are for a situation file: a stored run keeps its own."""
     from sitgen.failures import FailureFilterError, check_class
     from sitgen.run import run_spec_with
     from sitgen.shrink import ShrinkError, save_side_by_side, shrink_run
@@ -711,7 +709,7 @@ def shrink(
             check_class(failure_class)
         except FailureFilterError as e:
             raise UsageError(str(e)) from None
-    is_store = source.suffix == ".db" or (source.exists() and _is_sqlite(source))
+    is_store = _is_store(source)
     with _progress("shrink", max_probes, "probes") as on_progress:
         try:
             if is_store:
@@ -782,14 +780,6 @@ def shrink(
         typer.echo(f"  {step}")
     typer.echo(f"wrote {output}, {run_spec_path}, {figure_path} (original left, minimal right)")
     typer.echo(f"rerun: {rerun}")
-
-
-def _is_sqlite(path: Path) -> bool:
-    try:
-        with path.open("rb") as f:
-            return f.read(16) == b"SQLite format 3\x00"
-    except OSError:
-        return False
 
 
 @app.command()

@@ -36,6 +36,7 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -172,7 +173,7 @@ class Candidate:
     occupied: npt.NDArray[np.bool_]
     robots: tuple[dict[str, Any], ...]
 
-    @property
+    @cached_property
     def key(self) -> str:
         h = hashlib.sha256(self.occupied.tobytes())
         h.update(repr(self.occupied.shape).encode())
@@ -226,24 +227,26 @@ class Shrinker:
         original: Situation,
         run_spec: dict[str, Any],
         run_seed: int,
-        target: Target,
+        failure_class: str | None,
         workers: int,
         max_probes: int,
         on_progress: Callable[[int, int], None] | None = None,
     ) -> None:
+        """Bind a shrink to ``original`` run with ``run_spec`` and ``run_seed``; runs it once to
+        find what must be kept (raises :exc:`ShrinkError` if it does not fail so)."""
         self.original = original
         self.original_json = original.to_json()
         self.resolution = original.grid.resolution
         self.run_spec = run_spec
         self.run_json = json.dumps(run_spec)
         self.run_seed = run_seed
-        self.target = target
         self.workers = workers
         self.max_probes = max_probes
         self.on_progress = on_progress
         self.leg_margin = _core.shrink_leg_margin(self.original_json)
         self.cache: dict[str, dict[str, Any]] = {}
         self.paths: dict[str, npt.NDArray[np.float64]] = {}
+        self.files: dict[str, str] = {}
         self.start = Candidate(
             np.ascontiguousarray(original.grid.occupied, dtype=bool),
             tuple(json.loads(self.original_json)["robots"]),
@@ -252,13 +255,22 @@ class Shrinker:
         self.skipped = 0
         self.exhausted = False
         self.dt_s = float(run_spec.get("sim", {}).get("dt_s", 0.1))
+        self.target = self._target(failure_class)
 
     # Building and probing candidates.
 
     def situation_json(self, c: Candidate) -> str:
+        """``c`` as a situation file."""
         return _core.shrunk_situation(
             self.original_json, c.occupied, self.resolution, json.dumps(list(c.robots))
         )
+
+    def kept_json(self, c: Candidate) -> str:
+        """A candidate that was kept (restarts and path runs of it, and the result) as a
+        situation file, built once; probes of the rest build theirs and let it go."""
+        if c.key not in self.files:
+            self.files[c.key] = self.situation_json(c)
+        return self.files[c.key]
 
     def outcomes(self, candidates: Sequence[Candidate]) -> list[dict[str, Any]]:
         """Each candidate's probe (from the cache, or run now as one batch); a candidate past
@@ -303,7 +315,7 @@ class Shrinker:
 
         if c.key not in self.paths:
             self.probes += 1
-            situation = Situation(self.situation_json(c))
+            situation = Situation(self.kept_json(c))
             self.paths[c.key] = run(situation, seed=self.run_seed, spec=self.run_spec).trajectory
         return self.paths[c.key]
 
@@ -311,7 +323,7 @@ class Shrinker:
         """``c``'s robots as they stand ``t_s`` into its run. One more (partial) run."""
         self.probes += 1
         robots: list[dict[str, Any]] = json.loads(
-            _core.robots_at(self.situation_json(c), self.run_json, self.run_seed, t_s)
+            _core.robots_at(self.kept_json(c), self.run_json, self.run_seed, t_s)
         )
         return robots
 
@@ -439,7 +451,6 @@ class Shrinker:
     def shrink(self) -> tuple[Candidate, list[str]]:
         """The smallest failing candidate found, and what helped."""
         c = self.start
-        self._check_original(self.probe(c))
         done: list[str] = []
         for _ in range(PASSES):
             changed = False
@@ -456,18 +467,24 @@ class Shrinker:
                 break
         return c, done
 
-    def _check_original(self, probe: dict[str, Any]) -> None:
+    def _target(self, failure_class: str | None) -> Target:
+        """What candidates must keep, from the original's run: its class, or with
+        ``failure_class`` that class among those its events show."""
+        probe = self.probe(self.start)
         if not probe["ok"]:
             raise ShrinkError(f"the situation cannot be run: {probe['problem']}")
-        if self.target.met(probe):
-            return
         if probe["class"] is None:
             raise ShrinkError(NOTHING_TO_SHRINK)
-        shown = ", ".join(k for k, _ in probe["first_s"])
-        raise ShrinkError(
-            f"--class: the run fails as {probe['class']}, and its events show {shown}, "
-            f"not {self.target.failure_class}"
-        )
+        if failure_class is None:
+            return Target(probe["class"])
+        target = Target(failure_class, shown=True)
+        if not target.met(probe):
+            shown = ", ".join(k for k, _ in probe["first_s"])
+            raise ShrinkError(
+                f"--class: the run fails as {probe['class']}, and its events show {shown}, "
+                f"not {failure_class}"
+            )
+        return target
 
     def measure(self, c: Candidate) -> Measure:
         agent = c.robots[0]
@@ -538,23 +555,12 @@ def shrink(
     threads = check_workers(workers, "local")
     started = time.perf_counter()
     shrinker = Shrinker(
-        situation,
-        run_spec,
-        run_seed,
-        Target(failure_class or "", shown=failure_class is not None),
-        threads,
-        max_probes,
-        on_progress,
+        situation, run_spec, run_seed, failure_class, threads, max_probes, on_progress
     )
-    if failure_class is None:
-        first = shrinker.probe(shrinker.start)
-        if first["ok"] and first["class"] is None:
-            raise ShrinkError(NOTHING_TO_SHRINK)
-        shrinker.target = Target(first.get("class") or "")
     minimal, reductions = shrinker.shrink()
     return ShrinkResult(
         original=situation,
-        minimal=Situation(shrinker.situation_json(minimal)),
+        minimal=Situation(shrinker.kept_json(minimal)),
         failure_class=shrinker.target.failure_class,
         run_spec=run_spec,
         run_seed=run_seed,

@@ -45,6 +45,24 @@ pub fn situation(size: usize, occupied: &[(usize, usize)], robots: Vec<Robot>) -
     Situation::new(&map, robots, SituationSpec::default(), 0)
 }
 
+/// The occupied cells of a map `size` cells square at 0.1 m whose squares lie inside
+/// [x0, x1] × [y0, y1] (metres; give bounds on the 0.1 m grid).
+pub fn block(size: usize, (x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> Vec<(usize, usize)> {
+    let inside = |lo: f64, hi: f64, k: usize| {
+        let a = k as f64 * 0.1;
+        a >= lo - 1e-9 && a + 0.1 <= hi + 1e-9
+    };
+    let mut cells = Vec::new();
+    for row in 0..size {
+        for col in 0..size {
+            if inside(x0, x1, col) && inside(y0, y1, size - 1 - row) {
+                cells.push((row, col));
+            }
+        }
+    }
+    cells
+}
+
 /// `../shared/data` beside the repository (or `$SITGEN_SHARED_DATA`) joined with `rel`, if it
 /// exists; tests that need it print why they skip when it does not.
 pub fn shared(rel: &str) -> Option<PathBuf> {

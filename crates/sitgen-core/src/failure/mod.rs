@@ -246,11 +246,22 @@ fn oscillating_at(events: &[Event], agent: u32, t_s: f64) -> bool {
 /// Every class a run's events show, most severe first (what a kill compares: a class of a
 /// faulty run that the correct run does not show is a new failure).
 pub fn classes(events: &[Event], agent: u32) -> Vec<FailureClass> {
-    let found: std::collections::BTreeSet<FailureClass> = events
-        .iter()
-        .filter_map(|e| class_of(e, events, agent))
-        .collect();
-    found.into_iter().collect()
+    first_seen(events, agent)
+        .into_iter()
+        .map(|(c, _)| c)
+        .collect()
+}
+
+/// Every class a run's events show, most severe first, with when the first event of each
+/// began (simulated seconds): what shrinking keeps, and its time to failure.
+pub fn first_seen(events: &[Event], agent: u32) -> Vec<(FailureClass, f64)> {
+    let mut first: BTreeMap<FailureClass, f64> = BTreeMap::new();
+    for e in events {
+        if let Some(class) = class_of(e, events, agent) {
+            first.entry(class).or_insert(e.start_s);
+        }
+    }
+    first.into_iter().collect()
 }
 
 /// The failure of a run: the most severe class among its events, `None` if it has no scored

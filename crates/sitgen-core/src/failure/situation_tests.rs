@@ -12,25 +12,7 @@ use crate::monitor::{Event, EventKind, Party};
 use crate::run::tests::{close, rear_approach, run_with_still_agent, spec, FRONT, REAR};
 use crate::run::{run, Outcome, RunRecord};
 use crate::situation::Situation;
-use crate::test_data::{robot, situation};
-
-/// The occupied cells of a map `size` cells square at 0.1 m whose squares lie inside
-/// [x0, x1] × [y0, y1] (metres; give bounds on the 0.1 m grid).
-fn block(size: usize, (x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> Vec<(usize, usize)> {
-    let inside = |lo: f64, hi: f64, k: usize| {
-        let a = k as f64 * 0.1;
-        a >= lo - 1e-9 && a + 0.1 <= hi + 1e-9
-    };
-    let mut cells = Vec::new();
-    for row in 0..size {
-        for col in 0..size {
-            if inside(x0, x1, col) && inside(y0, y1, size - 1 - row) {
-                cells.push((row, col));
-            }
-        }
-    }
-    cells
-}
+use crate::test_data::{block, robot, situation};
 
 /// A peer that stands still at (x, y) facing `heading` (a `straight` peer whose only waypoint
 /// is where it starts).

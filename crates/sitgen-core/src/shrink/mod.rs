@@ -63,19 +63,10 @@ pub fn probe(
 ) -> Result<Probe, String> {
     check(candidate, leg_margin_m)?;
     let record = run::run(candidate, spec, seed).map_err(|e| e.to_string())?;
-    let agent = 0;
-    let mut first_s: Vec<(FailureClass, f64)> = Vec::new();
-    for e in &record.events {
-        if let Some(class) = failure::class_of(e, &record.events, agent) {
-            if !first_s.iter().any(|(c, _)| *c == class) {
-                first_s.push((class, e.start_s));
-            }
-        }
-    }
-    first_s.sort_by_key(|(c, _)| *c);
+    // The agent is robot 0 of every valid situation.
     Ok(Probe {
         class: record.failure.map(|f| f.class),
-        first_s,
+        first_s: failure::first_seen(&record.events, 0),
         time_s: record.time_s,
         outcome: record.outcome,
     })

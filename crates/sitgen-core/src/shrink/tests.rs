@@ -1,23 +1,14 @@
 use super::*;
 use crate::run::tests::spec;
-use crate::test_data::{robot, situation};
-
-/// The cells (row from the top, column) of a 200 × 200 map at 0.1 m that lie inside
-/// [x0, x1) × [y0, y1) metres.
-fn rect((x0, x1): (f64, f64), (y0, y1): (f64, f64)) -> Vec<(usize, usize)> {
-    let cell = |m: f64| (m * 10.0).round() as usize;
-    (cell(y0)..cell(y1))
-        .flat_map(|y| (cell(x0)..cell(x1)).map(move |x| (199 - y, x)))
-        .collect()
-}
+use crate::test_data::{block, robot, situation};
 
 /// A `snd_follow` agent driving east along a corridor 1.2 m wide (y 9.4–10.6 m, x 5–20 m) and a
 /// `straight` peer driving west at it along the same line: the agent stops, the peer drives
 /// in. A wall block (x 2–3 m, y 17–18 m) plays no part.
 fn head_on() -> Situation {
-    let mut walls = rect((5.0, 20.0), (9.1, 9.4));
-    walls.extend(rect((5.0, 20.0), (10.6, 10.9)));
-    walls.extend(rect((2.0, 3.0), (17.0, 18.0)));
+    let mut walls = block(200, (5.0, 20.0), (9.1, 9.4));
+    walls.extend(block(200, (5.0, 20.0), (10.6, 10.9)));
+    walls.extend(block(200, (2.0, 3.0), (17.0, 18.0)));
     situation(
         200,
         &walls,
