@@ -239,8 +239,8 @@ def test_bad_fault_ids_and_stores_are_one_line_errors(
     assert "holds another fault evaluation" in line
     campaign = tmp_path / "campaign.db"
     assert run_cli("campaign", str(spec), "--n", "1", "--db", str(campaign)).returncode == 0
-    assert "holds another campaign" in error("--db", str(campaign))
-    assert "holds another fault evaluation" in (
+    assert "holds a campaign, not a fault evaluation" in error("--db", str(campaign))
+    assert "holds a fault evaluation, not a campaign" in (
         run_cli("campaign", str(spec), "--n", "1", "--db", str(held)).stderr
     )
 

@@ -39,7 +39,7 @@ import time
 import tomllib
 import zlib
 from collections import deque
-from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -145,16 +145,25 @@ def job_seed(seed: int, index: int) -> int:
     return int.from_bytes(digest[:8], "little") >> 1
 
 
-def _draw(rng: np.random.Generator, kind: str, args: list[Any], current: Any) -> Any:
+def draw_gene(rng: np.random.Generator, kind: str, args: list[Any]) -> int | float:
+    """One draw of a ``[vary]`` distribution, as a gene: ``choice`` the index of the value,
+    ``uniform`` and ``int`` the value, ``scale`` the factor."""
     if kind == "choice":
-        return args[int(rng.integers(len(args)))]
-    if kind == "uniform":
-        return float(rng.uniform(args[0], args[1]))
+        return int(rng.integers(len(args)))
     if kind == "int":
         return int(rng.integers(args[0], args[1] + 1))
+    return float(rng.uniform(args[0], args[1]))
+
+
+def express_gene(kind: str, args: list[Any], gene: int | float, current: Any) -> Any:
+    """The value a gene gives the field whose value is ``current``."""
+    if kind == "choice":
+        return args[int(gene)]
+    if kind != "scale":
+        return gene
     if not isinstance(current, int | float):
         raise ValueError(f"scale needs a number there, found {current!r}")
-    return float(current * rng.uniform(args[0], args[1]))
+    return float(current * gene)
 
 
 def _set(tree: dict[str, Any], path: str, value: Callable[[Any], Any]) -> None:
@@ -204,32 +213,47 @@ class Job:
         return f"{name}+{fault}" if fault else name
 
 
+def vary_order(spec: CampaignSpec) -> list[tuple[str, dict[str, Any]]]:
+    """The ``[vary]`` entries in the order they are drawn and applied: presets first, so that
+    later paths (and ``scale``) see the preset's values."""
+    return sorted(spec.vary.items(), key=lambda kv: not kv[0].endswith(".preset"))
+
+
+def draw_genes(spec: CampaignSpec, seed: int, index: int) -> list[int | float]:
+    """Job ``index``'s draws, one gene per :func:`vary_order` entry."""
+    rng = np.random.Generator(np.random.PCG64([seed, index]))
+    return [draw_gene(rng, *next(iter(dist.items()))) for _, dist in vary_order(spec)]
+
+
 def build_job(spec: CampaignSpec, seed: int, index: int) -> Job:
     """Job ``index``: its draws applied to the base specs, the situation spec resolved and
     checked. Raises SpecError naming the field."""
-    rng = np.random.Generator(np.random.PCG64([seed, index]))
+    return express_job(spec, index, job_seed(seed, index), draw_genes(spec, seed, index))
+
+
+def express_job(spec: CampaignSpec, index: int, seed: int, genes: Sequence[int | float]) -> Job:
+    """The job whose situation and run seed is ``seed`` and whose ``[vary]`` fields take
+    ``genes`` (one per :func:`vary_order` entry). Raises SpecError naming the field."""
     situation = copy.deepcopy(spec.situation)
     run = copy.deepcopy(spec.run)
-    # Presets first, so that later paths (and `scale`) see the preset's values.
-    ordered = sorted(spec.vary.items(), key=lambda kv: not kv[0].endswith(".preset"))
     resolved = False
-    for path, dist in ordered:
+    for (path, dist), gene in zip(vary_order(spec), genes, strict=True):
         if not resolved and not path.endswith(".preset"):
             situation = _resolve(situation, index)
             resolved = True
         section, _, rest = path.partition(".")
         kind, args = next(iter(dist.items()))
 
-        def draw(old: Any, kind: str = kind, args: list[Any] = args) -> Any:
-            return _draw(rng, kind, args, old)
+        def value(old: Any, kind: str = kind, args: list[Any] = args, gene: Any = gene) -> Any:
+            return express_gene(kind, args, gene, old)
 
         try:
-            _set(situation if section == "situation" else run, rest, draw)
+            _set(situation if section == "situation" else run, rest, value)
         except ValueError as e:
             raise _core.SpecError(f"vary.{path!r}: {e}") from None
     situation = _resolve(situation, index)
     _core.check_run_spec(json.dumps(run))
-    return Job(index=index, seed=job_seed(seed, index), situation=situation, run=run)
+    return Job(index=index, seed=seed, situation=situation, run=run)
 
 
 def _resolve(situation: dict[str, Any], index: int) -> dict[str, Any]:

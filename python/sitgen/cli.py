@@ -12,7 +12,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, Protocol, TypeVar
 
 import typer
 from rich.console import Console
@@ -399,10 +399,17 @@ def check_controller_command(
         raise typer.Exit(EXIT_FAILED)
 
 
+class OnProgress(Protocol):
+    """A progress bar's update: work done of total, and a line of what it found so far."""
+
+    def __call__(self, done: int, total: int, status: str = "") -> None: ...
+
+
 @contextmanager
-def _progress(label: str, total: int, unit: str) -> Iterator[Callable[[int, int], None]]:
+def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
     """A progress bar on a terminal (or with SITGEN_PROGRESS set): yields the
-    ``on_progress(done, total)`` to call, which also shows the rate of this call's work."""
+    ``on_progress(done, total, status)`` to call, which also shows the rate of this call's
+    work."""
     import os
     import time
 
@@ -424,17 +431,20 @@ def _progress(label: str, total: int, unit: str) -> Iterator[Callable[[int, int]
         TimeElapsedColumn(),
         TextColumn("ETA"),
         TimeRemainingColumn(),
+        TextColumn("{task.fields[status]}"),
         disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
     ) as progress:
-        task = progress.add_task(unit, total=total, rate="")
+        task = progress.add_task(unit, total=total, rate="", status="")
         first: list[int] = []
 
-        def on_progress(done: int, total: int) -> None:
+        def on_progress(done: int, total: int, status: str = "") -> None:
             if not first:
                 first.append(done)
             elapsed = time.perf_counter() - started
             rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
-            progress.update(task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s")
+            progress.update(
+                task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s", status=status
+            )
 
         yield on_progress
 
@@ -451,7 +461,7 @@ def _stored(
     label: str,
     total: int,
     unit: str,
-    work: Callable[[Callable[[int, int], None], Callable[[], bool]], T],
+    work: Callable[[OnProgress, Callable[[], bool]], T],
 ) -> T:
     """``work(on_progress, stop)`` with a progress bar and Ctrl-C asking it to stop; a store
     it cannot use is bad input."""
@@ -579,13 +589,18 @@ def faults(
         str,
         typer.Option(
             "--strategy",
-            help="How situations are drawn: random (the campaign's generation) or barn (the 300 "
-            "BARN worlds, shuffled by the seed).",
+            help="How situations are drawn: random (the campaign's generation), barn (the 300 "
+            "BARN worlds, shuffled by the seed) or stored (a campaign's or search's situations, "
+            "in the order it ran them: --situations).",
         ),
     ] = "random",
     barn_dir: Annotated[
         Path | None,
         typer.Option("--barn-dir", help="The BARN data folder (with --strategy barn)."),
+    ] = None,
+    situations: Annotated[
+        Path | None,
+        typer.Option("--situations", help="A campaign or search store (with --strategy stored)."),
     ] = None,
     fault_ids: Annotated[
         str | None,
@@ -627,6 +642,7 @@ def faults(
             on_progress=on_progress,
             stop=stop,
             barn_dir=barn_dir,
+            situations_db=situations,
         ),
     )
     if result.interrupted:
@@ -654,6 +670,113 @@ def faults(
         Console(width=200).print(table)
         for line in summary_lines(report):
             typer.echo(line)
+    if result.interrupted:
+        raise typer.Exit(130)
+
+
+@app.command()
+def search(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Campaign spec (TOML) whose varied fields to search. Omit for the paper's."
+        ),
+    ] = None,
+    budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
+    seed: CampaignSeedOption = 0,
+    db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
+    strategy: Annotated[
+        str,
+        typer.Option(
+            "--strategy",
+            help="map-elites (quality diversity) or random (the campaign's generation).",
+        ),
+    ] = "map-elites",
+    measures: Annotated[
+        str,
+        typer.Option(
+            "--measures",
+            help="The archive's one or two descriptors, comma-separated: failure_class, terrain, "
+            "peers, min_clearance, approach_side.",
+        ),
+    ] = "failure_class,terrain",
+    objective: Annotated[
+        str,
+        typer.Option(
+            "--objective",
+            help="score (the most dangerous run per cell) or threshold (the paper's: fewer runs "
+            "under --threshold points).",
+        ),
+    ] = "score",
+    threshold: Annotated[
+        float, typer.Option("--threshold", help="Low-score threshold (points).")
+    ] = 10.0,
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
+    top: Annotated[int, typer.Option("--top", help="Distinct failures in the summary.")] = 5,
+) -> None:
+    """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
+    situation seed, each cell of the archive (failure class × terrain by default) holding its
+    highest-scoring run. Writes a store like a campaign's (rank, failures, report, rerun,
+    shrink work on it). Ctrl-C stops after the runs in flight; the same command resumes."""
+    from sitgen.campaign import summary
+    from sitgen.search import SearchPlan, SearchProgress, SearchResult, plan_search, run_search
+    from sitgen.store import Store
+
+    parsed = _campaign_spec(spec)
+    plan: SearchPlan = plan_search(
+        parsed,
+        strategy,
+        [m.strip() for m in measures.split(",") if m.strip()],
+        objective,
+        threshold,
+    )
+
+    def work(on_progress: OnProgress, stop: Callable[[], bool]) -> SearchResult:
+        def show(p: SearchProgress) -> None:
+            on_progress(
+                p.runs,
+                p.budget,
+                f"cells {p.cells}  failure classes {p.classes}  best {p.best:,.0f}",
+            )
+
+        return run_search(
+            parsed,
+            db,
+            seed=seed,
+            budget=budget,
+            plan=plan,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=show,
+            stop=stop,
+        )
+
+    result = _stored("search", budget, "runs", work)
+    rate = result.ran / result.wall_s if result.wall_s > 0 else 0.0
+    typer.echo(
+        f"{db}: {result.ran} runs in {result.wall_s:.1f} s ({rate:.1f} runs/s), "
+        f"{result.total} of {budget} stored; archive {result.cells} cells, "
+        f"QD score {result.qd_score:,.0f}"
+    )
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        if not db.exists():
+            raise typer.Exit(130)
+    with Store(db) as store:
+        s = summary(store, top)
+    typer.echo(
+        f"runs {s['runs']}, mean score {s['mean_score']:.1f}, median {s['median_score']:.1f}, "
+        f"{100 * s['share_under_10']:.0f}% under 10 points"
+    )
+    typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
+    for f in s["distinct"][:top]:
+        typer.echo(
+            f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
+            f"{f['description']}"
+        )
     if result.interrupted:
         raise typer.Exit(130)
 

@@ -46,7 +46,7 @@ from sitgen.campaign import (
     stream_jobs,
 )
 from sitgen.maps import BARN_WORLDS, BarnWorlds
-from sitgen.store import Store, StoreError
+from sitgen.store import KINDS, Store, StoreError
 
 KILL_MARGIN_POINTS = 100.0
 """A faulty run that shows no new failure class kills its fault only if it scores worse than
@@ -60,10 +60,12 @@ CHUNK = 16
 """Situations run between two kill checks."""
 RUN_STRIDE = 64
 """Run ids per situation: the correct run and up to 63 faults."""
-STRATEGIES = ("random", "barn")
+STRATEGIES = ("random", "barn", "stored")
 """How situations are drawn: ``random`` is the campaign's own generation (the paper's);
 ``barn`` takes the 300 BARN worlds (a fixed, hand-curated benchmark, no peers) in an order
-shuffled by the seed, with the campaign's run spec."""
+shuffled by the seed, with the campaign's run spec; ``stored`` takes the situations of a stored
+campaign or search (``--situations``) in the order it ran them, each with its own run spec and
+seed, so that any way of generating (a search, too) can be measured by what it kills."""
 MAX_BUDGET = 1_000_000
 """Most situations an evaluation may ask for (``random``; ``barn`` has 300)."""
 CURVE_BUDGETS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
@@ -162,9 +164,14 @@ class FaultPlan:
     controller: dict[str, Any]
     faults: tuple[str, ...]
     strategy: str = "random"
+    situations: str | None = None
+    """The store the situations come from (strategy ``stored``)."""
 
     def as_dict(self) -> dict[str, Any]:
+        # Only a stored strategy names its source, so older evaluations' plans still match.
+        source = {} if self.situations is None else {"situations": self.situations}
         return {
+            **source,
             "controller": self.controller,
             "faults": list(self.faults),
             "strategy": self.strategy,
@@ -230,12 +237,33 @@ class Situations:
     """Situation ``i`` of an evaluation, as the job a campaign would run there."""
 
     def __init__(
-        self, spec: CampaignSpec, seed: int, strategy: str, barn_dir: Path | None = None
+        self,
+        spec: CampaignSpec,
+        seed: int,
+        strategy: str,
+        barn_dir: Path | None = None,
+        stored: Path | None = None,
     ) -> None:
         self.spec, self.seed, self.strategy = spec, seed, strategy
         self.barn: BarnWorlds | None = None
+        self.stored: Store | None = None
         self.order: list[int] = []
-        if strategy == "barn":
+        if strategy == "stored":
+            if stored is None:
+                raise _core.SpecError(
+                    "--situations: strategy stored needs a campaign or search store"
+                )
+            try:
+                self.stored = Store(stored)
+            except StoreError as e:
+                raise _core.SpecError(f"--situations: {e}") from None
+            kind = self.stored.kind()
+            if kind == "fault_evaluation":
+                raise _core.SpecError(
+                    f"--situations: {stored} holds a fault evaluation; give a campaign or search"
+                )
+            self.order = sorted(self.stored.done_ids())
+        elif strategy == "barn":
             try:
                 self.barn = BarnWorlds(barn_dir or Path("."))
             except OSError as e:
@@ -247,10 +275,22 @@ class Situations:
 
     def most(self) -> int:
         """How many situations there are."""
+        if self.strategy == "stored":
+            return len(self.order)
         return BARN_WORLDS if self.strategy == "barn" else MAX_BUDGET
+
+    def close(self) -> None:
+        if self.stored is not None:
+            self.stored.close()
 
     def job(self, i: int) -> Job:
         """Situation ``i``'s job; one whose spec cannot be built carries its error."""
+        if self.stored is not None:
+            row = self.stored.run_row(self.order[i])
+            # A stored situation that could not be built is not retried: it kills nothing.
+            error = None if row["situation"] else "spec: its situation could not be built"
+            seed = row["situation_seed"]
+            return Job(i, seed, row["situation_spec"], row["run_spec"], error)
         if self.barn is not None:
             situation = json.loads(self.barn.situation(self.order[i]).to_json())
             return Job(i, job_seed(self.seed, i), situation, copy.deepcopy(self.spec.run))
@@ -322,6 +362,7 @@ def run_faults(
     on_progress: Callable[[int, int], None] | None = None,
     stop: Callable[[], bool] | None = None,
     barn_dir: Path | None = None,
+    situations_db: Path | None = None,
 ) -> FaultsResult:
     """Evaluate (or resume evaluating) ``spec``'s agent controller under ``faults`` on
     ``budget`` situations, into store ``db``. ``on_progress(situations done, budget)``;
@@ -331,7 +372,31 @@ def run_faults(
         raise _core.SpecError(f"--budget: {budget} is not in [1, {MAX_BUDGET}]")
     workers = check_workers(workers, backend)
     plan = plan_faults(spec, faults, strategy)
-    situations = Situations(spec, seed, strategy, barn_dir)
+    if strategy == "stored" and situations_db is not None:
+        plan = dataclasses.replace(plan, situations=str(situations_db))
+    situations = Situations(spec, seed, strategy, barn_dir, situations_db)
+    try:
+        return _run_faults(
+            spec, db, seed, budget, plan, situations, workers, backend, address, on_progress, stop
+        )
+    finally:
+        situations.close()
+
+
+def _run_faults(
+    spec: CampaignSpec,
+    db: str | Path,
+    seed: int,
+    budget: int,
+    plan: FaultPlan,
+    situations: Situations,
+    workers: int,
+    backend: str,
+    address: str | None,
+    on_progress: Callable[[int, int], None] | None,
+    stop: Callable[[], bool] | None,
+) -> FaultsResult:
+    strategy = plan.strategy
     if budget > situations.most():
         raise _core.SpecError(
             f"--budget: {budget} is more than the {situations.most()} situations of "
@@ -467,16 +532,17 @@ def kill_rate_at(report: FaultReport, budget: int) -> float:
 
 
 def evaluation(store: Store) -> dict[str, Any] | None:
-    """The store's fault evaluation plan, or None if it holds a campaign."""
-    row = store.db.execute("SELECT plan FROM fault_evaluation WHERE id = 1").fetchone()
-    return None if row is None else dict(json.loads(row[0]))
+    """The store's fault evaluation plan, or None if it holds none."""
+    return store.plan("fault_evaluation")
 
 
 def fault_report(store: Store) -> FaultReport:
     """The results stored in an evaluation's store. Raises StoreError if it holds none."""
     plan = evaluation(store)
     if plan is None:
-        raise StoreError(f"{store.path}: holds a campaign, not a fault evaluation (sitgen faults)")
+        raise StoreError(
+            f"{store.path}: holds a {KINDS[store.kind()]}, not a fault evaluation (sitgen faults)"
+        )
     campaign = store.campaign() or {}
     kills = {
         fault: (situation, run_id, by, json.loads(classes), delta)

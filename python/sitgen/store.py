@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -62,7 +62,10 @@ CREATE TABLE IF NOT EXISTS runs (
     waypoints INTEGER NOT NULL,
     events_jsonl TEXT NOT NULL,
     failure_class TEXT,
-    failure TEXT
+    failure TEXT,
+    generation INTEGER,
+    parents TEXT,
+    genes TEXT
 );
 CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
 CREATE INDEX IF NOT EXISTS runs_by_failure_class ON runs (failure_class, score DESC, id);
@@ -120,6 +123,13 @@ CREATE TABLE IF NOT EXISTS shrinks (
 );
 """
 
+SEARCH_SCHEMA = """
+CREATE TABLE IF NOT EXISTS search (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    plan TEXT NOT NULL
+);
+"""
+
 TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
@@ -158,7 +168,20 @@ class RunRow:
     events_jsonl: str
     trajectory: bytes | None
     robots: int
+    generation: int | None = None
+    """The search generation that made it (None for a campaign's run)."""
+    parents: tuple[int, ...] | None = None
+    """The runs a search mutated to make it (empty for a fresh draw; None in a campaign)."""
+    genes: dict[str, Any] | None = None
+    """A search's genome for it: each varied field's draw and the situation seed."""
 
+
+KINDS = {"campaign": "campaign", "fault_evaluation": "fault evaluation", "search": "search"}
+"""What a store can hold, as a sentence names it."""
+PLAN_PARTS = {
+    "fault_evaluation": "its controller, faults or strategy",
+    "search": "its strategy, measures or objective",
+}
 
 TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
 
@@ -190,7 +213,7 @@ class Store:
             self._check_tables()
         if version is None:
             with self.db:
-                self.db.executescript(SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA)
+                self.db.executescript(SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA + SEARCH_SCHEMA)
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
                     (str(SCHEMA_VERSION),),
@@ -232,6 +255,12 @@ class Store:
             if version < 4:
                 # Version 4 adds shrink results (sitgen shrink): one table, empty until then.
                 self.db.executescript(SHRINK_SCHEMA)
+            if version < 5:
+                # Version 5 adds searches (sitgen search): each run's generation, parents and
+                # genes (NULL for a campaign's runs) and the search's plan.
+                for column in ("generation INTEGER", "parents TEXT", "genes TEXT"):
+                    self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
+                self.db.executescript(SEARCH_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -313,9 +342,12 @@ class Store:
         version: str,
         created_at: str,
         evaluation: dict[str, Any] | None = None,
+        search: dict[str, Any] | None = None,
     ) -> None:
-        """Record the campaign (with ``evaluation``, the plan of a fault evaluation), or check
-        that the store holds this one (then resume it)."""
+        """Record the campaign (with ``evaluation``, the plan of a fault evaluation; with
+        ``search``, the plan of a search), or check that the store holds this one (then resume
+        it)."""
+        plans = {"fault_evaluation": evaluation, "search": search}
         stored = self.campaign()
         if stored is None:
             with self.db:
@@ -324,35 +356,49 @@ class Store:
                     "VALUES (1, ?, ?, ?, ?, ?)",
                     (json.dumps(spec, sort_keys=True), seed, n, version, created_at),
                 )
-                if evaluation is not None:
-                    self.db.execute(
-                        "INSERT INTO fault_evaluation (id, plan) VALUES (1, ?)",
-                        (json.dumps(evaluation, sort_keys=True),),
-                    )
+                for table, plan in plans.items():
+                    if plan is not None:
+                        self.db.execute(
+                            f"INSERT INTO {table} (id, plan) VALUES (1, ?)",
+                            (json.dumps(plan, sort_keys=True),),
+                        )
             return
-        row = self.db.execute("SELECT plan FROM fault_evaluation WHERE id = 1").fetchone()
-        stored_plan = None if row is None else json.loads(row[0])
-        if stored_plan != json.loads(json.dumps(evaluation, sort_keys=True)):
-            held = "campaign" if stored_plan is None else "fault evaluation"
-            differs = (
-                "its controller, faults or strategy differ"
-                if stored_plan is not None and evaluation is not None
-                else f"it holds a {held}"
-            )
+        held = self.kind()
+        wanted = next((t for t, p in plans.items() if p is not None), "campaign")
+        if held != wanted:
             raise StoreError(
-                f"{self.path} holds another {held} ({differs}); give a new --db to start this "
-                "one, or the same options to resume it"
+                f"{self.path} holds a {KINDS[held]}, not a {KINDS[wanted]}; give a new --db "
+                f"to start this {KINDS[wanted]}"
             )
+        if wanted != "campaign":
+            row = self.db.execute(f"SELECT plan FROM {wanted} WHERE id = 1").fetchone()
+            if json.loads(row[0]) != json.loads(json.dumps(plans[wanted], sort_keys=True)):
+                raise StoreError(
+                    f"{self.path} holds another {KINDS[wanted]} ({PLAN_PARTS[wanted]} differ); "
+                    "give a new --db to start this one, or the same options to resume it"
+                )
         same_spec = stored["spec"] == json.loads(json.dumps(spec, sort_keys=True))
         if not same_spec or stored["seed"] != seed:
             differs = "its spec differs" if not same_spec else f"its seed is {stored['seed']}"
             raise StoreError(
-                f"{self.path} holds another campaign ({differs}); give a new --db to start "
-                "this one, or the same spec and seed to resume it"
+                f"{self.path} holds another {KINDS[wanted]} ({differs}); give a new --db to "
+                "start this one, or the same spec and seed to resume it"
             )
         if n > stored["n"]:
             with self.db:
                 self.db.execute("UPDATE campaign SET n = ? WHERE id = 1", (n,))
+
+    def kind(self) -> str:
+        """What the store holds: ``campaign``, ``fault_evaluation`` or ``search``."""
+        for table in ("fault_evaluation", "search"):
+            if self.db.execute(f"SELECT 1 FROM {table} WHERE id = 1").fetchone():
+                return table
+        return "campaign"
+
+    def plan(self, kind: str) -> dict[str, Any] | None:
+        """The stored plan of a ``fault_evaluation`` or ``search``; None if it holds none."""
+        row = self.db.execute(f"SELECT plan FROM {kind} WHERE id = 1").fetchone()
+        return None if row is None else dict(json.loads(row[0]))
 
     def record_kills(self, kills: dict[str, tuple[int, int, Any]]) -> None:
         """Store each fault's first kill: fault → (situation, killing run, :class:`Kill`)."""
@@ -443,8 +489,8 @@ class Store:
         self.db.execute(
             "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
             "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
-            "waypoints, events_jsonl, failure_class, failure) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "waypoints, events_jsonl, failure_class, failure, generation, parents, genes) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 row.id,
                 row.id,
@@ -464,6 +510,9 @@ class Store:
                 row.events_jsonl,
                 failure["class"] if failure else None,
                 json.dumps(failure, sort_keys=True) if failure else None,
+                row.generation,
+                None if row.parents is None else json.dumps(list(row.parents)),
+                None if row.genes is None else json.dumps(row.genes, sort_keys=True),
             ),
         )
         self.db.executemany(

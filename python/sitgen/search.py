@@ -1,0 +1,654 @@
+"""Search toward distinct failures: quality-diversity generation (MAP-Elites) over a campaign
+spec's varied fields and the situation seed, compared with random generation at the same budget.
+
+The paper (§6) notes that random generation "would spend most of its time generating safe
+situations" and asks for a generator tuned to give fewer low scores without losing diversity.
+A search keeps an *archive*: a grid of cells by behaviour descriptors (*measures*; by default the
+run's failure class × its terrain kind), each cell holding the highest-objective run seen there
+(by default the run's score). Each generation draws its situations by varying elites chosen
+uniformly over the filled cells, so a rare failure is built on as often as a common one.
+
+A situation's *genome* is one gene per ``[vary]`` entry of the campaign spec (the draw a
+campaign makes: a choice's index, a real or whole value, a scale factor) and the situation seed.
+Variation (:func:`vary`) follows Vassiliades & Mouret's Iso+LineDD on the real genes (Gaussian
+noise plus a step along the line to a second elite, in each gene's range scaled to [0, 1]),
+resamples a choice with probability :data:`P_CHOICE` and draws a new seed with probability
+:data:`P_RESEED` (a seed has no locality: it drives the terrain noise and the placement). The
+archive is ``ribs``' ``GridArchive`` (elitist insertion per cell, QD statistics); the variation
+is written here because ribs' emitters vary real vectors and a situation's genome is not one.
+
+Runs are numbered like a campaign's jobs. Run ``i`` of generation 0 (the first :data:`INITIAL`)
+and every *fresh* run (a share :data:`FRESH_SHARE` of each later generation, which keeps
+exploring) is exactly the campaign's job ``i`` with the same seed; ``--strategy random`` makes
+every run fresh, so it *is* the campaign. Generation ``g ≥ 1`` holds the next :data:`BATCH`
+runs and is drawn from the archive as generations ``< g`` left it, with a stream seeded by
+(seed, run index): a search is a pure function of (spec, seed, options), whatever the worker
+count, and a budget only truncates it. Each run is stored as it ends (its generation, parents
+and genes with it); the same command resumes, rebuilding the archive from the store.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from sitgen import _core
+from sitgen.campaign import (
+    CampaignSpec,
+    Executor,
+    Job,
+    _row,
+    check_campaign,
+    check_workers,
+    controller_names,
+    draw_genes,
+    express_job,
+    job_seed,
+    started_at,
+    vary_order,
+)
+from sitgen.failures import classes as failure_classes
+from sitgen.store import KINDS, Store, StoreError
+
+if TYPE_CHECKING:
+    from ribs.archives import GridArchive
+
+STRATEGIES = ("map-elites", "random")
+OBJECTIVES = ("score", "threshold")
+"""``score``: the run's score (the most dangerous run per cell); ``threshold``: the paper's
+aim of fewer low scores, min(score, threshold) / threshold, so every run at or above the
+threshold is as good as any other and the search spends itself on filling cells."""
+MEASURES = ("failure_class", "terrain", "peers", "min_clearance", "approach_side")
+DEFAULT_MEASURES = ("failure_class", "terrain")
+LOW_SCORE_POINTS = 10.0
+"""The paper's low score (§4.2: the share of runs under 10 points)."""
+INITIAL = 32
+"""Runs of generation 0: the campaign's first jobs, before any variation."""
+BATCH = 16
+"""Runs per later generation (fixed, so the runs do not depend on the worker count)."""
+FRESH_SHARE = 0.125
+"""Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
+P_CHOICE = 0.2
+"""Probability that a child draws a choice gene anew instead of taking its parent's."""
+P_RESEED = 0.5
+"""Probability that a child gets a new situation seed instead of its parent's."""
+SIGMA_ISO = 0.05
+"""Iso+LineDD's isotropic noise, in each real gene's range scaled to [0, 1]."""
+SIGMA_LINE = 0.2
+"""Iso+LineDD's step along the line between the two parents."""
+CLEARANCE_CELLS = 5
+"""Cells of the ``min_clearance`` measure below the monitor's default unsafe-proximity distance,
+0.5 m (and one more for runs with no near miss)."""
+CLEARANCE_STEP_M = 0.5 / CLEARANCE_CELLS
+MAX_BUDGET = 1_000_000
+
+
+# Measures.
+
+
+@dataclass(frozen=True)
+class Measure:
+    """One behaviour descriptor: a cell per label, read from a stored run."""
+
+    name: str
+    labels: tuple[str, ...]
+
+    def label(self, run: dict[str, Any]) -> str:
+        """The run's label on this measure, given its :func:`_view`."""
+        if self.name == "failure_class":
+            return str(run["failure_class"] or "none")
+        if self.name == "terrain":
+            return str(run["terrain"])
+        if self.name == "peers":
+            return str(min(len(self.labels) - 1, int(run["peers"] or 0)))
+        if self.name == "min_clearance":
+            clearance = run["min_clearance_m"]
+            if clearance is None:
+                return self.labels[-1]
+            return self.labels[min(CLEARANCE_CELLS - 1, int(clearance / CLEARANCE_STEP_M))]
+        return str(run["bearing"] or "none")
+
+    def cell(self, run: dict[str, Any]) -> int:
+        """The run's cell (a terrain the spec does not name, as one given whole: the first)."""
+        label = self.label(run)
+        return self.labels.index(label) if label in self.labels else 0
+
+
+def _terrains(spec: CampaignSpec) -> tuple[str, ...]:
+    dist = spec.vary.get("situation.terrain.preset", {})
+    if "choice" in dist:
+        return tuple(str(c) for c in dist["choice"])
+    return (str(spec.situation.get("terrain", {}).get("preset") or "the spec's terrain"),)
+
+
+def _most_peers(spec: CampaignSpec) -> int:
+    most = int(spec.situation.get("mission", {}).get("peers_max", 5))
+    dist = spec.vary.get("situation.mission.peers_max", {})
+    for args in dist.values():
+        most = max([most, *(int(a) for a in args if isinstance(a, int | float))])
+    return most
+
+
+def measures_for(spec: CampaignSpec, names: Sequence[str]) -> list[Measure]:
+    """The measures ``names`` for searching ``spec``. Raises SpecError naming the option."""
+    if not names:
+        raise _core.SpecError(f"--measures: name one or two of {', '.join(MEASURES)}")
+    if len(names) > 2 or len(set(names)) != len(names):
+        raise _core.SpecError(
+            f"--measures: {','.join(names)}: give one or two different measures (a grid "
+            "of more dimensions has more cells than a budget can fill)"
+        )
+    out = []
+    for name in names:
+        if name == "failure_class":
+            labels: tuple[str, ...] = ("none", *(k for k, _ in failure_classes()))
+        elif name == "terrain":
+            labels = _terrains(spec)
+        elif name == "peers":
+            labels = tuple(str(k) for k in range(_most_peers(spec) + 1))
+        elif name == "min_clearance":
+            near = (f"< {CLEARANCE_STEP_M * (k + 1):.1f} m" for k in range(CLEARANCE_CELLS))
+            labels = (*near, "no near miss")
+        elif name == "approach_side":
+            labels = ("none", "front", "left", "right", "rear")
+        else:
+            raise _core.SpecError(
+                f"--measures: unknown measure `{name}`; expected some of {', '.join(MEASURES)}"
+            )
+        out.append(Measure(name, labels))
+    return out
+
+
+# The plan.
+
+
+@dataclass(frozen=True)
+class SearchPlan:
+    """What a search does besides the campaign spec, seed and budget (stored with it: a resumed
+    search must be the same search)."""
+
+    strategy: str = "map-elites"
+    measures: tuple[str, ...] = DEFAULT_MEASURES
+    objective: str = "score"
+    threshold: float = LOW_SCORE_POINTS
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "strategy": self.strategy,
+            "measures": list(self.measures),
+            "objective": self.objective,
+            "threshold": self.threshold,
+            "initial": INITIAL,
+            "batch": BATCH,
+            "fresh_share": FRESH_SHARE,
+            "p_choice": P_CHOICE,
+            "p_reseed": P_RESEED,
+            "sigma_iso": SIGMA_ISO,
+            "sigma_line": SIGMA_LINE,
+        }
+
+
+def plan_search(
+    spec: CampaignSpec,
+    strategy: str = "map-elites",
+    measures: Sequence[str] = DEFAULT_MEASURES,
+    objective: str = "score",
+    threshold: float = LOW_SCORE_POINTS,
+) -> SearchPlan:
+    """Check a search's options against its spec. Raises SpecError naming the option."""
+    if strategy not in STRATEGIES:
+        raise _core.SpecError(f"--strategy: `{strategy}` is not one of {', '.join(STRATEGIES)}")
+    if objective not in OBJECTIVES:
+        raise _core.SpecError(f"--objective: `{objective}` is not one of {', '.join(OBJECTIVES)}")
+    if not (math.isfinite(threshold) and threshold > 0):
+        raise _core.SpecError(f"--threshold: {threshold} is not a positive number of points")
+    measures_for(spec, measures)
+    return SearchPlan(strategy, tuple(measures), objective, float(threshold))
+
+
+# Genomes.
+
+
+@dataclass(frozen=True)
+class Genome:
+    """A situation to run: one gene per ``[vary]`` entry (in :func:`vary_order`) and a seed."""
+
+    genes: tuple[int | float, ...]
+    seed: int
+
+    def as_dict(self, spec: CampaignSpec) -> dict[str, Any]:
+        paths = [path for path, _ in vary_order(spec)]
+        return {"seed": self.seed, "draws": dict(zip(paths, self.genes, strict=True))}
+
+    @staticmethod
+    def from_dict(spec: CampaignSpec, data: dict[str, Any]) -> Genome:
+        draws = data["draws"]
+        return Genome(tuple(draws[path] for path, _ in vary_order(spec)), int(data["seed"]))
+
+
+def _to_unit(kind: str, args: list[Any], gene: int | float) -> float:
+    """A gene scaled to [0, 1] over its distribution's range (a choice: its index's middle)."""
+    if kind == "choice":
+        return (int(gene) + 0.5) / len(args)
+    lo, hi = float(args[0]), float(args[1])
+    if kind == "int":
+        return (int(gene) - lo + 0.5) / (hi - lo + 1)
+    return 0.5 if hi == lo else (float(gene) - lo) / (hi - lo)
+
+
+def _from_unit(kind: str, args: list[Any], u: float) -> int | float:
+    lo, hi = args
+    if kind == "int":
+        return int(lo + min(hi - lo, math.floor(u * (hi - lo + 1))))
+    return float(lo + u * (hi - lo))
+
+
+def solution(spec: CampaignSpec, genome: Genome) -> np.ndarray:
+    """The genome's genes scaled to [0, 1], as the archive stores a solution (at least one
+    number: a spec that varies nothing searches seeds alone)."""
+    units = [
+        _to_unit(*next(iter(dist.items())), gene)
+        for (_, dist), gene in zip(vary_order(spec), genome.genes, strict=True)
+    ]
+    return np.array(units or [0.0])
+
+
+def fresh(spec: CampaignSpec, seed: int, index: int) -> Genome:
+    """Run ``index``'s fresh genome: exactly the campaign's job ``index``."""
+    return Genome(tuple(draw_genes(spec, seed, index)), job_seed(seed, index))
+
+
+def new_seed(seed: int, index: int) -> int:
+    """A situation seed for a varied child at run ``index`` (63 bits, apart from job seeds)."""
+    digest = hashlib.sha256(f"{seed}:{index}:search".encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 1
+
+
+def vary(
+    spec: CampaignSpec,
+    seed: int,
+    index: int,
+    first: Genome,
+    second: Genome,
+    rng: np.random.Generator,
+) -> Genome:
+    """A child of two elites: Iso+LineDD on the real genes, a choice drawn anew with
+    probability :data:`P_CHOICE`, a new seed with probability :data:`P_RESEED`, and a new
+    seed in any case if nothing else changed (the same genome would repeat a run)."""
+    line = rng.normal()
+    genes: list[int | float] = []
+    for (_, dist), a, b in zip(vary_order(spec), first.genes, second.genes, strict=True):
+        kind, args = next(iter(dist.items()))
+        if kind == "choice":
+            genes.append(int(rng.integers(len(args))) if rng.random() < P_CHOICE else a)
+            continue
+        ua, ub = _to_unit(kind, args, a), _to_unit(kind, args, b)
+        u = ua + SIGMA_ISO * rng.normal() + SIGMA_LINE * line * (ub - ua)
+        genes.append(_from_unit(kind, args, float(np.clip(u, 0.0, 1.0))))
+    child_seed = new_seed(seed, index) if rng.random() < P_RESEED else first.seed
+    if tuple(genes) == first.genes and child_seed == first.seed:
+        child_seed = new_seed(seed, index)
+    return Genome(tuple(genes), child_seed)
+
+
+# Generations.
+
+
+def generation_of(index: int) -> int:
+    """The generation of run ``index``."""
+    return 0 if index < INITIAL else 1 + (index - INITIAL) // BATCH
+
+
+def generation_runs(generation: int) -> range:
+    """The run indices of a generation (before the budget truncates it)."""
+    if generation == 0:
+        return range(INITIAL)
+    start = INITIAL + (generation - 1) * BATCH
+    return range(start, start + BATCH)
+
+
+@dataclass(frozen=True)
+class Child:
+    """One run a generation asks for."""
+
+    index: int
+    genome: Genome
+    parents: tuple[int, ...]
+    """The elites it was varied from (none for a fresh run)."""
+
+
+@dataclass(frozen=True)
+class ArchiveStats:
+    """How full and how good an archive is."""
+
+    cells: int
+    """Cells filled."""
+    qd_score: float
+    """Sum of the elites' objectives (ribs' QD score, offset 0: objectives are ≥ 0)."""
+    best: float
+    """Best objective."""
+
+
+class Archive:
+    """The search's archive: ``ribs``' GridArchive over the plan's measures, with each elite's
+    run id and the genome of every run told to it."""
+
+    def __init__(self, spec: CampaignSpec, seed: int, plan: SearchPlan) -> None:
+        from ribs.archives import GridArchive
+
+        self.spec, self.seed, self.plan = spec, seed, plan
+        self.measures = measures_for(spec, plan.measures)
+        dims = [len(m.labels) for m in self.measures]
+        self.grid: GridArchive = GridArchive(
+            solution_dim=max(1, len(spec.vary)),
+            dims=dims,
+            ranges=[(0.0, float(d)) for d in dims],
+            extra_fields={"run_id": ((), np.int64)},
+        )
+        self.genomes: dict[int, Genome] = {}
+        self.told = 0
+        """Runs told (errors included)."""
+
+    def objective(self, score: float) -> float:
+        if self.plan.objective == "threshold":
+            return min(score, self.plan.threshold) / self.plan.threshold
+        return score
+
+    def cells(self, run: dict[str, Any]) -> tuple[int, ...]:
+        """The run's cell on each measure."""
+        return tuple(m.cell(run) for m in self.measures)
+
+    def tell(self, runs: Sequence[dict[str, Any]]) -> None:
+        """Add one generation's runs (their :func:`_view`, in index order); runs that could
+        not be made are remembered but not placed."""
+        for run in runs:
+            self.genomes[run["id"]] = run["genome"]
+        self.told += len(runs)
+        placed = [r for r in runs if r["outcome"] != "error"]
+        if not placed:
+            return
+        self.grid.add(
+            np.stack([solution(self.spec, r["genome"]) for r in placed]),
+            np.array([self.objective(r["score"]) for r in placed]),
+            np.array([[c + 0.5 for c in self.cells(r)] for r in placed]),
+            run_id=np.array([r["id"] for r in placed], dtype=np.int64),
+        )
+
+    def elites(self) -> list[int]:
+        """The elites' run ids, by cell."""
+        if self.grid.empty:
+            return []
+        data = self.grid.data(["index", "run_id"])
+        pairs = zip(data["index"].tolist(), data["run_id"].tolist(), strict=True)
+        return [int(r) for _, r in sorted(pairs)]
+
+    def ask(self, generation: int) -> list[Child]:
+        """Generation ``generation``'s runs (all of them; the budget truncates)."""
+        elites = self.elites()
+        children = []
+        for index in generation_runs(generation):
+            rng = np.random.Generator(np.random.PCG64([self.seed, index, 1]))
+            is_fresh = (
+                generation == 0
+                or self.plan.strategy == "random"
+                or not elites
+                or rng.random() < FRESH_SHARE
+            )
+            if is_fresh:
+                children.append(Child(index, fresh(self.spec, self.seed, index), ()))
+                continue
+            a = elites[int(rng.integers(len(elites)))]
+            b = elites[int(rng.integers(len(elites)))]
+            genome = vary(self.spec, self.seed, index, self.genomes[a], self.genomes[b], rng)
+            children.append(Child(index, genome, (a,) if a == b else (a, b)))
+        return children
+
+    def stats(self) -> ArchiveStats:
+        s = self.grid.stats
+        best = s.obj_max if s.num_elites and s.obj_max is not None else 0.0
+        return ArchiveStats(int(s.num_elites), float(s.qd_score), float(best))
+
+
+def _view(store: Store, spec: CampaignSpec, ids: Iterable[int]) -> list[dict[str, Any]]:
+    """What the archive reads of stored runs ``ids`` (in that order)."""
+    out = []
+    for run_id in ids:
+        row = store.db.execute(
+            "SELECT r.id, r.outcome, r.score, r.failure_class, r.failure, r.min_clearance_m, "
+            "r.genes, s.terrain, s.peers FROM runs r JOIN situations s ON s.id = r.situation_id "
+            "WHERE r.id = ?",
+            (run_id,),
+        ).fetchone()
+        failure = json.loads(row[4]) if row[4] else {}
+        out.append(
+            {
+                "id": row[0],
+                "outcome": row[1],
+                "score": row[2],
+                "failure_class": row[3],
+                "bearing": failure.get("features", {}).get("bearing"),
+                "min_clearance_m": row[5],
+                "genome": Genome.from_dict(spec, json.loads(row[6])),
+                "terrain": row[7],
+                "peers": row[8],
+            }
+        )
+    return out
+
+
+# Running a search.
+
+
+@dataclass(frozen=True)
+class SearchProgress:
+    """Where a search stands (for a progress bar)."""
+
+    runs: int
+    budget: int
+    cells: int
+    classes: int
+    """Failure classes found so far."""
+    best: float
+    """Best objective in the archive."""
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """What a search call did."""
+
+    ran: int
+    total: int
+    interrupted: bool
+    wall_s: float
+    cells: int
+    qd_score: float
+
+
+def _job(spec: CampaignSpec, child: Child) -> Job:
+    """The child's job; one whose genes make a bad spec carries its error."""
+    try:
+        job = express_job(spec, child.index, child.genome.seed, child.genome.genes)
+    except _core.SpecError as e:
+        job = Job(
+            child.index, child.genome.seed, dict(spec.situation), dict(spec.run), f"spec: {e}"
+        )
+    return job
+
+
+def run_search(
+    spec: CampaignSpec,
+    db: str | Path,
+    seed: int = 0,
+    budget: int = 500,
+    plan: SearchPlan | None = None,
+    workers: int | None = None,
+    backend: str = "local",
+    address: str | None = None,
+    on_progress: Callable[[SearchProgress], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> SearchResult:
+    """Run (or resume) a search of ``budget`` runs into store ``db``. The spec, options and
+    controllers are checked before any run; ``stop()`` is checked after every run, and the
+    runs in flight are kept."""
+    if not 1 <= budget <= MAX_BUDGET:
+        raise _core.SpecError(f"--budget: {budget} is not in [1, {MAX_BUDGET}]")
+    plan = plan or SearchPlan()
+    plan = plan_search(spec, plan.strategy, plan.measures, plan.objective, plan.threshold)
+    workers = check_workers(workers, backend)
+    started = time.perf_counter()
+    check_campaign(spec, seed, budget, stop)
+    if stop is not None and stop():
+        return SearchResult(0, 0, True, time.perf_counter() - started, 0, 0.0)
+    user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
+    with Store(db, create=True) as store:
+        store.lock_for_writing()
+        store.start_campaign(
+            spec.source, seed, budget, _core.__version__, started_at(), search=plan.as_dict()
+        )
+        done = store.done_ids()
+        archive = Archive(spec, seed, plan)
+        executor = Executor(workers, backend, address, user=user)
+        classes_seen = {
+            c for (c,) in store.db.execute("SELECT DISTINCT failure_class FROM runs") if c
+        }
+        ran = 0
+        interrupted = False
+
+        def progress() -> None:
+            if on_progress is not None:
+                s = archive.stats()
+                on_progress(SearchProgress(len(done), budget, s.cells, len(classes_seen), s.best))
+
+        progress()
+        generation = 0
+        while generation_runs(generation).start < budget:
+            children = [c for c in archive.ask(generation) if c.index < budget]
+            _check_stored(store, spec, children, done)
+            todo = [c for c in children if c.index not in done]
+            if todo and not interrupted:
+                by_index = {c.index: c for c in todo}
+                jobs = [_job(spec, c) for c in todo]
+                for job, result in executor.results(jobs):
+                    child = by_index[job.index]
+                    row = dataclasses.replace(
+                        _row(job, result),
+                        generation=generation,
+                        parents=child.parents,
+                        genes=child.genome.as_dict(spec),
+                    )
+                    # One transaction per run: a kill loses only the runs in flight.
+                    store.add_runs([row])
+                    done.add(job.index)
+                    ran += 1
+                    if result.get("ok"):
+                        failure = json.loads(result["record"]).get("failure")
+                        if failure:
+                            classes_seen.add(failure["class"])
+                    progress()
+                    if stop is not None and stop():
+                        executor.stop()
+            if any(c.index not in done for c in children):
+                interrupted = True
+                break
+            archive.tell(_view(store, spec, [c.index for c in children]))
+            generation += 1
+        total = store.run_count()
+        stats = archive.stats()
+    return SearchResult(
+        ran, total, interrupted, time.perf_counter() - started, stats.cells, stats.qd_score
+    )
+
+
+def _check_stored(store: Store, spec: CampaignSpec, children: list[Child], done: set[int]) -> None:
+    """A resumed generation must ask for what was stored: a store written by another sitgen
+    (other variation) cannot be resumed without mixing two searches."""
+    for child in children:
+        if child.index not in done:
+            continue
+        (genes,) = store.db.execute(
+            "SELECT genes FROM runs WHERE id = ?", (child.index,)
+        ).fetchone()
+        if genes is None or Genome.from_dict(spec, json.loads(genes)) != child.genome:
+            raise StoreError(
+                f"{store.path}: run {child.index} is not the run this search asks for there "
+                "(written by another sitgen?); give a new --db"
+            )
+
+
+# Reading a search.
+
+
+@dataclass
+class SearchReplay:
+    """A stored search replayed generation by generation: the archive it ends with and the
+    figures over budget."""
+
+    archive: Archive
+    curve: list[dict[str, float]] = field(default_factory=list)
+    """After each generation: runs, cells, QD score, failure classes found, runs under the
+    low-score threshold."""
+
+
+def replay(store: Store) -> SearchReplay:
+    """Rebuild a stored search's archive, and its figures over budget. Raises StoreError if
+    the store holds no search."""
+    from sitgen.campaign import campaign_from_data
+
+    raw = store.plan("search")
+    campaign = store.campaign()
+    if raw is None or campaign is None:
+        raise StoreError(
+            f"{store.path}: holds a {KINDS[store.kind()]}, not a search (sitgen search)"
+        )
+    spec = campaign_from_data(campaign["spec"])
+    plan = SearchPlan(raw["strategy"], tuple(raw["measures"]), raw["objective"], raw["threshold"])
+    archive = Archive(spec, campaign["seed"], plan)
+    out = SearchReplay(archive)
+    stored = store.done_ids()
+    classes: set[str] = set()
+    low = 0
+    generation = 0
+    while ids := [i for i in generation_runs(generation) if i in stored]:
+        runs = _view(store, spec, ids)
+        archive.tell(runs)
+        classes.update(r["failure_class"] for r in runs if r["failure_class"])
+        low += sum(r["score"] < LOW_SCORE_POINTS for r in runs)
+        s = archive.stats()
+        out.curve.append(
+            {
+                "runs": archive.told,
+                "cells": s.cells,
+                "qd_score": s.qd_score,
+                "classes": len(classes),
+                "low_share": low / archive.told,
+            }
+        )
+        generation += 1
+    return out
+
+
+def elite_grid(archive: Archive) -> list[list[dict[str, Any] | None]]:
+    """The archive as rows (first measure) × columns (second measure, or one column): each
+    cell its elite's run id and objective, or None."""
+    labels = [m.labels for m in archive.measures]
+    rows = len(labels[0])
+    cols = len(labels[1]) if len(labels) > 1 else 1
+    grid: list[list[dict[str, Any] | None]] = [[None] * cols for _ in range(rows)]
+    if archive.grid.empty:
+        return grid
+    data = archive.grid.data(["index", "run_id", "objective"])
+    cells = archive.grid.int_to_grid_index(data["index"])
+    elites = zip(cells.tolist(), data["run_id"].tolist(), data["objective"].tolist(), strict=True)
+    for cell, r, o in elites:
+        row, col = cell[0], cell[1] if cols > 1 else 0
+        grid[row][col] = {"run": int(r), "objective": float(o)}
+    return grid
