@@ -28,8 +28,9 @@ import numpy as np
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
+from sitgen.search import SearchReplay, elite_grid, replay
 from sitgen.situation import Situation
-from sitgen.store import Store, main_events
+from sitgen.store import KINDS, Store, main_events
 
 STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; color: #222; max-width: 1200px; }
@@ -47,7 +48,8 @@ canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
 .card img { width: 100%; height: 250px; object-fit: contain; background: #fff;
   border: 1px solid #ccc; display: block; } .muted { color: #666; }
 td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
-mark { background: #fde2b8; } #failure-events span:hover { background: #f3f3f3; }
+mark { background: #fde2b8; } #archive td { min-width: 4em; font-size: 12px; }
+#archive td.empty { background: #fafafa; } #failure-events span:hover { background: #f3f3f3; }
 """
 
 
@@ -223,12 +225,106 @@ def _faults_section(report: FaultReport, pages: set[int]) -> str:
     return "".join(body)
 
 
+def _line_svg(
+    element_id: str, points: list[tuple[float, float]], x_label: str, y_label: str
+) -> str:
+    """A line chart of ``points`` (x ascending) with its axes' ranges written at the ends."""
+    width, height, pad = 640, 180, 40
+    if not points:
+        return "<p>No runs.</p>"
+    xs, ys = [p[0] for p in points], [p[1] for p in points]
+    x_hi, y_hi = max(max(xs), 1.0), max(max(ys), 1e-9)
+
+    def at(x: float, y: float) -> str:
+        return f"{pad + (width - 2 * pad) * x / x_hi:.1f},{height - (height - pad) * y / y_hi:.1f}"
+
+    line = " ".join(at(x, y) for x, y in points)
+    dots = "".join(
+        f"<circle cx='{at(x, y).split(',')[0]}' cy='{at(x, y).split(',')[1]}' r='2.5' "
+        f"fill='#2c3e50'><title>{x:g} runs: {y:,.4g}</title></circle>"
+        for x, y in points
+    )
+    return (
+        f"<svg id='{element_id}' width='{width}' height='{height + 40}' role='img'>"
+        f"<line x1='{pad}' y1='{height}' x2='{width - pad}' y2='{height}' stroke='#999'/>"
+        f"<line x1='{pad}' y1='{pad}' x2='{pad}' y2='{height}' stroke='#999'/>"
+        f"<polyline points='{line}' fill='none' stroke='#c0392b' stroke-width='2'/>{dots}"
+        f"<text x='{pad - 4}' y='{pad + 4}' font-size='10' text-anchor='end'>{y_hi:,.4g}</text>"
+        f"<text x='{pad - 4}' y='{height}' font-size='10' text-anchor='end'>0</text>"
+        f"<text x='{width - pad}' y='{height + 14}' font-size='10' text-anchor='end'>"
+        f"{x_hi:g}</text><text x='{width / 2}' y='{height + 30}' font-size='12' "
+        f"text-anchor='middle'>{html.escape(x_label)}</text><text x='8' y='{pad - 10}' "
+        f"font-size='12'>{html.escape(y_label)}</text></svg>"
+    )
+
+
+def _search_section(search: SearchReplay, pages: set[int]) -> str:
+    """A search's archive as a grid of cells by its measures (each cell: its elite's run and
+    objective, shaded by it on a log scale), then distinct failure classes and QD score over
+    the budget."""
+    archive = search.archive
+    plan = archive.plan
+    grid = elite_grid(archive)
+    names = [m.name for m in archive.measures]
+    labels = [m.labels for m in archive.measures]
+    columns = labels[1] if len(labels) > 1 else ("",)
+    filled = sum(cell is not None for row in grid for cell in row)
+    top = max((c["objective"] for row in grid for c in row if c is not None), default=0.0)
+    stats = archive.stats()
+    body = [
+        "<section id='search'><h2>Search</h2><p>",
+        f"strategy <b>{html.escape(plan.strategy)}</b>, objective "
+        f"<b>{html.escape(plan.objective)}</b>"
+        + (f" ({plan.threshold:g} points)" if plan.objective == "threshold" else "")
+        + f", {len(search.curve)} generations, {archive.told} runs; archive: {filled} of "
+        f"{sum(len(r) for r in grid)} cells filled, QD score {stats.qd_score:,.1f}.</p>",
+        f"<table id='archive' data-cells='{filled}'><tr><th>{html.escape(names[0])} \\ "
+        f"{html.escape(names[1] if len(names) > 1 else '')}</th>",
+    ]
+    body += [f"<th>{html.escape(c)}</th>" for c in columns]
+    body.append("</tr>")
+    for label, row in zip(labels[0], grid, strict=True):
+        body.append(f"<tr><th>{html.escape(label)}</th>")
+        for col, cell in zip(columns, row, strict=True):
+            if cell is None:
+                body.append("<td class='empty'></td>")
+                continue
+            run_id = cell["run"]
+            shade = math.log1p(cell["objective"]) / math.log1p(top) if top > 0 else 0.0
+            link = f"<a href='run-{run_id}.html'>{run_id}</a>" if run_id in pages else str(run_id)
+            body.append(
+                f"<td class='num elite' data-run='{run_id}' data-row='{html.escape(label)}' "
+                f"data-col='{html.escape(col)}' style='background: rgba(192, 57, 43, "
+                f"{0.1 + 0.6 * shade:.2f})' title='{cell['objective']:,.1f}'>run {link}<br>"
+                f"{cell['objective']:,.1f}</td>"
+            )
+        body.append("</tr>")
+    body.append("</table>")
+    curve = search.curve
+    body.append("<h3>Failure classes found over the budget</h3>")
+    body.append(
+        _line_svg(
+            "classes-curve",
+            [(c["runs"], c["classes"]) for c in curve],
+            "runs",
+            "failure classes",
+        )
+    )
+    body.append("<h3>QD score over the budget</h3>")
+    body.append(
+        _line_svg("qd-curve", [(c["runs"], c["qd_score"]) for c in curve], "runs", "QD score")
+    )
+    body.append("</section>")
+    return "".join(body)
+
+
 def _index(
     store: Store,
     rows: list[dict[str, Any]],
     failures: list[DistinctFailure],
     pages: set[int],
     faults: FaultReport | None = None,
+    search: SearchReplay | None = None,
 ) -> str:
     campaign = store.campaign() or {}
     scores = [r["score"] for r in rows]
@@ -270,10 +366,12 @@ def _index(
     ]
     spec = json.dumps(campaign.get("spec", {}), indent=2, sort_keys=True)
     ranks = {r["run"]: rank for rank, r in enumerate(rows, 1)}
-    title = "sitgen campaign report" if faults is None else "sitgen fault evaluation report"
+    title = f"sitgen {KINDS[store.kind()]} report"
     body = [f"<h1>{title}</h1>"]
     if faults is not None:
         body.append(_faults_section(faults, pages))
+    if search is not None:
+        body.append(_search_section(search, pages))
     shrunk = {
         run_id: json.loads(after)
         for run_id, after in store.db.execute("SELECT run_id, after FROM shrinks")
@@ -766,6 +864,10 @@ def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
         if faults is not None:
             # Each kill is shown as its faulty run beside the correct run on the same situation.
             wanted += [r for f in faults.faults for r in (f.run, f.correct_run) if r is not None]
+        search = replay(store) if store.kind() == "search" else None
+        if search is not None:
+            # Every elite of the archive gets a page: the grid links them.
+            wanted += search.archive.elites()
         pages: set[int] = set()
         for run_id in dict.fromkeys(wanted):
             made = _run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
@@ -778,5 +880,5 @@ def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
             pages.add(run_id)
             written.append(path)
         index = out / "index.html"
-        index.write_text(_index(store, ranked, failures, pages, faults))
+        index.write_text(_index(store, ranked, failures, pages, faults, search))
     return [index, *written]

@@ -11,9 +11,11 @@ uniformly over the filled cells, so a rare failure is built on as often as a com
 A situation's *genome* is one gene per ``[vary]`` entry of the campaign spec (the draw a
 campaign makes: a choice's index, a real or whole value, a scale factor) and the situation seed.
 Variation (:func:`vary`) follows Vassiliades & Mouret's Iso+LineDD on the real genes (Gaussian
-noise plus a step along the line to a second elite, in each gene's range scaled to [0, 1]),
-resamples a choice with probability :data:`P_CHOICE` and draws a new seed with probability
-:data:`P_RESEED` (a seed has no locality: it drives the terrain noise and the placement). The
+noise plus a step along the line to a second elite, in each gene's range scaled to [0, 1]) and
+resamples a choice with probability :data:`P_CHOICE`. A seed has no locality (any change of it,
+or of a map's size, redraws everything it drives), so the genome keeps one seed per stage and
+the :data:`OPERATORS` change one stage at a time: most often the elite's very map with the
+robots drawn anew on it. The
 archive is ``ribs``' ``GridArchive`` (elitist insertion per cell, QD statistics); the variation
 is written here because ribs' emitters vary real vectors and a situation's genome is not one.
 
@@ -79,8 +81,11 @@ FRESH_SHARE = 0.125
 """Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
 P_CHOICE = 0.2
 """Probability that a child draws a choice gene anew instead of taking its parent's."""
-P_RESEED = 0.5
-"""Probability that a child gets a new situation seed instead of its parent's."""
+OPERATORS = {"new_mission": 0.5, "tune": 0.3, "new_map": 0.2}
+"""How a child is varied from its elite, and how often: ``new_mission`` keeps the elite's map
+(its terrain genes and terrain seed) and draws the robots anew on it (a new mission seed; the
+other genes varied); ``tune`` varies every gene and keeps both seeds; ``new_map`` draws a new
+map of varied terrain genes and keeps the mission's draws."""
 SIGMA_ISO = 0.05
 """Iso+LineDD's isotropic noise, in each real gene's range scaled to [0, 1]."""
 SIGMA_LINE = 0.2
@@ -191,7 +196,7 @@ class SearchPlan:
             "batch": BATCH,
             "fresh_share": FRESH_SHARE,
             "p_choice": P_CHOICE,
-            "p_reseed": P_RESEED,
+            "operators": OPERATORS,
             "sigma_iso": SIGMA_ISO,
             "sigma_line": SIGMA_LINE,
         }
@@ -220,19 +225,33 @@ def plan_search(
 
 @dataclass(frozen=True)
 class Genome:
-    """A situation to run: one gene per ``[vary]`` entry (in :func:`vary_order`) and a seed."""
+    """A situation to run: one gene per ``[vary]`` entry (in :func:`vary_order`), the seed of
+    its terrain's draws, the seed of its mission's draws (placement, routes, peers) and the
+    run's own seed (sensor noise; the situation seed where a stage has no seed of its own)."""
 
     genes: tuple[int | float, ...]
     seed: int
+    terrain_seed: int
+    mission_seed: int
 
     def as_dict(self, spec: CampaignSpec) -> dict[str, Any]:
         paths = [path for path, _ in vary_order(spec)]
-        return {"seed": self.seed, "draws": dict(zip(paths, self.genes, strict=True))}
+        return {
+            "seed": self.seed,
+            "terrain_seed": self.terrain_seed,
+            "mission_seed": self.mission_seed,
+            "draws": dict(zip(paths, self.genes, strict=True)),
+        }
 
     @staticmethod
     def from_dict(spec: CampaignSpec, data: dict[str, Any]) -> Genome:
         draws = data["draws"]
-        return Genome(tuple(draws[path] for path, _ in vary_order(spec)), int(data["seed"]))
+        return Genome(
+            tuple(draws[path] for path, _ in vary_order(spec)),
+            int(data["seed"]),
+            int(data["terrain_seed"]),
+            int(data["mission_seed"]),
+        )
 
 
 def _to_unit(kind: str, args: list[Any], gene: int | float) -> float:
@@ -264,13 +283,19 @@ def solution(spec: CampaignSpec, genome: Genome) -> np.ndarray:
 
 def fresh(spec: CampaignSpec, seed: int, index: int) -> Genome:
     """Run ``index``'s fresh genome: exactly the campaign's job ``index``."""
-    return Genome(tuple(draw_genes(spec, seed, index)), job_seed(seed, index))
+    own = job_seed(seed, index)
+    return Genome(tuple(draw_genes(spec, seed, index)), own, own, own)
 
 
-def new_seed(seed: int, index: int) -> int:
-    """A situation seed for a varied child at run ``index`` (63 bits, apart from job seeds)."""
-    digest = hashlib.sha256(f"{seed}:{index}:search".encode()).digest()
+def new_seed(seed: int, index: int, stage: str) -> int:
+    """A new seed for ``stage`` of a varied child at run ``index`` (63 bits, apart from job
+    seeds and from the other stages')."""
+    digest = hashlib.sha256(f"{seed}:{index}:search:{stage}".encode()).digest()
     return int.from_bytes(digest[:8], "little") >> 1
+
+
+def _is_terrain(path: str) -> bool:
+    return path.startswith("situation.terrain.")
 
 
 def vary(
@@ -280,24 +305,30 @@ def vary(
     first: Genome,
     second: Genome,
     rng: np.random.Generator,
-) -> Genome:
-    """A child of two elites: Iso+LineDD on the real genes, a choice drawn anew with
-    probability :data:`P_CHOICE`, a new seed with probability :data:`P_RESEED`, and a new
-    seed in any case if nothing else changed (the same genome would repeat a run)."""
+) -> tuple[str, Genome]:
+    """A child of two elites by one of :data:`OPERATORS` (drawn by their weights), and the
+    operator's name. Real genes vary by Iso+LineDD, a choice is drawn anew with probability
+    :data:`P_CHOICE`; the child always has a run seed of its own, so no run repeats."""
+    names = list(OPERATORS)
+    weights = np.array(list(OPERATORS.values()))
+    operator = names[int(rng.choice(len(names), p=weights / weights.sum()))]
     line = rng.normal()
     genes: list[int | float] = []
-    for (_, dist), a, b in zip(vary_order(spec), first.genes, second.genes, strict=True):
+    for (path, dist), a, b in zip(vary_order(spec), first.genes, second.genes, strict=True):
         kind, args = next(iter(dist.items()))
-        if kind == "choice":
+        if operator == "new_mission" and _is_terrain(path):
+            genes.append(a)  # the same map
+        elif kind == "choice":
             genes.append(int(rng.integers(len(args))) if rng.random() < P_CHOICE else a)
-            continue
-        ua, ub = _to_unit(kind, args, a), _to_unit(kind, args, b)
-        u = ua + SIGMA_ISO * rng.normal() + SIGMA_LINE * line * (ub - ua)
-        genes.append(_from_unit(kind, args, float(np.clip(u, 0.0, 1.0))))
-    child_seed = new_seed(seed, index) if rng.random() < P_RESEED else first.seed
-    if tuple(genes) == first.genes and child_seed == first.seed:
-        child_seed = new_seed(seed, index)
-    return Genome(tuple(genes), child_seed)
+        else:
+            ua, ub = _to_unit(kind, args, a), _to_unit(kind, args, b)
+            u = ua + SIGMA_ISO * rng.normal() + SIGMA_LINE * line * (ub - ua)
+            genes.append(_from_unit(kind, args, float(np.clip(u, 0.0, 1.0))))
+    terrain_seed = new_seed(seed, index, "terrain") if operator == "new_map" else first.terrain_seed
+    mission_seed = (
+        new_seed(seed, index, "mission") if operator == "new_mission" else first.mission_seed
+    )
+    return operator, Genome(tuple(genes), new_seed(seed, index, "run"), terrain_seed, mission_seed)
 
 
 # Generations.
@@ -324,6 +355,11 @@ class Child:
     genome: Genome
     parents: tuple[int, ...]
     """The elites it was varied from (none for a fresh run)."""
+    operator: str
+    """How: one of :data:`OPERATORS`, or ``fresh``."""
+
+    def stored_genes(self, spec: CampaignSpec) -> dict[str, Any]:
+        return {"operator": self.operator, **self.genome.as_dict(spec)}
 
 
 @dataclass(frozen=True)
@@ -404,12 +440,14 @@ class Archive:
                 or rng.random() < FRESH_SHARE
             )
             if is_fresh:
-                children.append(Child(index, fresh(self.spec, self.seed, index), ()))
+                children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
                 continue
             a = elites[int(rng.integers(len(elites)))]
             b = elites[int(rng.integers(len(elites)))]
-            genome = vary(self.spec, self.seed, index, self.genomes[a], self.genomes[b], rng)
-            children.append(Child(index, genome, (a,) if a == b else (a, b)))
+            operator, genome = vary(
+                self.spec, self.seed, index, self.genomes[a], self.genomes[b], rng
+            )
+            children.append(Child(index, genome, (a,) if a == b else (a, b), operator))
         return children
 
     def stats(self) -> ArchiveStats:
@@ -474,13 +512,16 @@ class SearchResult:
 
 
 def _job(spec: CampaignSpec, child: Child) -> Job:
-    """The child's job; one whose genes make a bad spec carries its error."""
+    """The child's job (a stage whose seed is not the run's gets it in its spec); one whose
+    genes make a bad spec carries its error."""
+    g = child.genome
     try:
-        job = express_job(spec, child.index, child.genome.seed, child.genome.genes)
+        job = express_job(spec, child.index, g.seed, g.genes)
     except _core.SpecError as e:
-        job = Job(
-            child.index, child.genome.seed, dict(spec.situation), dict(spec.run), f"spec: {e}"
-        )
+        return Job(child.index, g.seed, dict(spec.situation), dict(spec.run), f"spec: {e}")
+    for stage, own in (("terrain", g.terrain_seed), ("mission", g.mission_seed)):
+        if own != g.seed:
+            job.situation.setdefault(stage, {})["seed"] = own
     return job
 
 
@@ -543,7 +584,7 @@ def run_search(
                         _row(job, result),
                         generation=generation,
                         parents=child.parents,
-                        genes=child.genome.as_dict(spec),
+                        genes=child.stored_genes(spec),
                     )
                     # One transaction per run: a kill loses only the runs in flight.
                     store.add_runs([row])

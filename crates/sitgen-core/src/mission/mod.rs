@@ -86,6 +86,10 @@ impl ControllerSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MissionSpec {
+    /// Seed of the mission's draws (placement, routes, peers' choices). Default: the
+    /// situation's seed. A search sets it to place the same robots on a changed map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
     /// Body of every robot. Default: Pioneer 3-AT.
     #[serde(default)]
     pub body: Body,
@@ -163,6 +167,7 @@ fn default_peer_controller() -> ControllerSpec {
 impl Default for MissionSpec {
     fn default() -> Self {
         Self {
+            seed: None,
             body: Body::default(),
             peers_min: 0,
             peers_max: default_peers_max(),

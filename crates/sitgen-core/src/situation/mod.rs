@@ -378,20 +378,23 @@ fn check_route_point(map: &Map, path: &str, x: f64, y: f64) -> Result<(), SpecEr
 }
 
 /// Generate the situation of `spec` with master seed `seed`: terrain from the `terrain`
-/// stream, robot placement and the agent's route from `mission`, peers' routes from `peers`.
+/// stream, robot placement and the agent's route from `mission`, peers' routes from `peers`
+/// (each stage from its own seed where the spec gives one).
 pub fn generate(
     spec: &SituationSpec,
     seed: u64,
 ) -> Result<(Situation, terrain::Terrain), GenerationFailed> {
+    let terrain_seed = spec.terrain.seed.unwrap_or(seed);
+    let mission_seed = spec.mission.seed.unwrap_or(seed);
     let terrain = terrain::generate(
         &spec.terrain,
-        &mut ChoiceSource::stream(seed, stream::TERRAIN),
+        &mut ChoiceSource::stream(terrain_seed, stream::TERRAIN),
     )?;
     let robots = mission::generate(
         &terrain.map,
         &spec.mission,
-        &mut ChoiceSource::stream(seed, stream::MISSION),
-        &mut ChoiceSource::stream(seed, stream::PEERS),
+        &mut ChoiceSource::stream(mission_seed, stream::MISSION),
+        &mut ChoiceSource::stream(mission_seed, stream::PEERS),
     )?;
     Ok((
         Situation::new(&terrain.map, robots, spec.clone(), seed),

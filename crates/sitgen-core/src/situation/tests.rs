@@ -134,3 +134,31 @@ fn too_many_robots_or_waypoints_are_refused() {
     }
     assert!(load_error(&s).starts_with("robots: 101 robots; at most 100 allowed"));
 }
+
+#[test]
+fn a_stage_given_its_own_seed_keeps_its_draws_when_the_master_seed_changes() {
+    let spec = crate::spec::from_toml_str("[terrain]\npreset = \"caves\"\nwidth_m = 20.0\n")
+        .unwrap();
+    let mut own = spec.clone();
+    own.terrain.seed = Some(7);
+    let (a, _) = generate(&own, 1).unwrap();
+    let (b, _) = generate(&own, 2).unwrap();
+    assert_eq!(a.map, b.map, "the terrain's own seed makes the same map");
+    own.mission.seed = Some(11);
+    let (c, _) = generate(&own, 3).unwrap();
+    let (d, _) = generate(&own, 4).unwrap();
+    assert_eq!(
+        (c.map, c.robots.len()),
+        (d.map.clone(), d.robots.len()),
+        "both own seeds: the same situation"
+    );
+    assert_eq!(c.robots, d.robots);
+    // Without them, the master seed decides both stages (what every campaign does).
+    let (e, _) = generate(&spec, 1).unwrap();
+    let (f, _) = generate(&spec, 2).unwrap();
+    assert_ne!(e.map, f.map);
+    own.mission.seed = None;
+    let (g, _) = generate(&own, 5).unwrap();
+    assert_eq!(g.map, d.map);
+    assert_ne!(g.robots, d.robots, "a new mission on the same map");
+}

@@ -45,6 +45,10 @@ pub struct TerrainSpec {
     /// the other fields given here override the preset's. Default: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
+    /// Seed of the terrain's draws (noise offsets, cave fill, rooms, rocks, mazes). Default:
+    /// the situation's seed. A search sets it to keep a map while the robots change.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
     /// Map width (x, east), metres, in (0, 10000]. Default 40, or the image's width times
     /// `resolution_m` for an `image` source.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -72,6 +76,7 @@ impl Default for TerrainSpec {
     fn default() -> Self {
         Self {
             preset: None,
+            seed: None,
             width_m: None,
             height_m: None,
             resolution_m: default_resolution_m(),
