@@ -1,4 +1,5 @@
-"""Shared fixtures: the reference data beside the repository and a CLI runner."""
+"""Shared fixtures: the reference data beside the repository, a CLI runner and a real
+headless Chromium (Debian's, driven by Playwright; nothing downloads a browser)."""
 
 from __future__ import annotations
 
@@ -6,8 +7,10 @@ import os
 import shutil
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -66,3 +69,27 @@ def situation_file(situation: sitgen.Situation, tmp_path_factory: pytest.TempPat
     path = tmp_path_factory.mktemp("situation") / "situation.json"
     situation.save(path)
     return path
+
+
+CHROMIUM = os.environ.get("SITGEN_CHROMIUM", "/usr/bin/chromium")
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    if not Path(CHROMIUM).exists():
+        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium, or set SITGEN_CHROMIUM)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
+    with sync_api.sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        yield b
+        b.close()
+
+
+def open_page(browser: Any, path: Path) -> tuple[Any, list[str]]:
+    """A page of ``path`` and the console errors it logs."""
+    page = browser.new_page(viewport={"width": 1280, "height": 1000})
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(path.as_uri())
+    return page, errors

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -17,10 +16,9 @@ import pytest
 
 from sitgen.failures import distinct_failures
 from sitgen.store import Store
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, open_page, run_cli
 from tests.test_campaign import SMALL, write_spec
 
-CHROMIUM = os.environ.get("SITGEN_CHROMIUM", "/usr/bin/chromium")
 ARTIFACTS = Path(os.environ.get("SITGEN_TEST_ARTIFACTS", ROOT / "test-artifacts"))
 
 
@@ -37,26 +35,6 @@ def make_report(tmp_path: Path, text: str, name: str, *extra: str) -> Path:
 @pytest.fixture(scope="module")
 def report(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return make_report(tmp_path_factory.mktemp("report"), SMALL, "small")
-
-
-@pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
-    if not Path(CHROMIUM).exists():
-        pytest.skip(f"no Chromium at {CHROMIUM} (apt-get install chromium, or set SITGEN_CHROMIUM)")
-    sync_api = pytest.importorskip("playwright.sync_api", reason="pip install playwright")
-    with sync_api.sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-        yield b
-        b.close()
-
-
-def open_page(browser: Any, path: Path) -> tuple[Any, list[str]]:
-    page = browser.new_page(viewport={"width": 1280, "height": 1000})
-    errors: list[str] = []
-    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: errors.append(str(e)))
-    page.goto(path.as_uri())
-    return page, errors
 
 
 def test_the_index_sorts_filters_and_has_no_console_errors(report: Path, browser: Any) -> None:
