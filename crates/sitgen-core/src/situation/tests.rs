@@ -137,8 +137,8 @@ fn too_many_robots_or_waypoints_are_refused() {
 
 #[test]
 fn a_stage_given_its_own_seed_keeps_its_draws_when_the_master_seed_changes() {
-    let spec = crate::spec::from_toml_str("[terrain]\npreset = \"caves\"\nwidth_m = 20.0\n")
-        .unwrap();
+    let spec =
+        crate::spec::from_toml_str("[terrain]\npreset = \"caves\"\nwidth_m = 20.0\n").unwrap();
     let mut own = spec.clone();
     own.terrain.seed = Some(7);
     let (a, _) = generate(&own, 1).unwrap();
