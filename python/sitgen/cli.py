@@ -503,8 +503,7 @@ def campaign(
 ) -> None:
     """Generate N randomised situations, run them all, store everything, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
-    from sitgen.campaign import run_campaign, summary
-    from sitgen.store import Store
+    from sitgen.campaign import run_campaign
 
     parsed = _campaign_spec(spec)
     total_n = parsed.n if n is None else n
@@ -524,12 +523,31 @@ def campaign(
             stop=stop,
         ),
     )
-    rate = result.ran / result.wall_s if result.wall_s > 0 else 0.0
+    _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
+    if shrink_top:
+        _shrink_top(db, shrink_top, workers)
+
+
+def _echo_stored(
+    db: Path,
+    ran: int,
+    wall_s: float,
+    total: int,
+    asked: int,
+    interrupted: bool,
+    top: int,
+    extra: str = "",
+) -> None:
+    """What a campaign or search did and what its store holds: the paper's figures, the top
+    runs and the distinct failures; exits 130 if it was stopped early."""
+    from sitgen.campaign import summary
+    from sitgen.store import Store
+
+    rate = ran / wall_s if wall_s > 0 else 0.0
     typer.echo(
-        f"{db}: {result.ran} runs in {result.wall_s:.1f} s ({rate:.1f} runs/s), "
-        f"{result.total} of {total_n} stored"
+        f"{db}: {ran} runs in {wall_s:.1f} s ({rate:.1f} runs/s), {total} of {asked} stored{extra}"
     )
-    if result.interrupted:
+    if interrupted:
         typer.echo("stopped early: run the same command again to finish")
         if not db.exists():
             raise typer.Exit(130)
@@ -548,10 +566,8 @@ def campaign(
             f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
             f"{f['description']}"
         )
-    if result.interrupted:
+    if interrupted:
         raise typer.Exit(130)
-    if shrink_top:
-        _shrink_top(db, shrink_top, workers)
 
 
 def _shrink_top(db: Path, k: int, workers: int | None) -> None:
@@ -720,9 +736,7 @@ def search(
     situation seed, each cell of the archive (failure class × terrain by default) holding its
     highest-scoring run. Writes a store like a campaign's (rank, failures, report, rerun,
     shrink work on it). Ctrl-C stops after the runs in flight; the same command resumes."""
-    from sitgen.campaign import summary
     from sitgen.search import SearchPlan, SearchProgress, SearchResult, plan_search, run_search
-    from sitgen.store import Store
 
     parsed = _campaign_spec(spec)
     plan: SearchPlan = plan_search(
@@ -755,30 +769,16 @@ def search(
         )
 
     result = _stored("search", budget, "runs", work)
-    rate = result.ran / result.wall_s if result.wall_s > 0 else 0.0
-    typer.echo(
-        f"{db}: {result.ran} runs in {result.wall_s:.1f} s ({rate:.1f} runs/s), "
-        f"{result.total} of {budget} stored; archive {result.cells} cells, "
-        f"QD score {result.qd_score:,.0f}"
+    _echo_stored(
+        db,
+        result.ran,
+        result.wall_s,
+        result.total,
+        budget,
+        result.interrupted,
+        top,
+        f"; archive {result.cells} cells, QD score {result.qd_score:,.0f}",
     )
-    if result.interrupted:
-        typer.echo("stopped early: run the same command again to finish")
-        if not db.exists():
-            raise typer.Exit(130)
-    with Store(db) as store:
-        s = summary(store, top)
-    typer.echo(
-        f"runs {s['runs']}, mean score {s['mean_score']:.1f}, median {s['median_score']:.1f}, "
-        f"{100 * s['share_under_10']:.0f}% under 10 points"
-    )
-    typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
-    for f in s["distinct"][:top]:
-        typer.echo(
-            f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
-            f"{f['description']}"
-        )
-    if result.interrupted:
-        raise typer.Exit(130)
 
 
 @app.command()
