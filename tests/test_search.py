@@ -116,7 +116,10 @@ def test_children_stay_in_their_distributions_and_never_repeat_a_run() -> None:
                 k: v for k, v in parent.items() if k.startswith("situation.terrain.")
             }
         if operator == "tune":
-            assert (child.terrain_seed, child.mission_seed) == (first.terrain_seed, first.mission_seed)
+            assert (child.terrain_seed, child.mission_seed) == (
+                first.terrain_seed,
+                first.mission_seed,
+            )
     assert set(seen) == set(OPERATORS)
 
 

@@ -258,8 +258,10 @@ class Store:
             if version < 5:
                 # Version 5 adds searches (sitgen search): each run's generation, parents and
                 # genes (NULL for a campaign's runs) and the search's plan.
+                present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
                 for column in ("generation INTEGER", "parents TEXT", "genes TEXT"):
-                    self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
+                    if column.split()[0] not in present:
+                        self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
                 self.db.executescript(SEARCH_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
