@@ -736,16 +736,11 @@ def search(
     situation seed, each cell of the archive (failure class × terrain by default) holding its
     highest-scoring run. Writes a store like a campaign's (rank, failures, report, rerun,
     shrink work on it). Ctrl-C stops after the runs in flight; the same command resumes."""
-    from sitgen.search import SearchPlan, SearchProgress, SearchResult, plan_search, run_search
+    from sitgen.search import SearchPlan, SearchProgress, SearchResult, run_search
 
     parsed = _campaign_spec(spec)
-    plan: SearchPlan = plan_search(
-        parsed,
-        strategy,
-        [m.strip() for m in measures.split(",") if m.strip()],
-        objective,
-        threshold,
-    )
+    names = tuple(m.strip() for m in measures.split(",") if m.strip())
+    plan = SearchPlan(strategy, names, objective, threshold)
 
     def work(on_progress: OnProgress, stop: Callable[[], bool]) -> SearchResult:
         def show(p: SearchProgress) -> None:

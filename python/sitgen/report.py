@@ -235,14 +235,14 @@ def _line_svg(
     xs, ys = [p[0] for p in points], [p[1] for p in points]
     x_hi, y_hi = max(max(xs), 1.0), max(max(ys), 1e-9)
 
-    def at(x: float, y: float) -> str:
-        return f"{pad + (width - 2 * pad) * x / x_hi:.1f},{height - (height - pad) * y / y_hi:.1f}"
-
-    line = " ".join(at(x, y) for x, y in points)
+    at = [
+        (pad + (width - 2 * pad) * x / x_hi, height - (height - pad) * y / y_hi) for x, y in points
+    ]
+    line = " ".join(f"{u:.1f},{v:.1f}" for u, v in at)
     dots = "".join(
-        f"<circle cx='{at(x, y).split(',')[0]}' cy='{at(x, y).split(',')[1]}' r='2.5' "
-        f"fill='#2c3e50'><title>{x:g} runs: {y:,.4g}</title></circle>"
-        for x, y in points
+        f"<circle cx='{u:.1f}' cy='{v:.1f}' r='2.5' fill='#2c3e50'>"
+        f"<title>{x:g} runs: {y:,.4g}</title></circle>"
+        for (u, v), (x, y) in zip(at, points, strict=True)
     )
     return (
         f"<svg id='{element_id}' width='{width}' height='{height + 40}' role='img'>"

@@ -36,7 +36,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -185,6 +185,13 @@ class SearchPlan:
     measures: tuple[str, ...] = DEFAULT_MEASURES
     objective: str = "score"
     threshold: float = LOW_SCORE_POINTS
+
+    @staticmethod
+    def from_dict(data: dict[str, Any]) -> SearchPlan:
+        """The plan a store holds (its variation constants are this sitgen's)."""
+        return SearchPlan(
+            data["strategy"], tuple(data["measures"]), data["objective"], data["threshold"]
+        )
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -456,28 +463,29 @@ class Archive:
         return ArchiveStats(int(s.num_elites), float(s.qd_score), float(best))
 
 
-def _view(store: Store, spec: CampaignSpec, ids: Iterable[int]) -> list[dict[str, Any]]:
-    """What the archive reads of stored runs ``ids`` (in that order)."""
+def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str, Any]]:
+    """What the archive reads of stored runs ``ids`` (one query; in run order)."""
+    marks = ", ".join("?" for _ in ids)
+    rows = store.db.execute(
+        "SELECT r.id, r.outcome, r.score, r.failure_class, r.failure, r.min_clearance_m, "
+        "r.genes, s.terrain, s.peers FROM runs r JOIN situations s ON s.id = r.situation_id "
+        f"WHERE r.id IN ({marks}) ORDER BY r.id",
+        list(ids),
+    )
     out = []
-    for run_id in ids:
-        row = store.db.execute(
-            "SELECT r.id, r.outcome, r.score, r.failure_class, r.failure, r.min_clearance_m, "
-            "r.genes, s.terrain, s.peers FROM runs r JOIN situations s ON s.id = r.situation_id "
-            "WHERE r.id = ?",
-            (run_id,),
-        ).fetchone()
-        failure = json.loads(row[4]) if row[4] else {}
+    for run_id, outcome, score, cls, failure, clearance, genes, terrain, peers in rows:
+        features = json.loads(failure)["features"] if failure else {}
         out.append(
             {
-                "id": row[0],
-                "outcome": row[1],
-                "score": row[2],
-                "failure_class": row[3],
-                "bearing": failure.get("features", {}).get("bearing"),
-                "min_clearance_m": row[5],
-                "genome": Genome.from_dict(spec, json.loads(row[6])),
-                "terrain": row[7],
-                "peers": row[8],
+                "id": run_id,
+                "outcome": outcome,
+                "score": score,
+                "failure_class": cls,
+                "bearing": features.get("bearing"),
+                "min_clearance_m": clearance,
+                "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
+                "terrain": terrain,
+                "peers": peers,
             }
         )
     return out
@@ -573,12 +581,12 @@ def run_search(
         generation = 0
         while generation_runs(generation).start < budget:
             children = [c for c in archive.ask(generation) if c.index < budget]
-            _check_stored(store, spec, children, done)
+            views = _view(store, spec, [c.index for c in children if c.index in done])
+            _check_stored(store, children, views)
             todo = [c for c in children if c.index not in done]
             if todo and not interrupted:
                 by_index = {c.index: c for c in todo}
-                jobs = [_job(spec, c) for c in todo]
-                for job, result in executor.results(jobs):
+                for job, result in executor.results([_job(spec, c) for c in todo]):
                     child = by_index[job.index]
                     row = dataclasses.replace(
                         _row(job, result),
@@ -590,17 +598,17 @@ def run_search(
                     store.add_runs([row])
                     done.add(job.index)
                     ran += 1
-                    if result.get("ok"):
-                        failure = json.loads(result["record"]).get("failure")
-                        if failure:
-                            classes_seen.add(failure["class"])
+                    failure = (row.record or {}).get("failure")
+                    if failure:
+                        classes_seen.add(failure["class"])
                     progress()
                     if stop is not None and stop():
                         executor.stop()
             if any(c.index not in done for c in children):
                 interrupted = True
                 break
-            archive.tell(_view(store, spec, [c.index for c in children]))
+            views += _view(store, spec, [c.index for c in todo])
+            archive.tell(sorted(views, key=lambda v: int(v["id"])))
             generation += 1
         total = store.run_count()
         stats = archive.stats()
@@ -609,18 +617,14 @@ def run_search(
     )
 
 
-def _check_stored(store: Store, spec: CampaignSpec, children: list[Child], done: set[int]) -> None:
-    """A resumed generation must ask for what was stored: a store written by another sitgen
-    (other variation) cannot be resumed without mixing two searches."""
-    for child in children:
-        if child.index not in done:
-            continue
-        (genes,) = store.db.execute(
-            "SELECT genes FROM runs WHERE id = ?", (child.index,)
-        ).fetchone()
-        if genes is None or Genome.from_dict(spec, json.loads(genes)) != child.genome:
+def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any]]) -> None:
+    """A resumed generation must ask for what was stored (``views``): a store written by
+    another sitgen (other variation) cannot be resumed without mixing two searches."""
+    asked = {c.index: c.genome for c in children}
+    for view in views:
+        if view["genome"] != asked[view["id"]]:
             raise StoreError(
-                f"{store.path}: run {child.index} is not the run this search asks for there "
+                f"{store.path}: run {view['id']} is not the run this search asks for there "
                 "(written by another sitgen?); give a new --db"
             )
 
@@ -635,8 +639,7 @@ class SearchReplay:
 
     archive: Archive
     curve: list[dict[str, float]] = field(default_factory=list)
-    """After each generation: runs, cells, QD score, failure classes found, runs under the
-    low-score threshold."""
+    """After each generation: runs, QD score, failure classes found."""
 
 
 def replay(store: Store) -> SearchReplay:
@@ -651,26 +654,21 @@ def replay(store: Store) -> SearchReplay:
             f"{store.path}: holds a {KINDS[store.kind()]}, not a search (sitgen search)"
         )
     spec = campaign_from_data(campaign["spec"])
-    plan = SearchPlan(raw["strategy"], tuple(raw["measures"]), raw["objective"], raw["threshold"])
+    plan = SearchPlan.from_dict(raw)
     archive = Archive(spec, campaign["seed"], plan)
     out = SearchReplay(archive)
     stored = store.done_ids()
     classes: set[str] = set()
-    low = 0
     generation = 0
     while ids := [i for i in generation_runs(generation) if i in stored]:
         runs = _view(store, spec, ids)
         archive.tell(runs)
         classes.update(r["failure_class"] for r in runs if r["failure_class"])
-        low += sum(r["score"] < LOW_SCORE_POINTS for r in runs)
-        s = archive.stats()
         out.curve.append(
             {
                 "runs": archive.told,
-                "cells": s.cells,
-                "qd_score": s.qd_score,
+                "qd_score": archive.stats().qd_score,
                 "classes": len(classes),
-                "low_share": low / archive.told,
             }
         )
         generation += 1
