@@ -10,7 +10,10 @@ median over seeds of
 - the kill rate of snd_follow's seeded faults on those situations, in the order they were run
   (``sitgen faults --strategy stored``), and the mean runs to first kill over the faults,
 
-and the ratio search / random. Writes ``benches/results/search.json``.
+and the ratio search / random. For the search it also prints the locality of each variation
+operator: of the children it made, the share that failed with their first parent's failure
+class (or, like it, with none) — how much a child resembles the elite it was varied from.
+Writes ``benches/results/search.json``.
 ``SITGEN_BENCH_SEARCH_SEEDS`` (default 5) and ``SITGEN_BENCH_SEARCH_BUDGET`` (default 500)
 shrink it for a quick look.
 """
@@ -56,6 +59,22 @@ def measure(db: Path, budget: int, faults: FaultReport) -> dict[str, float]:
     }
 
 
+def locality(db: Path) -> dict[str, list[int]]:
+    """Per operator: [children, children with their first parent's failure class]."""
+    with Store(db) as store:
+        rows = store.db.execute("SELECT id, failure_class, parents, genes FROM runs").fetchall()
+    classes = {run_id: cls for run_id, cls, _, _ in rows}
+    out: dict[str, list[int]] = {}
+    for _, cls, parents, genes in rows:
+        first = json.loads(parents)[:1]
+        if not first:
+            continue
+        tally = out.setdefault(json.loads(genes)["operator"], [0, 0])
+        tally[0] += 1
+        tally[1] += cls == classes[first[0]]
+    return out
+
+
 def main() -> None:
     seeds = range(1, 1 + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
     largest = int(os.environ.get("SITGEN_BENCH_SEARCH_BUDGET", str(BUDGETS[-1])))
@@ -65,12 +84,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for strategy in STRATEGIES:
             per_seed: list[dict[str, dict[str, float]]] = []
+            kept: dict[str, list[int]] = {}
             wall = 0.0
             for seed in seeds:
                 db = Path(tmp) / f"{strategy}-{seed}.db"
                 started = time.perf_counter()
                 run_search(spec, db, seed=seed, budget=largest, plan=SearchPlan(strategy))
                 wall += time.perf_counter() - started
+                for operator, (n, same) in locality(db).items():
+                    tally = kept.setdefault(operator, [0, 0])
+                    tally[0] += n
+                    tally[1] += same
                 faults_db = Path(tmp) / f"faults-{strategy}-{seed}.db"
                 run_faults(spec, faults_db, budget=largest, strategy="stored", situations_db=db)
                 faults = report_from(faults_db)
@@ -86,6 +110,7 @@ def main() -> None:
                     for b in budgets
                 },
                 "search_wall_s": wall,
+                "children_keeping_parent_class": kept,
             }
     search, random = (out["strategies"][s]["median"] for s in STRATEGIES)
     print(f"\nsearch (map-elites) against random, median over seeds {seeds.start}-{seeds.stop - 1}")
@@ -102,6 +127,10 @@ def main() -> None:
             s, r = search[str(b)][key], random[str(b)][key]
             ratio = s / r if r else float("nan")
             print(f"{b:>6}  {name:32}{s:>12.3g}{r:>10.3g}{ratio:>8.2f}")
+    kept = out["strategies"]["map-elites"]["children_keeping_parent_class"]
+    print("\nchildren with their first parent's failure class, all seeds, by operator")
+    for operator, (n, same) in sorted(kept.items()):
+        print(f"  {operator:12} {same:>5} of {n:>5} ({same / n:.0%})")
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "search.json").write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {RESULTS / 'search.json'}")
