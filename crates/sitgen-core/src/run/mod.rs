@@ -6,7 +6,9 @@
 //!    command comes from outside (a Python or external controller driven by the Python layer);
 //! 3. a command that is not finite ends the run with outcome `error`;
 //! 4. the world steps ([`World::step`]);
-//! 5. the monitor watches the new state, and every robot's pose is appended to the trajectory;
+//! 5. the monitor watches the new state, the coverage observer marks the cells of the
+//!    interaction space it shows ([`crate::coverage`]), and every robot's pose is appended to
+//!    the trajectory;
 //! 6. the run ends when the monitor sees the agent complete its route (`completed`) or the time
 //!    limit is reached (`timeout`, with a timeout event); its scored events give its score and
 //!    its failure class ([`crate::failure::classify`]).
@@ -17,6 +19,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::control::{self, Command, Controller};
+use crate::coverage::{CoverageRecord, Observer};
 use crate::failure::{self, Failure};
 use crate::mission::ControllerSpec;
 use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
@@ -132,6 +135,8 @@ pub struct RunRecord {
     pub events: Vec<Event>,
     /// What went wrong: the failure class of the most severe scored event; `None` if nothing.
     pub failure: Option<Failure>,
+    /// The cells of the interaction space the run exercised ([`crate::coverage`]).
+    pub coverage: CoverageRecord,
     /// Steps simulated.
     pub steps: u64,
     /// Simulated seconds.
@@ -155,6 +160,7 @@ impl RunRecord {
 pub struct Run {
     world: World,
     monitor: Option<Monitor>,
+    coverage: Option<Observer>,
     controllers: Vec<Option<Box<dyn Controller>>>,
     agent: u32,
     scoring: ScoringSpec,
@@ -173,6 +179,7 @@ impl Run {
         world.check_start()?;
         let monitor = Monitor::new(situation, &world, &spec.monitor);
         let agent = monitor.agent();
+        let coverage = Observer::new(&world, agent, spec.monitor.attribution_window_s);
         let mut controllers = Vec::with_capacity(situation.robots.len());
         for r in &situation.robots {
             let (controller, path) = match &spec.controller {
@@ -197,6 +204,7 @@ impl Run {
         let mut run = Self {
             world,
             monitor: Some(monitor),
+            coverage: Some(coverage),
             controllers,
             agent,
             scoring: spec.scoring.clone(),
@@ -307,11 +315,16 @@ impl Run {
             .monitor
             .as_mut()
             .expect("the monitor lives until the end");
-        monitor.observe(&Frame {
+        let frame = Frame {
             step: self.world.steps(),
             seen_by_agent: &seen,
             world: &self.world,
-        });
+        };
+        monitor.observe(&frame);
+        self.coverage
+            .as_mut()
+            .expect("the observer lives until the end")
+            .observe(&frame);
         if monitor.route_completed(self.agent) {
             self.ended = Some((Outcome::Completed, "the agent completed its route".into()));
         } else if self.world.steps() >= self.limit_steps {
@@ -354,11 +367,17 @@ impl Run {
         );
         let score = scoring::score(&events, &self.scoring);
         let failure = failure::classify(&events, agent);
+        let coverage = self
+            .coverage
+            .take()
+            .expect("finished once")
+            .finish(&events, failure.as_ref());
         RunRecord {
             outcome,
             reason,
             score,
             failure,
+            coverage,
             events,
             steps: self.world.steps(),
             time_s: self.world.time_s(),

@@ -505,6 +505,30 @@ impl World {
         (best <= within_m).then_some(best)
     }
 
+    /// Distance from `origin` along the unit direction `dir` to the first occupied cell or the
+    /// map's edge, at most `max`, ignoring robots: the terrain as seen from a point (the
+    /// coverage observer's terrain context). 0 from outside the map.
+    pub fn wall_range(&self, origin: (f64, f64), dir: (f64, f64), max: f64) -> f64 {
+        let (w, h) = (self.map.width_m(), self.map.height_m());
+        if !(0.0..=w).contains(&origin.0) || !(0.0..=h).contains(&origin.1) {
+            return 0.0;
+        }
+        // Where the ray leaves the map: the edge is a wall to a robot, not open ground.
+        let leave = |o: f64, d: f64, size: f64| match d {
+            d if d > 0.0 => (size - o) / d,
+            d if d < 0.0 => -o / d,
+            _ => f64::INFINITY,
+        };
+        let edge = leave(origin.0, dir.0, w).min(leave(origin.1, dir.1, h));
+        ray_to_grid(
+            &self.map,
+            Some(&self.clearance_m),
+            origin,
+            dir,
+            max.min(edge),
+        )
+    }
+
     /// What robot `id` senses now. Only the agent carries the laser.
     pub fn observe(&self, id: u32) -> Result<Observation, String> {
         let r = self
