@@ -148,7 +148,7 @@ def test_a_store_from_schema_1_is_upgraded_on_open_and_loses_nothing(
         c.execute("DROP INDEX runs_by_failure_class")
         c.execute("ALTER TABLE runs DROP COLUMN failure_class")
         c.execute("ALTER TABLE runs DROP COLUMN failure")
-        for column in ("generation", "parents", "genes"):
+        for column in ("generation", "parents", "genes", "coverage"):
             c.execute(f"ALTER TABLE runs DROP COLUMN {column}")
         for table in ("fault_evaluation", "fault_kills", "shrinks", "search"):
             c.execute(f"DROP TABLE {table}")

@@ -64,6 +64,7 @@ def view(run_id: int, cls: str | None, terrain: str, score: float, spec: Any) ->
         "genome": fresh(spec, 0, run_id),
         "terrain": terrain,
         "peers": 0,
+        "cells": (),
     }
 
 

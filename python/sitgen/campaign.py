@@ -373,6 +373,8 @@ def run_user_job(job: Job) -> dict[str, Any]:
         "events": rec.events,
         "steps": rec.steps,
         "time_s": rec.time_s,
+        "failure": rec.failure,
+        "coverage": rec.coverage,
     }
     packed = zlib.compress(rec.trajectory.astype("<f4").tobytes(), 6)
     return {

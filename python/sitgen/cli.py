@@ -705,7 +705,8 @@ def search(
         str,
         typer.Option(
             "--strategy",
-            help="map-elites (quality diversity) or random (the campaign's generation).",
+            help="map-elites (quality diversity), random (the campaign's generation) or "
+            "coverage (fields drawn toward uncovered cells of the interaction space).",
         ),
     ] = "map-elites",
     measures: Annotated[
@@ -734,8 +735,9 @@ def search(
 ) -> None:
     """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
     situation seed, each cell of the archive (failure class × terrain by default) holding its
-    highest-scoring run. Writes a store like a campaign's (rank, failures, report, rerun,
-    shrink work on it). Ctrl-C stops after the runs in flight; the same command resumes."""
+    highest-scoring run; or (--strategy coverage) generation steered toward situation coverage.
+    Writes a store like a campaign's (rank, failures, report, rerun, shrink, coverage work on
+    it). Ctrl-C stops after the runs in flight; the same command resumes."""
     from sitgen.search import SearchPlan, SearchProgress, SearchResult, run_search
 
     parsed = _campaign_spec(spec)
@@ -972,6 +974,64 @@ def failures(
             str(f.representative), f"{f.median_duration_s:.1f}",
         )  # fmt: skip
     Console(width=200).print(table)
+
+
+@app.command("coverage")
+def coverage_command(
+    db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Situation coverage of a store: how many cells of the interaction space (interaction
+    type × clearance × terrain context × agent speed) its runs exercised, each dimension's
+    marginals, pairwise coverage of the dimensions, and which failures began in which cells
+    (docs/coverage.md)."""
+    from sitgen.coverage import coverage_report
+    from sitgen.store import Store
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    require_store(db)
+    with Store(db) as store:
+        report = coverage_report(store)
+    if format == "json":
+        typer.echo(json.dumps(report, indent=2))
+        return
+    console = Console(width=200)
+    console.print(
+        f"{db}: {report['covered']} of {report['total']} cells covered "
+        f"({100 * report['ratio']:.1f}%) by {report['runs']} runs"
+        + (
+            f"; {report['runs_without_coverage']} runs without coverage (errors, or stored "
+            "before coverage was observed)"
+            if report["runs_without_coverage"]
+            else ""
+        )
+    )
+    for d in report["dimensions"]:
+        table = Table(title=d["name"])
+        for column in ("value", "covered", "of", "runs"):
+            table.add_column(column, justify="left" if column == "value" else "right")
+        for v in d["values"]:
+            table.add_row(v["value"], str(v["covered"]), str(v["total"]), str(v["runs"]))
+        console.print(table)
+    table = Table(title="pairwise: value pairs covered")
+    for column in ("dimensions", "covered", "of", "missing (first 4)"):
+        table.add_column(column, justify="right" if column in ("covered", "of") else "left")
+    for p in report["pairwise"]:
+        missing = [" + ".join(q["values"]) for q in p["pairs"] if not q["runs"]]
+        table.add_row(
+            " × ".join(p["dimensions"]), str(p["covered"]), str(p["total"]),
+            ", ".join(missing[:4]) + (" …" if len(missing) > 4 else ""),
+        )  # fmt: skip
+    console.print(table)
+    table = Table(title="failures: the cells they began in")
+    for column in ("class", "runs", "cells (most runs first)", "outside"):
+        table.add_column(column, justify="right" if column in ("runs", "outside") else "left")
+    for f in report["failures"]:
+        cells = ", ".join(f"{c} ({n})" for c, n in list(f["cells"].items())[:3])
+        more = " …" if len(f["cells"]) > 3 else ""
+        table.add_row(f["class"], str(f["runs"]), cells + more, str(f["outside"]))
+    console.print(table)
 
 
 @app.command()

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from sitgen.coverage import RunCoverage, coverage_report, dimensions, stored
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
@@ -49,7 +50,13 @@ canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
   border: 1px solid #ccc; display: block; } .muted { color: #666; }
 td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
 mark { background: #fde2b8; } #archive td { min-width: 4em; font-size: 12px; }
-#archive td.empty { background: #fafafa; } #failure-events span:hover { background: #f3f3f3; }
+#archive td.empty { background: #fafafa; }
+#coverage-grid td { width: 1.4em; height: 1.1em; font-size: 10px; text-align: center;
+  padding: 0; } #coverage-grid td.uncovered { background: #f4f4f4; }
+#coverage-grid td.failed { outline: 2px solid #c0392b; }
+#coverage-grid th { font-size: 11px; font-weight: normal; }
+#coverage-grid th.speed { writing-mode: vertical-rl; }
+#failure-events span:hover { background: #f3f3f3; }
 """
 
 
@@ -318,6 +325,71 @@ def _search_section(search: SearchReplay, pages: set[int]) -> str:
     return "".join(body)
 
 
+def _coverage_section(store: Store, pages: set[int]) -> str:
+    """Situation coverage as a heat grid: rows interaction × clearance, columns terrain context
+    × agent speed, one cell of the interaction space each, shaded by the runs that exercised it
+    (log scale); a cell where a failure began is outlined and marked with how many, linking the
+    most dangerous such run when it has a page."""
+    report = coverage_report(store)
+    runs, _ = stored(store)
+    dims = dimensions()
+    interaction, clearance, context, speed = (d.values for d in dims)
+    hits = {c["cell"]: c["runs"] for c in report["cells"]}
+    failed: dict[str, list[RunCoverage]] = {}
+    for r in runs:
+        if r.failure_cell is not None:
+            failed.setdefault(r.failure_cell, []).append(r)
+    top = max(hits.values(), default=0)
+    body = [
+        "<section id='coverage'><h2>Situation coverage</h2><p>",
+        f"{report['covered']} of {report['total']} cells of the interaction space covered "
+        f"({100 * report['ratio']:.1f}%) by {report['runs']} runs; "
+        f"{sum(len(v) for v in failed.values())} failures began with a peer in a cell "
+        "(outlined; the number is how many). Rows: interaction × clearance; columns: terrain "
+        "context × agent speed (docs/coverage.md).</p>",
+        f"<table id='coverage-grid' data-covered='{report['covered']}' "
+        f"data-total='{report['total']}'><tr><th></th><th></th>",
+    ]
+    body += [f"<th colspan='{len(speed)}'>{html.escape(c)}</th>" for c in context]
+    body.append("</tr><tr><th></th><th></th>")
+    body += [f"<th class='speed'>{html.escape(v)}</th>" for _ in context for v in speed]
+    body.append("</tr>")
+    for i in interaction:
+        for k, c in enumerate(clearance):
+            body.append("<tr>")
+            if k == 0:
+                body.append(f"<th rowspan='{len(clearance)}'>{html.escape(i)}</th>")
+            body.append(f"<th class='clearance'>{html.escape(c)}</th>")
+            for x in context:
+                for v in speed:
+                    key = f"{i}/{c}/{x}/{v}"
+                    n = hits.get(key, 0)
+                    if not n:
+                        body.append(f"<td class='uncovered' data-cell='{key}'></td>")
+                        continue
+                    shade = math.log1p(n) / math.log1p(top)
+                    fails = failed.get(key, [])
+                    title = f"{key}: {n} runs" + (
+                        f", {len(fails)} failures began here" if fails else ""
+                    )
+                    mark = ""
+                    if fails:
+                        worst = max(fails, key=lambda r: (r.score, -r.id)).id
+                        mark = (
+                            f"<a href='run-{worst}.html'>{len(fails)}</a>"
+                            if worst in pages
+                            else str(len(fails))
+                        )
+                    body.append(
+                        f"<td class='covered{' failed' if fails else ''}' data-cell='{key}' "
+                        f"data-runs='{n}' style='background: rgba(39, 174, 96, "
+                        f"{0.15 + 0.6 * shade:.2f})' title='{html.escape(title)}'>{mark}</td>"
+                    )
+            body.append("</tr>")
+    body.append("</table></section>")
+    return "".join(body)
+
+
 def _index(
     store: Store,
     rows: list[dict[str, Any]],
@@ -377,6 +449,7 @@ def _index(
         for run_id, after in store.db.execute("SELECT run_id, after FROM shrinks")
     }
     body.append(_distinct_section(failures, pages, ranks, len(rows), shrunk))
+    body.append(_coverage_section(store, pages))
     body.append("<h2>Campaign</h2><table class='facts'>")
     body += [f"<tr><td>{k}</td><td>{html.escape(str(v))}</td></tr>" for k, v in facts]
     body.append("</table><details><summary>campaign spec</summary><pre>")

@@ -60,6 +60,9 @@ class RunRecord:
     """What went wrong: ``class`` (key), ``description`` (sentence), ``events`` (positions in
     the log of the events that decided it), ``features``; None if nothing did
     (docs/failures.md)."""
+    coverage: dict[str, Any] | None = None
+    """The cells of the interaction space the run exercised: ``cells`` (keys), ``encounters``,
+    ``failure_cell`` (docs/coverage.md)."""
 
     def to_dict(self) -> dict[str, Any]:
         """Everything but the trajectory, as JSON-ready data."""
@@ -73,6 +76,7 @@ class RunRecord:
             "steps": self.steps,
             "time_s": self.time_s,
             "failure": self.failure,
+            "coverage": self.coverage,
             "events": self.events,
         }
 
@@ -171,6 +175,7 @@ def run(
         events_jsonl=out["events_jsonl"],
         events_text=out["events_text"],
         failure=record.get("failure"),
+        coverage=record.get("coverage"),
     )
 
 

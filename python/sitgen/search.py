@@ -27,6 +27,10 @@ runs and is drawn from the archive as generations ``< g`` left it, with a stream
 (seed, run index): a search is a pure function of (spec, seed, options), whatever the worker
 count, and a budget only truncates it. Each run is stored as it ends (its generation, parents
 and genes with it); the same command resumes, rebuilding the archive from the store.
+
+``--strategy coverage`` steers toward situation coverage instead (docs/coverage.md): every
+later generation draws each ``[vary]`` gene level by level, in proportion to the coverage
+:func:`credit` of the runs drawn at that level, with the campaign job's seeds.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from sitgen.store import KINDS, Store, StoreError
 if TYPE_CHECKING:
     from ribs.archives import GridArchive
 
-STRATEGIES = ("map-elites", "random")
+STRATEGIES = ("map-elites", "random", "coverage")
 OBJECTIVES = ("score", "threshold")
 """``score``: the run's score (the most dangerous run per cell); ``threshold``: the paper's
 aim of fewer low scores, min(score, threshold) / threshold, so every run at or above the
@@ -95,6 +99,13 @@ CLEARANCE_CELLS = 5
 0.5 m (and one more for runs with no near miss)."""
 CLEARANCE_STEP_M = 0.5 / CLEARANCE_CELLS
 MAX_BUDGET = 1_000_000
+GUIDE_STRATA = 4
+"""Levels of a real or whole gene for the coverage guide (equal parts of its range)."""
+GUIDE_EPSILON = 0.25
+"""Share of the coverage guide's draw that stays uniform over a gene's levels, so that a level
+that found nothing early is still tried."""
+GUIDE_PRIOR_RUNS = 2.0
+"""Runs' worth of the overall mean credit each level starts with (few runs say little)."""
 
 
 # Measures.
@@ -206,6 +217,15 @@ class SearchPlan:
             "operators": OPERATORS,
             "sigma_iso": SIGMA_ISO,
             "sigma_line": SIGMA_LINE,
+            **(
+                {
+                    "guide_strata": GUIDE_STRATA,
+                    "guide_epsilon": GUIDE_EPSILON,
+                    "guide_prior_runs": GUIDE_PRIOR_RUNS,
+                }
+                if self.strategy == "coverage"
+                else {}
+            ),
         }
 
 
@@ -338,6 +358,80 @@ def vary(
     return operator, Genome(tuple(genes), new_seed(seed, index, "run"), terrain_seed, mission_seed)
 
 
+# The coverage guide.
+
+
+def levels(kind: str, args: list[Any]) -> int:
+    """The coverage guide's levels of a ``[vary]`` entry: a choice's values, else
+    :data:`GUIDE_STRATA` equal parts of its range (fewer for a short whole range)."""
+    if kind == "choice":
+        return len(args)
+    if kind == "int":
+        return min(GUIDE_STRATA, int(args[1]) - int(args[0]) + 1)
+    return GUIDE_STRATA
+
+
+def level_of(kind: str, args: list[Any], gene: int | float) -> int:
+    """The level a gene lies in."""
+    if kind == "choice":
+        return int(gene)
+    n = levels(kind, args)
+    return min(n - 1, int(_to_unit(kind, args, gene) * n))
+
+
+def credit(covered: Sequence[tuple[Genome, tuple[str, ...]]]) -> list[float]:
+    """Each run's coverage credit: the sum over its cells of 1 / (runs that exercised the
+    cell). A cell only this run reached is worth 1, a cell every run reaches almost nothing,
+    and a run that met no peer nothing (after the rare-branch credit of coverage-guided
+    fuzzers, e.g. FairFuzz)."""
+    hits: dict[str, int] = {}
+    for _, cells in covered:
+        for c in cells:
+            hits[c] = hits.get(c, 0) + 1
+    return [sum(1.0 / hits[c] for c in cells) for _, cells in covered]
+
+
+def guide_weights(
+    spec: CampaignSpec, covered: Sequence[tuple[Genome, tuple[str, ...]]]
+) -> list[np.ndarray]:
+    """For each ``[vary]`` entry, the probability of each of its levels: in proportion to the
+    mean :func:`credit` of the runs drawn at that level (each level starting with
+    :data:`GUIDE_PRIOR_RUNS` runs at the overall mean), mixed with a uniform share
+    :data:`GUIDE_EPSILON`."""
+    credits = credit(covered)
+    mean = float(np.mean(credits)) if credits else 0.0
+    out = []
+    for j, (_, dist) in enumerate(vary_order(spec)):
+        kind, args = next(iter(dist.items()))
+        n = levels(kind, args)
+        total = np.full(n, GUIDE_PRIOR_RUNS * mean)
+        runs = np.full(n, GUIDE_PRIOR_RUNS)
+        for (genome, _), c in zip(covered, credits, strict=True):
+            level = level_of(kind, args, genome.genes[j])
+            total[level] += c
+            runs[level] += 1
+        w = total / runs
+        p = w / w.sum() if w.sum() > 0 else np.full(n, 1.0 / n)
+        out.append((1 - GUIDE_EPSILON) * p + GUIDE_EPSILON / n)
+    return out
+
+
+def guided_genes(
+    spec: CampaignSpec, weights: list[np.ndarray], rng: np.random.Generator
+) -> tuple[int | float, ...]:
+    """Genes drawn level by level from :func:`guide_weights`, uniform within a level."""
+    genes: list[int | float] = []
+    for (_, dist), p in zip(vary_order(spec), weights, strict=True):
+        kind, args = next(iter(dist.items()))
+        level = int(rng.choice(len(p), p=p))
+        if kind == "choice":
+            genes.append(level)
+        else:
+            u = (level + rng.random()) / len(p)
+            genes.append(_from_unit(kind, args, min(u, 1.0 - 1e-12)))
+    return tuple(genes)
+
+
 # Generations.
 
 
@@ -398,6 +492,8 @@ class Archive:
             extra_fields={"run_id": ((), np.int64)},
         )
         self.genomes: dict[int, Genome] = {}
+        self.covered: list[tuple[Genome, tuple[str, ...]]] = []
+        """Each run's genome and the coverage cells it exercised (errors left out)."""
         self.told = 0
         """Runs told (errors included)."""
 
@@ -415,6 +511,8 @@ class Archive:
         not be made are remembered but not placed."""
         for run in runs:
             self.genomes[run["id"]] = run["genome"]
+            if run["outcome"] != "error":
+                self.covered.append((run["genome"], run["cells"]))
         self.told += len(runs)
         placed = [r for r in runs if r["outcome"] != "error"]
         if not placed:
@@ -438,8 +536,18 @@ class Archive:
         """Generation ``generation``'s runs (all of them; the budget truncates)."""
         elites = self.elites()
         children = []
+        guide = (
+            guide_weights(self.spec, self.covered)
+            if self.plan.strategy == "coverage" and generation > 0
+            else None
+        )
         for index in generation_runs(generation):
             rng = np.random.Generator(np.random.PCG64([self.seed, index, 1]))
+            if guide is not None:
+                genes = guided_genes(self.spec, guide, rng)
+                own = job_seed(self.seed, index)
+                children.append(Child(index, Genome(genes, own, own, own), (), "guided"))
+                continue
             is_fresh = (
                 generation == 0
                 or self.plan.strategy == "random"
@@ -468,12 +576,13 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
     marks = ", ".join("?" for _ in ids)
     rows = store.db.execute(
         "SELECT r.id, r.outcome, r.score, r.failure_class, r.failure, r.min_clearance_m, "
-        "r.genes, s.terrain, s.peers FROM runs r JOIN situations s ON s.id = r.situation_id "
+        "r.genes, r.coverage, s.terrain, s.peers FROM runs r "
+        "JOIN situations s ON s.id = r.situation_id "
         f"WHERE r.id IN ({marks}) ORDER BY r.id",
         list(ids),
     )
     out = []
-    for run_id, outcome, score, cls, failure, clearance, genes, terrain, peers in rows:
+    for run_id, outcome, score, cls, failure, clearance, genes, coverage, terrain, peers in rows:
         features = json.loads(failure)["features"] if failure else {}
         out.append(
             {
@@ -484,6 +593,7 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "bearing": features.get("bearing"),
                 "min_clearance_m": clearance,
                 "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
+                "cells": tuple(json.loads(coverage)["cells"]) if coverage else (),
                 "terrain": terrain,
                 "peers": peers,
             }

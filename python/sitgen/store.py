@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -65,7 +65,8 @@ CREATE TABLE IF NOT EXISTS runs (
     failure TEXT,
     generation INTEGER,
     parents TEXT,
-    genes TEXT
+    genes TEXT,
+    coverage TEXT
 );
 CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
 CREATE INDEX IF NOT EXISTS runs_by_failure_class ON runs (failure_class, score DESC, id);
@@ -263,6 +264,12 @@ class Store:
                     if column.split()[0] not in present:
                         self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
                 self.db.executescript(SEARCH_SCHEMA)
+            if version < 6:
+                # Version 6 adds each run's situation coverage (NULL for runs stored before:
+                # coverage is observed during a run and cannot be read back from its log).
+                present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
+                if "coverage" not in present:
+                    self.db.execute("ALTER TABLE runs ADD COLUMN coverage TEXT")
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -491,8 +498,9 @@ class Store:
         self.db.execute(
             "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
             "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
-            "waypoints, events_jsonl, failure_class, failure, generation, parents, genes) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "waypoints, events_jsonl, failure_class, failure, generation, parents, genes, "
+            "coverage) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 row.id,
                 row.id,
@@ -515,6 +523,7 @@ class Store:
                 row.generation,
                 None if row.parents is None else json.dumps(list(row.parents)),
                 None if row.genes is None else json.dumps(row.genes, sort_keys=True),
+                json.dumps(rec["coverage"], sort_keys=True) if rec.get("coverage") else None,
             ),
         )
         self.db.executemany(

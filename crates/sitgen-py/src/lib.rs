@@ -2,6 +2,7 @@
 //! modules; long calls release the GIL.
 
 mod campaign;
+mod coverage;
 mod failure;
 mod fault;
 mod interchange;
@@ -43,6 +44,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     run::register(m)?;
     campaign::register(m)?;
     failure::register(m)?;
+    coverage::register(m)?;
     fault::register(m)?;
     shrink::register(m)?;
     Ok(())
