@@ -7,7 +7,10 @@ use sitgen_core::coverage::DIMENSIONS;
 /// The interaction space as (dimension name, its values in order).
 #[pyfunction]
 fn coverage_dimensions() -> Vec<(&'static str, Vec<&'static str>)> {
-    DIMENSIONS.iter().map(|d| (d.name, d.values.to_vec())).collect()
+    DIMENSIONS
+        .iter()
+        .map(|d| (d.name, d.values.to_vec()))
+        .collect()
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
