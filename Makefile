@@ -51,7 +51,7 @@ bench-search: install-test
 # Coverage-guided search against random generation at budgets 100, 250 and 500 over 5 seeds:
 # cells covered and the seeded faults' kill rate (about 15 minutes on 2 cores).
 bench-coverage: install-test
-	$(BIN)/python benches/coverage.py
+	$(BIN)/python benches/situation_coverage.py
 
 # IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
 # with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).

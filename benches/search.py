@@ -22,17 +22,14 @@ from __future__ import annotations
 
 import json
 import os
-import statistics
-import sys
-import tempfile
-import time
 from pathlib import Path
-from typing import Any
+
+from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
 from sitgen.campaign import parse_campaign
 from sitgen.failures import distinct_failures
-from sitgen.faults import FaultReport, kill_rate_at, report_from, run_faults
-from sitgen.search import LOW_SCORE_POINTS, SearchPlan, run_search
+from sitgen.faults import FaultReport, kill_rate_at
+from sitgen.search import LOW_SCORE_POINTS
 from sitgen.store import Store
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -47,15 +44,12 @@ def measure(db: Path, budget: int, faults: FaultReport) -> dict[str, float]:
             "SELECT failure_class, score FROM runs WHERE id < ? ORDER BY id", (budget,)
         ).fetchall()
         split = [f for f in distinct_failures(store) if min(f.run_ids) < budget]
-    firsts = [f.runs_to_first_kill for f in faults.faults]
     return {
         "classes": len({c for c, _ in rows if c}),
         "distinct_failures": len(split),
         "low_share": sum(s < LOW_SCORE_POINTS for _, s in rows) / len(rows),
         "kill_rate": kill_rate_at(faults, budget),
-        "mean_runs_to_first_kill": statistics.fmean(
-            budget + 1 if r is None or r > budget else r for r in firsts
-        ),
+        "mean_runs_to_first_kill": mean_runs_to_first_kill(faults, budget),
     }
 
 
@@ -79,55 +73,29 @@ def main() -> None:
     seeds = range(1, 1 + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
     largest = int(os.environ.get("SITGEN_BENCH_SEARCH_BUDGET", str(BUDGETS[-1])))
     budgets = [b for b in BUDGETS if b <= largest] or [largest]
-    spec = parse_campaign(None)
-    out: dict[str, Any] = {"budgets": budgets, "seeds": list(seeds), "strategies": {}}
-    with tempfile.TemporaryDirectory() as tmp:
-        for strategy in STRATEGIES:
-            per_seed: list[dict[str, dict[str, float]]] = []
-            kept: dict[str, list[int]] = {}
-            wall = 0.0
-            for seed in seeds:
-                db = Path(tmp) / f"{strategy}-{seed}.db"
-                started = time.perf_counter()
-                run_search(spec, db, seed=seed, budget=largest, plan=SearchPlan(strategy))
-                wall += time.perf_counter() - started
-                for operator, (n, same) in locality(db).items():
-                    tally = kept.setdefault(operator, [0, 0])
-                    tally[0] += n
-                    tally[1] += same
-                faults_db = Path(tmp) / f"faults-{strategy}-{seed}.db"
-                run_faults(spec, faults_db, budget=largest, strategy="stored", situations_db=db)
-                faults = report_from(faults_db)
-                per_seed.append({str(b): measure(db, b, faults) for b in budgets})
-                print(f"{strategy} seed {seed}: {per_seed[-1]}", file=sys.stderr)
-            out["strategies"][strategy] = {
-                "per_seed": per_seed,
-                "median": {
-                    str(b): {
-                        k: statistics.median(s[str(b)][k] for s in per_seed)
-                        for k in per_seed[0][str(b)]
-                    }
-                    for b in budgets
-                },
-                "search_wall_s": wall,
-                "children_keeping_parent_class": kept,
-            }
-    search, random = (out["strategies"][s]["median"] for s in STRATEGIES)
-    print(f"\nsearch (map-elites) against random, median over seeds {seeds.start}-{seeds.stop - 1}")
-    names = {
-        "classes": "failure classes found",
-        "distinct_failures": "distinct failures",
-        "low_share": "share of runs under 10 points",
-        "kill_rate": "kill rate of the seeded faults",
-        "mean_runs_to_first_kill": "mean runs to first kill",
-    }
-    print(f"{'budget':>6}  {'figure':32}{'map-elites':>12}{'random':>10}{'ratio':>8}")
-    for b in budgets:
-        for key, name in names.items():
-            s, r = search[str(b)][key], random[str(b)][key]
-            ratio = s / r if r else float("nan")
-            print(f"{b:>6}  {name:32}{s:>12.3g}{r:>10.3g}{ratio:>8.2f}")
-    kept = out["strategies"]["map-elites"]["children_keeping_parent_class"]
+    kept: dict[str, list[int]] = {}
+
+    def tally(strategy: str, db: Path) -> None:
+        if strategy != "map-elites":
+            return
+        for operator, (n, same) in locality(db).items():
+            counts = kept.setdefault(operator, [0, 0])
+            counts[0] += n
+            counts[1] += same
+
+    out = compare(parse_campaign(None), STRATEGIES, seeds, budgets, largest, measure, tally)
+    out["strategies"]["map-elites"]["children_keeping_parent_class"] = kept
+    print_comparison(
+        out,
+        STRATEGIES,
+        {
+            "classes": "failure classes found",
+            "distinct_failures": "distinct failures",
+            "low_share": "share of runs under 10 points",
+            "kill_rate": "kill rate of the seeded faults",
+            "mean_runs_to_first_kill": "mean runs to first kill",
+        },
+    )
     print("\nchildren with their first parent's failure class, all seeds, by operator")
     for operator, (n, same) in sorted(kept.items()):
         print(f"  {operator:12} {same:>5} of {n:>5} ({same / n:.0%})")

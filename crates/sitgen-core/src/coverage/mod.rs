@@ -33,7 +33,7 @@ use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
 use serde::Serialize;
 
 use crate::failure::Failure;
-use crate::monitor::attribution::MOVING_M_S;
+use crate::monitor::attribution::{mean_speed_m_s, MOVING_M_S};
 use crate::monitor::{Event, Frame, Party};
 use crate::sim::{wrap_angle, Contact, World};
 
@@ -350,16 +350,8 @@ impl Observer {
 
     /// The agent's mean speed over the window (path length over time).
     fn agent_speed_bin(&self) -> u8 {
-        let span_s = (self.history.len() - 1) as f64 * self.dt_s;
         let a = self.agent;
-        let path: f64 = self
-            .history
-            .iter()
-            .zip(self.history.iter().skip(1))
-            .map(|(p, q)| (q[a].0 - p[a].0).hypot(q[a].1 - p[a].1))
-            .sum();
-        let speed = if span_s > 0.0 { path / span_s } else { 0.0 };
-        match speed {
+        match mean_speed_m_s(self.history.iter().map(|p| p[a]), self.dt_s) {
             s if s < MOVING_M_S => 0,
             s if s < 0.2 => 1,
             s if s < 0.4 => 2,

@@ -37,6 +37,24 @@ use super::{seconds, Frame, Party};
 /// twentieth of a Pioneer's top speed, above the creep of a robot turning on the spot.
 pub const MOVING_M_S: f64 = 0.05;
 
+/// Mean speed along consecutive positions `dt_s` apart: path length over time (0 for fewer
+/// than two), what a robot actually did rather than what it was commanded.
+pub fn mean_speed_m_s(positions: impl IntoIterator<Item = (f64, f64)>, dt_s: f64) -> f64 {
+    let (mut path, mut steps, mut last) = (0.0, 0usize, None::<(f64, f64)>);
+    for p in positions {
+        if let Some((x, y)) = last {
+            path += (p.0 - x).hypot(p.1 - y);
+            steps += 1;
+        }
+        last = Some(p);
+    }
+    if steps == 0 {
+        0.0
+    } else {
+        path / (steps as f64 * dt_s)
+    }
+}
+
 /// Recent poses of every robot and what the agent's laser has seen.
 #[derive(Debug)]
 pub(super) struct Attribution {
@@ -103,14 +121,9 @@ impl Attribution {
         let then = self.history.front().expect("observed before detectors");
         let span_s = (self.history.len() - 1) as f64 * self.dt_s;
         let per_s = |d: f64| if span_s > 0.0 { d / span_s } else { 0.0 };
-        let path: f64 = self
-            .history
-            .iter()
-            .zip(self.history.iter().skip(1))
-            .map(|(p, q)| (q[a].0 - p[a].0).hypot(q[a].1 - p[a].1))
-            .sum();
+        let speed = mean_speed_m_s(self.history.iter().map(|p| (p[a].0, p[a].1)), self.dt_s);
         let mut d = BTreeMap::new();
-        d.insert("agent_mean_speed_m_s".into(), json!(per_s(path)));
+        d.insert("agent_mean_speed_m_s".into(), json!(speed));
         let Party::Robot(o) = other else {
             d.insert("initiator".into(), json!("agent"));
             return d;
