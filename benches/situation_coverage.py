@@ -26,7 +26,7 @@ from pathlib import Path
 from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
 from sitgen.campaign import parse_campaign
-from sitgen.coverage import coverage_curve, dimensions, split, stored
+from sitgen.coverage import stored, summarise
 from sitgen.faults import FaultReport, kill_rate_at
 from sitgen.store import Store
 
@@ -37,23 +37,6 @@ BUDGETS = (100, 250, 500)
 STRATEGIES = ("coverage", "random")
 
 
-def pairs_covered(db: Path, budget: int) -> int:
-    """Value pairs covered, summed over every pair of dimensions, by runs below ``budget``."""
-    with Store(db) as store:
-        runs, _ = stored(store)
-    n = len(dimensions())
-    seen = {
-        (i, j, v[i], v[j])
-        for r in runs
-        if r.id < budget
-        for c in r.cells
-        for v in [split(c)]
-        for i in range(n)
-        for j in range(i + 1, n)
-    }
-    return len(seen)
-
-
 def measure(db: Path, budget: int, faults: FaultReport) -> dict[str, float]:
     """The figures of the first ``budget`` runs of the search in ``db``."""
     with Store(db) as store:
@@ -61,9 +44,10 @@ def measure(db: Path, budget: int, faults: FaultReport) -> dict[str, float]:
         classes = store.db.execute(
             "SELECT count(DISTINCT failure_class) FROM runs WHERE id < ?", (budget,)
         ).fetchone()[0]
+    report = summarise([r for r in runs if r.id < budget])
     return {
-        "cells": coverage_curve(runs, [budget])[0],
-        "pairs": pairs_covered(db, budget),
+        "cells": report["covered"],
+        "pairs": sum(p["covered"] for p in report["pairwise"]),
         "classes": classes,
         "kill_rate": kill_rate_at(faults, budget),
         "mean_runs_to_first_kill": mean_runs_to_first_kill(faults, budget),

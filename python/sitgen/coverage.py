@@ -34,9 +34,9 @@ def dimensions() -> list[Dimension]:
     return [Dimension(name, tuple(values)) for name, values in _core.coverage_dimensions()]
 
 
-def total_cells() -> int:
+def total_cells(dims: list[Dimension] | None = None) -> int:
     """Cells in the interaction space."""
-    return math.prod(len(d.values) for d in dimensions())
+    return math.prod(len(d.values) for d in dims or dimensions())
 
 
 def split(cell: str) -> tuple[str, ...]:
@@ -86,36 +86,46 @@ def hits(runs: list[RunCoverage]) -> Counter[str]:
 
 
 def coverage_report(store: Store) -> dict[str, Any]:
-    """The store's coverage as JSON-ready data (schema: ``schema/coverage-report.schema.json``):
-    ``covered``, ``total``, ``ratio``, ``runs``, ``runs_without_coverage``, ``dimensions``
-    (each value's covered cells of its total, and runs), ``pairwise`` (each pair of dimensions:
-    value pairs covered of all, and runs per pair), ``cells`` (each covered cell: runs, failures
-    that began there by class) and ``failures`` (each failure class: the cells its runs' failures
-    began in, and how many began outside the space, with no peer in an encounter)."""
+    """The store's coverage (:func:`summarise` of its runs)."""
+    return summarise(*stored(store))
+
+
+def summarise(runs: list[RunCoverage], unobserved: int = 0) -> dict[str, Any]:
+    """The coverage of ``runs`` (``unobserved``: runs without any) as JSON-ready data
+    (schema: ``schema/coverage-report.schema.json``): ``covered``, ``total``, ``ratio``,
+    ``runs``, ``runs_without_coverage``, ``dimensions`` (each value's covered cells of its
+    total, and runs), ``pairwise`` (each pair of dimensions: value pairs covered of all, and
+    runs per pair), ``cells`` (each covered cell: runs, failures that began there by class)
+    and ``failures`` (each failure class: the cells its runs' failures began in, and how many
+    began outside the space, with no peer in an encounter)."""
     dims = dimensions()
-    runs, unobserved = stored(store)
     by_cell = hits(runs)
-    covered = set(by_cell)
-    total = math.prod(len(d.values) for d in dims)
+    covered = [split(c) for c in by_cell]
+    run_values = [[split(c) for c in r.cells] for r in runs]
+    total = total_cells(dims)
     per_dim = []
     for k, d in enumerate(dims):
-        cells_per_value = total // len(d.values)
-        values = []
-        for v in d.values:
-            values.append(
-                {
-                    "value": v,
-                    "covered": sum(1 for c in covered if split(c)[k] == v),
-                    "total": cells_per_value,
-                    "runs": sum(1 for r in runs if any(split(c)[k] == v for c in r.cells)),
-                }
-            )
-        per_dim.append({"name": d.name, "values": values})
+        cells_with = Counter(values[k] for values in covered)
+        runs_with = Counter(v for cells in run_values for v in {values[k] for values in cells})
+        per_dim.append(
+            {
+                "name": d.name,
+                "values": [
+                    {
+                        "value": v,
+                        "covered": cells_with[v],
+                        "total": total // len(d.values),
+                        "runs": runs_with[v],
+                    }
+                    for v in d.values
+                ],
+            }
+        )
     pairwise = []
     for (i, a), (j, b) in itertools.combinations(enumerate(dims), 2):
         pair_runs: Counter[tuple[str, str]] = Counter()
-        for r in runs:
-            pair_runs.update({(split(c)[i], split(c)[j]) for c in r.cells})
+        for cells in run_values:
+            pair_runs.update({(values[i], values[j]) for values in cells})
         pairwise.append(
             {
                 "dimensions": [a.name, b.name],
@@ -141,16 +151,16 @@ def coverage_report(store: Store) -> dict[str, Any]:
         by_class[r.failure_class][r.failure_cell] += 1
     order = {key: n for n, key in enumerate(all_cells(dims))}
     return {
-        "covered": len(covered),
+        "covered": len(by_cell),
         "total": total,
-        "ratio": len(covered) / total,
+        "ratio": len(by_cell) / total,
         "runs": len(runs),
         "runs_without_coverage": unobserved,
         "dimensions": per_dim,
         "pairwise": pairwise,
         "cells": [
             {"cell": c, "runs": by_cell[c], "failures": dict(sorted(failed_in[c].items()))}
-            for c in sorted(covered, key=order.__getitem__)
+            for c in sorted(by_cell, key=order.__getitem__)
         ],
         "failures": [
             {
@@ -168,17 +178,3 @@ def all_cells(dims: list[Dimension] | None = None) -> list[str]:
     """Every cell key, in the core's order (interaction-major)."""
     dims = dims or dimensions()
     return ["/".join(values) for values in itertools.product(*(d.values for d in dims))]
-
-
-def coverage_curve(runs: list[RunCoverage], at: list[int]) -> list[int]:
-    """Cells covered by the runs numbered below ``n`` (``runs`` in id order), for each ``n``
-    in ``at`` (ascending)."""
-    seen: set[str] = set()
-    out = []
-    k = 0
-    for n in at:
-        while k < len(runs) and runs[k].id < n:
-            seen.update(runs[k].cells)
-            k += 1
-        out.append(len(seen))
-    return out

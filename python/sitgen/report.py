@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.coverage import RunCoverage, coverage_report, dimensions, stored
+from sitgen.coverage import RunCoverage, dimensions, stored, summarise
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
@@ -330,8 +330,8 @@ def _coverage_section(store: Store, pages: set[int]) -> str:
     × agent speed, one cell of the interaction space each, shaded by the runs that exercised it
     (log scale); a cell where a failure began is outlined and marked with how many, linking the
     most dangerous such run when it has a page."""
-    report = coverage_report(store)
-    runs, _ = stored(store)
+    runs, unobserved = stored(store)
+    report = summarise(runs, unobserved)
     dims = dimensions()
     interaction, clearance, context, speed = (d.values for d in dims)
     hits = {c["cell"]: c["runs"] for c in report["cells"]}

@@ -259,20 +259,22 @@ class Store:
             if version < 5:
                 # Version 5 adds searches (sitgen search): each run's generation, parents and
                 # genes (NULL for a campaign's runs) and the search's plan.
-                present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
-                for column in ("generation INTEGER", "parents TEXT", "genes TEXT"):
-                    if column.split()[0] not in present:
-                        self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
+                self._add_run_columns("generation INTEGER", "parents TEXT", "genes TEXT")
                 self.db.executescript(SEARCH_SCHEMA)
             if version < 6:
                 # Version 6 adds each run's situation coverage (NULL for runs stored before:
                 # coverage is observed during a run and cannot be read back from its log).
-                present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
-                if "coverage" not in present:
-                    self.db.execute("ALTER TABLE runs ADD COLUMN coverage TEXT")
+                self._add_run_columns("coverage TEXT")
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
+
+    def _add_run_columns(self, *columns: str) -> None:
+        """Add the columns (``name TYPE``) the ``runs`` table lacks."""
+        present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
+        for column in columns:
+            if column.split()[0] not in present:
+                self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
 
     def _schema_version(self) -> int | None:
         has_meta = self.db.execute(

@@ -36,6 +36,7 @@ use crate::failure::Failure;
 use crate::monitor::attribution::{mean_speed_m_s, MOVING_M_S};
 use crate::monitor::{Event, Frame, Party};
 use crate::sim::{wrap_angle, Contact, World};
+use crate::situation::Pose;
 
 #[cfg(test)]
 mod tests;
@@ -228,6 +229,9 @@ pub struct Observer {
     open: Vec<Option<usize>>,
     encounters: Vec<Encounter>,
     reach: Vec<f64>,
+    /// The last terrain context read and the agent's pose then: an agent pinned for minutes
+    /// against a peer needs the fan cast once, not every step.
+    context_at: Option<(Pose, u8)>,
 }
 
 impl Observer {
@@ -246,6 +250,7 @@ impl Observer {
             open: vec![None; robots.len()],
             encounters: Vec::new(),
             reach: robots.iter().map(|r| r.body.enclosing_radius()).collect(),
+            context_at: None,
         };
         observer.remember(world);
         observer
@@ -267,6 +272,7 @@ impl Observer {
         self.remember(frame.world);
         let robots = frame.robots();
         let a = &robots[self.agent];
+        let footprint = a.footprint();
         let mut moment_base: Option<(u8, u8)> = None;
         for (i, p) in robots.iter().enumerate() {
             if i == self.agent {
@@ -277,7 +283,7 @@ impl Observer {
             let clearance = if dx * dx + dy * dy >= apart * apart {
                 f64::INFINITY
             } else {
-                a.footprint().distance(&p.footprint())
+                footprint.distance(&p.footprint())
             };
             if clearance >= ENCOUNTER_M {
                 self.open[i] = None;
@@ -298,12 +304,10 @@ impl Observer {
                     self.encounters.len() - 1
                 }
             };
-            let (context, speed) = *moment_base.get_or_insert_with(|| {
-                (
-                    terrain_context(frame.world, self.agent, self.gap_m),
-                    self.agent_speed_bin(),
-                )
-            });
+            let (context, speed) = match moment_base {
+                Some(m) => m,
+                None => *moment_base.insert((self.context(frame.world), self.agent_speed_bin())),
+            };
             let touching = a.contacts.contains(&Contact::Robot(i as u32))
                 || p.contacts.contains(&Contact::Robot(self.agent as u32));
             let bearing = wrap_angle(dy.atan2(dx) - a.pose.heading_rad);
@@ -345,6 +349,20 @@ impl Observer {
             c if c <= FRAC_PI_4 => OVERTAKING,
             _ if course < 0.0 => CROSSING_LEFT,
             _ => CROSSING_RIGHT,
+        }
+    }
+
+    /// The terrain round the agent now ([`terrain_context`]; the map never changes, so the
+    /// same pose gives the same context).
+    fn context(&mut self, world: &World) -> u8 {
+        let pose = world.robots()[self.agent].pose;
+        match self.context_at {
+            Some((at, context)) if at == pose => context,
+            _ => {
+                let context = terrain_context(world, self.agent, self.gap_m);
+                self.context_at = Some((pose, context));
+                context
+            }
         }
     }
 
