@@ -155,3 +155,20 @@ def test_check_controller_passes_a_good_one_and_names_what_is_wrong() -> None:
     assert "FAIL act" in bad.stdout and "not JSON: 'hello'" in bad.stdout
     missing = run_cli("check-controller", f"{PY}:NoAct")
     assert missing.returncode == 1 and "FAIL loads" in missing.stdout
+
+
+def test_a_user_controller_with_a_control_period_is_asked_every_kth_step(
+    situation: sitgen.Situation,
+) -> None:
+    controller = Forward()
+    spec = {"controller": {"name": "python:any", "control_period_s": 0.5}}
+    record = sitgen.run(situation, controller=controller, time_limit=5, spec=spec)
+    assert record.steps == 50
+    assert [round(o.time, 1) for o in controller.observations] == [
+        round(0.5 * k, 1) for k in range(10)
+    ]
+    assert controller.info["control_period_s"] == 0.5
+    assert controller.observations[0].max_range == 10.0
+    # Its command stayed in force between: it drove 0.3 m/s for the whole 5 s.
+    moved = np.hypot(*(record.trajectory[-1, 0, :2] - record.trajectory[0, 0, :2]))
+    assert moved == pytest.approx(1.5) or any(e["kind"] == "collision" for e in record.events)

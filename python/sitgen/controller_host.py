@@ -97,12 +97,13 @@ def command(value: Any, when: str) -> tuple[float, float]:
         raise BadReply(f"{when} returned {_short(value)}; expected (v, omega) numbers") from None
 
 
-def _observation(message: dict[str, Any], angles: Any) -> Any:
+def _observation(message: dict[str, Any], laser: dict[str, Any]) -> Any:
     from sitgen.sim import Observation
 
     return Observation(
         ranges=np.asarray(message["ranges"], dtype=np.float64),
-        angles=angles,
+        angles=laser["angles"],
+        max_range=laser["range_m"],
         pose=tuple(message["pose"]),
         velocity=tuple(message["velocity"]),
         stalled=message["stalled"],
@@ -126,7 +127,7 @@ def serve(target: str, inbox: IO[str], outbox: IO[str]) -> int:
         controller, failure = load_class(target), None
     except ValueError as e:
         controller, failure = None, str(e)
-    angles: Any = None
+    laser: dict[str, Any] = {}
     for line in inbox:
         message = json.loads(line)
         kind = message.get("type")
@@ -141,11 +142,14 @@ def serve(target: str, inbox: IO[str], outbox: IO[str]) -> int:
         when = "in reset" if kind == "reset" else f"at {message.get('time', 0.0):.1f} s"
         try:
             if kind == "reset":
-                angles = np.asarray(message["laser"]["angles"], dtype=np.float64)
+                laser = {
+                    "angles": np.asarray(message["laser"]["angles"], dtype=np.float64),
+                    "range_m": float(message["laser"]["range_m"]),
+                }
                 controller.reset({k: v for k, v in message.items() if k != "type"})
                 reply({"ready": True})
             else:
-                v, omega = command(controller.act(_observation(message, angles)), when)
+                v, omega = command(controller.act(_observation(message, laser)), when)
                 reply({"v": v, "omega": omega})
         except BadReply as e:
             reply({"error": str(e)})

@@ -87,6 +87,7 @@ def _observation(obs: Mapping[str, Any]) -> Observation:
         velocity=obs["velocity"],
         stalled=obs["stalled"],
         time=obs["time"],
+        max_range=obs["max_range"],
         tracks=tuple(obs["tracks"]),
         waypoints_reached=obs.get("waypoints_reached", 0),
     )

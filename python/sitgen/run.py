@@ -90,16 +90,10 @@ def _controller_name(controller: Any) -> str:
 def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
     """What a user controller is told at the start: its route, body, laser and limits."""
     robot = situation.robots[agent]
-    sim = dict(run.get("sim", {}))
-    laser = {
-        "fov_deg": 180.0,
-        "beams": 181,
-        "range_m": 10.0,
-        "range_step_m": 0.01,
-        "offset_x_m": 0.0,
-        "noise_sd_m": 0.0,
-    }
-    laser.update(sim.get("laser", {}))
+    # The spec as the core resolves it: defaults and the profile's fields filled in.
+    resolved = json.loads(_core.check_run_spec(json.dumps(dict(run))))
+    sim, laser = resolved["sim"], resolved["sim"]["laser"]
+    controller = resolved.get("controller") or robot.controller
     n, fov = int(laser["beams"]), float(np.radians(laser["fov_deg"]))
     angles = [-fov / 2 + i * fov / (n - 1) for i in range(n)] if n > 1 else [0.0]
     return {
@@ -109,10 +103,11 @@ def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dic
         "at_end": robot.at_end,
         "body": robot.body,
         "laser": {**laser, "angles": angles},
-        "dt_s": float(sim.get("dt_s", 0.1)),
-        "max_speed_m_s": float(sim.get("max_speed_m_s", 0.8)),
-        "max_turn_rate_deg_s": float(sim.get("max_turn_rate_deg_s", 90.0)),
-        "time_limit_s": float(run.get("time_limit_s", 600.0)),
+        "dt_s": float(sim["dt_s"]),
+        "max_speed_m_s": float(sim["max_speed_m_s"]),
+        "max_turn_rate_deg_s": float(sim["max_turn_rate_deg_s"]),
+        "time_limit_s": float(resolved["time_limit_s"]),
+        "control_period_s": float(controller.get("control_period_s") or sim["dt_s"]),
     }
 
 
@@ -123,12 +118,14 @@ def run_spec_with(
     params: Mapping[str, float] | None = None,
 ) -> dict[str, Any]:
     """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
-    with ``params``) given on top, as ``sitgen run``'s options give them."""
+    with ``params``) given on top, as ``sitgen run``'s options give them; the rest of the spec's
+    controller section (its ``control_period_s``, ``fault``) stays."""
     run_spec: dict[str, Any] = dict(spec or {})
     if time_limit is not None:
         run_spec["time_limit_s"] = time_limit
     if controller:
-        run_spec["controller"] = {"name": controller, "params": dict(params or {})}
+        given = dict(run_spec.get("controller") or {})
+        run_spec["controller"] = {**given, "name": controller, "params": dict(params or {})}
     return run_spec
 
 
@@ -198,7 +195,9 @@ def _drive(
         return
     try:
         user.reset(_reset_info(situation, run_spec, core.agent))
-        while not core.step(user.act(core.observe_agent())):
+        # Between the controller's decisions (its control period) its last command stays in
+        # force and it is not asked.
+        while not core.step(user.act(core.observe_agent()) if core.agent_acts else None):
             pass
     except ControllerError as e:
         core.fail(str(e))

@@ -37,6 +37,8 @@ class Observation:
     """Whether the last move was blocked."""
     time: float
     """Simulated time, seconds."""
+    max_range: float = 10.0
+    """The laser's maximum range, metres: a beam that hits nothing reads exactly this."""
     tracks: tuple[dict[str, Any], ...] = ()
     """The other robots the laser sees now: ``id``, ``position`` (x, y), ``velocity``
     (vx, vy) in the world frame; standing in for a perception module."""

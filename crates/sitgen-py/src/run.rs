@@ -70,6 +70,13 @@ impl PyRun {
         Ok(self.live()?.agent())
     }
 
+    /// Whether the agent's controller decides on the coming step (every `control_period_s`);
+    /// on other steps its last command stays in force and `step` ignores the one given.
+    #[getter]
+    fn agent_acts(&self) -> PyResult<bool> {
+        Ok(self.live()?.agent_acts_now())
+    }
+
     /// Whether the run has ended.
     #[getter]
     fn ended(&self) -> PyResult<bool> {
@@ -153,6 +160,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
         name: name.into(),
         params: Default::default(),
         fault: None,
+        control_period_s: None,
     };
     control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
 }

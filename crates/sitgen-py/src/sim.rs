@@ -124,6 +124,7 @@ pub(crate) fn observation_dict(py: Python<'_>, o: sim::Observation) -> PyResult<
     let out = PyDict::new(py);
     out.set_item("ranges", PyArray1::from_vec(py, o.ranges))?;
     out.set_item("angles", PyArray1::from_vec(py, o.angles))?;
+    out.set_item("max_range", o.max_range_m)?;
     out.set_item("pose", (o.pose.x_m, o.pose.y_m, o.pose.heading_rad))?;
     out.set_item("velocity", o.velocity)?;
     out.set_item("stalled", o.stalled)?;

@@ -640,6 +640,7 @@ mod tests {
                 .into_iter()
                 .collect(),
             fault: None,
+            control_period_s: None,
         };
         assert!(crate::control::build(&spec, "c").is_ok());
     }
@@ -757,6 +758,7 @@ mod tests {
         let mut obs = Observation {
             ranges: Vec::new(),
             angles: Vec::new(),
+            max_range_m: 10.0,
             pose: s.robots[0].start,
             velocity: (f64::MAX, f64::NAN),
             stalled: false,
@@ -792,6 +794,7 @@ mod tests {
             name: "dwa".into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         };
         let mut failures = Vec::new();
         for seed in 1..=10 {
@@ -837,6 +840,7 @@ mod tests {
                 name: "dwa".into(),
                 params: Default::default(),
                 fault: None,
+                control_period_s: None,
             };
             run_situation(&s, &driver, 600, |w| {
                 if w.steps() % 10 == 0 {
@@ -849,6 +853,7 @@ mod tests {
                     name: name.into(),
                     params: Default::default(),
                     fault: None,
+                    control_period_s: None,
                 };
                 let mut c = crate::control::build(&spec, "c").unwrap();
                 c.reset(&s.robots[0]);

@@ -404,6 +404,10 @@ impl Controller for Seeded {
         self.inner.route()
     }
 
+    fn senses(&self) -> bool {
+        self.inner.senses()
+    }
+
     fn reset(&mut self, robot: &Robot) {
         self.last = None;
         self.inner.reset(robot);

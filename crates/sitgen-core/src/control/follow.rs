@@ -157,6 +157,10 @@ impl Follow {
 }
 
 impl Controller for Follow {
+    fn senses(&self) -> bool {
+        false
+    }
+
     fn route(&self) -> Option<&RouteFollower> {
         self.route.as_ref()
     }
@@ -239,6 +243,7 @@ mod tests {
                 name: "follow".into(),
                 params: Default::default(),
                 fault: None,
+                control_period_s: None,
             },
             at_end,
         }
@@ -257,6 +262,7 @@ mod tests {
             name: "follow".into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         }
     }
 

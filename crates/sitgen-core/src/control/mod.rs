@@ -44,6 +44,11 @@ pub trait Controller: Send {
     fn route(&self) -> Option<&route::RouteFollower> {
         None
     }
+    /// Whether it reads the laser: a peer whose controller does is fitted with one (the
+    /// agent always carries it).
+    fn senses(&self) -> bool {
+        true
+    }
 }
 
 /// Names of the built-in controllers.
@@ -78,6 +83,26 @@ pub fn build(spec: &ControllerSpec, path: &str) -> Result<Box<dyn Controller>, S
     Ok(fault::wrap(controller, f))
 }
 
+/// How many simulator steps of `dt_s` seconds lie between a controller's decisions: its
+/// `control_period_s` as a whole number of steps (1 when it has none). A period that is not a
+/// whole number of steps is refused rather than rounded, so the rate a spec asks for is the rate
+/// it gets; `path` names the spec in errors.
+pub fn period_steps(spec: &ControllerSpec, dt_s: f64, path: &str) -> Result<u64, SpecError> {
+    let Some(period) = spec.control_period_s else {
+        return Ok(1);
+    };
+    let field = join(path, "control_period_s");
+    SpecError::check_positive(&field, period, 3600.0)?;
+    let steps = (period / dt_s).round();
+    if steps < 1.0 || (steps * dt_s - period).abs() > 1e-6 * period {
+        return Err(SpecError::new(
+            field,
+            format!("{period} s is not a whole number of {dt_s} s simulator steps"),
+        ));
+    }
+    Ok(steps as u64)
+}
+
 /// Whether a controller name is run outside the core (by the Python layer): `python:…` or
 /// `cmd:…`.
 pub fn is_external(name: &str) -> bool {
@@ -89,6 +114,9 @@ pub fn is_external(name: &str) -> bool {
 /// program exists is for the Python layer to check). `path` names the spec in errors.
 pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
     let name_path = join(path, "name");
+    if let Some(period) = spec.control_period_s {
+        SpecError::check_positive(&join(path, "control_period_s"), period, 3600.0)?;
+    }
     if spec.fault.is_some() && is_external(&spec.name) {
         return Err(SpecError::new(
             join(path, "fault"),

@@ -124,6 +124,7 @@ mod tests {
                 name: "straight".into(),
                 params: Default::default(),
                 fault: None,
+                control_period_s: None,
             },
             at_end,
         };

@@ -32,10 +32,11 @@
 //! - `goal_position_tol` (m, default R/2, in (0, 100]).
 //! - `goal_angle_tol_deg` (degrees, default 30, in (0, 360]): 3.0.2's effective value; a value
 //!   of 180 or more never corrects the heading, as Player ≥ 3.1's 30-radian default does.
-//! - `max_range_m` (m, default 10, the sitgen laser's default, in (0, 1000]): the laser's
-//!   maximum range. Player reads it from the laser; sitgen's observations do not carry it, so
-//!   it is a parameter, set it to `sim.laser.range_m`. A reading at or beyond it (the laser
-//!   reads exactly `range_m` when nothing is hit) is "no return": free space.
+//! - `max_range_m` (m, default: the laser's, `sim.laser.range_m`, read from each observation as
+//!   Player reads it from the laser's data; in (0, 1000]): a reading at or beyond it (the laser
+//!   reads exactly `range_m` when nothing is hit) is "no return": free space. Setting it
+//!   overrides the laser's; a value below the laser's range makes SND take distant walls for
+//!   free space, one above it makes every empty beam an obstacle at that range.
 //!
 //! Sitgen specifics: SND runs synchronously, once per observation, on the current scan and pose
 //! (no 100 ms wall-clock thread, no decimation), so a run is deterministic. The angular
@@ -128,7 +129,7 @@ pub struct SndConfig {
     max_turn_rate: f64,
     goal_position_tol: Option<f64>,
     goal_angle_tol: f64,
-    max_range_m: f64,
+    max_range_m: Option<f64>,
 }
 
 /// Parameter `name` in (0, hi] if given.
@@ -157,7 +158,7 @@ impl SndConfig {
             goal_position_tol: optional(params, path, "goal_position_tol", 100.0)?,
             goal_angle_tol: super::param(params, path, "goal_angle_tol_deg", 30.0, 360.0)?
                 .to_radians(),
-            max_range_m: super::param(params, path, "max_range_m", 10.0, 1000.0)?,
+            max_range_m: optional(params, path, "max_range_m", 1000.0)?,
         })
     }
 
@@ -179,8 +180,8 @@ impl SndConfig {
         }
     }
 
-    /// The laser's maximum range, metres.
-    pub fn max_range_m(&self) -> f64 {
+    /// The maximum range the spec sets, metres; `None`: the laser's, from each observation.
+    pub fn max_range_m(&self) -> Option<f64> {
         self.max_range_m
     }
 }
@@ -1024,7 +1025,7 @@ impl Snd {
             &p,
             &obs.ranges,
             res,
-            self.config.max_range_m,
+            self.config.max_range_m.unwrap_or(obs.max_range_m),
             &obs.pose,
             &goal,
             &mut self.decision,

@@ -148,6 +148,7 @@ mod tests {
             name: "snd_follow".into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         }
     }
 
@@ -289,6 +290,7 @@ mod tests {
             name: "snd_follow".into(),
             params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
             fault: None,
+            control_period_s: None,
         };
         let err = |p: &[(&str, f64)]| {
             crate::control::build(&spec(p), "mission.agent_controller")

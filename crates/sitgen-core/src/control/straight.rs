@@ -52,6 +52,10 @@ impl Straight {
 }
 
 impl Controller for Straight {
+    fn senses(&self) -> bool {
+        false
+    }
+
     fn route(&self) -> Option<&RouteFollower> {
         self.route.as_ref()
     }

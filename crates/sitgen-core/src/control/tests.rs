@@ -71,6 +71,7 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
         name: "straight".into(),
         params: Default::default(),
         fault: None,
+        control_period_s: None,
     };
     run_situation(&s, &straight, steps, |_| false)
 }
@@ -104,6 +105,7 @@ pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> Str
         name: name.into(),
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
         fault: None,
+        control_period_s: None,
     };
     build(&spec, path)
         .err()

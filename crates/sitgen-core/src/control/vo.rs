@@ -377,6 +377,7 @@ mod tests {
             name: name.into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         }
     }
 
@@ -512,6 +513,7 @@ mod tests {
         let obs = Observation {
             ranges: Vec::new(),
             angles: Vec::new(),
+            max_range_m: 10.0,
             pose: Pose {
                 x_m: 1.0,
                 y_m: 1.0,

@@ -331,8 +331,8 @@ fn snd_locking_up_between_two_standing_peers_oscillates_beside_a_peer() {
 
 #[test]
 fn a_vo_agent_cornered_by_a_blind_peer_in_a_corridor_collides_while_oscillating() {
-    // A 2 m corridor; a `vo` agent and a `vo` peer head for each other. Peers carry no laser,
-    // so the peer's VO sees nothing and it drives straight on. The agent has no velocity that
+    // A 2 m corridor; a `vo` agent and a blind peer (`straight`, no laser) head for each other:
+    // the peer drives straight on. The agent has no velocity that
     // avoids it: it slows, stops and turns left and right towards the wall at 80–95° headings
     // (tens of reversals in 3 s) until the peer strikes it. The contact falls within the
     // oscillation, which decides the class.
@@ -344,7 +344,12 @@ fn a_vo_agent_cornered_by_a_blind_peer_in_a_corridor_collides_while_oscillating(
         &walls,
         vec![
             robot(0, (5.0, 10.0, 0.0), &[[15.0, 10.0]], "vo"),
-            robot(1, (15.0, 10.0, std::f64::consts::PI), &[[5.0, 10.0]], "vo"),
+            robot(
+                1,
+                (15.0, 10.0, std::f64::consts::PI),
+                &[[5.0, 10.0]],
+                "straight",
+            ),
         ],
     );
     let rec = run(&s, &spec(None, 60.0), 0).unwrap();

@@ -106,11 +106,7 @@ pub fn barn_situation(
             heading_rad: std::f64::consts::FRAC_PI_2,
         },
         waypoints,
-        controller: ControllerSpec {
-            name: "snd_follow".into(),
-            params: Default::default(),
-            fault: None,
-        },
+        controller: ControllerSpec::named("snd_follow"),
         at_end: AtEnd::Stop,
     };
     let situation = Situation::new(&map, vec![agent], SituationSpec::default(), index);

@@ -70,14 +70,22 @@ pub struct ControllerSpec {
     /// the controller as it is.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fault: Option<String>,
+    /// Simulated seconds between the controller's decisions, a whole number of simulator
+    /// steps, in (0, 3600]: it observes and commands every k-th step, and its command stays in
+    /// force between (a controller slower than the simulator, as Player's SND thread was under
+    /// a Stage running faster than real time). Default: every step.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub control_period_s: Option<f64>,
 }
 
 impl ControllerSpec {
-    fn named(name: &str) -> Self {
+    /// The controller `name` with its defaults.
+    pub fn named(name: &str) -> Self {
         Self {
             name: name.into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         }
     }
 }

@@ -84,7 +84,9 @@ impl RunSpec {
             ));
         }
         if let Some(c) = &self.controller {
-            control::check(c, &join(path, "controller"))?;
+            let path = join(path, "controller");
+            control::check(c, &path)?;
+            control::period_steps(c, self.sim.dt_s, &path)?;
         }
         self.monitor.validate(&join(path, "monitor"))?;
         self.scoring.validate(&join(path, "scoring"))
@@ -162,6 +164,8 @@ pub struct Run {
     monitor: Option<Monitor>,
     coverage: Option<Observer>,
     controllers: Vec<Option<Box<dyn Controller>>>,
+    /// Steps between each robot's decisions (its controller's `control_period_s`).
+    periods: Vec<u64>,
     agent: u32,
     scoring: ScoringSpec,
     limit_steps: u64,
@@ -175,17 +179,19 @@ impl Run {
     /// its command from [`Run::step`].
     pub fn new(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<Self, SpecError> {
         spec.validate("run")?;
-        let world = World::new(situation, spec.sim.clone(), seed)?;
+        let mut world = World::new(situation, spec.sim.clone(), seed)?;
         world.check_start()?;
         let monitor = Monitor::new(situation, &world, &spec.monitor);
         let agent = monitor.agent();
         let coverage = Observer::new(&world, agent, spec.monitor.attribution_window_s);
         let mut controllers = Vec::with_capacity(situation.robots.len());
+        let mut periods = Vec::with_capacity(situation.robots.len());
         for r in &situation.robots {
             let (controller, path) = match &spec.controller {
                 Some(c) if r.id == agent => (c, "run.controller".to_string()),
                 _ => (&r.controller, format!("robots[{}].controller", r.id)),
             };
+            periods.push(control::period_steps(controller, spec.sim.dt_s, &path)?);
             if is_external(&controller.name) {
                 if r.id != agent {
                     return Err(SpecError::new(
@@ -198,6 +204,11 @@ impl Run {
             }
             let mut c = control::build(controller, &path)?;
             c.reset(r);
+            if c.senses() {
+                world
+                    .fit_laser(r.id)
+                    .expect("the situation's robots are the world's");
+            }
             controllers.push(Some(c));
         }
         let limit_steps = (spec.time_limit_s / spec.sim.dt_s - 1e-9).ceil() as u64;
@@ -206,6 +217,7 @@ impl Run {
             monitor: Some(monitor),
             coverage: Some(coverage),
             controllers,
+            periods,
             agent,
             scoring: spec.scoring.clone(),
             limit_steps,
@@ -214,6 +226,18 @@ impl Run {
         };
         run.record_poses();
         Ok(run)
+    }
+
+    /// Whether robot `id`'s controller decides on the coming step: every `control_period_s`,
+    /// from the first step on; between, its last command stays in force.
+    pub fn acts_now(&self, id: u32) -> bool {
+        self.world.steps().is_multiple_of(self.periods[id as usize])
+    }
+
+    /// Whether the agent's controller decides on the coming step ([`Run::acts_now`]): an
+    /// external controller is asked for a command only then.
+    pub fn agent_acts_now(&self) -> bool {
+        self.acts_now(self.agent)
     }
 
     /// Whether the agent's commands come from outside.
@@ -281,7 +305,8 @@ impl Run {
     }
 
     /// One step. `agent_command` is the external controller's command (ignored for a built-in
-    /// agent); returns whether the run has ended.
+    /// agent, and on steps where the agent does not act: its last command stays in force);
+    /// returns whether the run has ended.
     pub fn step(&mut self, agent_command: Option<Command>) -> bool {
         if self.ended.is_some() {
             return true;
@@ -290,9 +315,18 @@ impl Run {
         let mut commands = Vec::with_capacity(n);
         let mut seen = Vec::new();
         for id in 0..n as u32 {
+            let acts = self.acts_now(id);
+            if !acts && id != self.agent {
+                continue;
+            }
+            // The agent's laser scans every step whether or not its controller acts: what it
+            // saw is the monitor's to know.
             let obs = self.world.observe(id).expect("ids are the world's");
             if id == self.agent {
                 seen = obs.tracks.iter().map(|t| t.id).collect();
+                if !acts {
+                    continue;
+                }
             }
             let command = match &mut self.controllers[id as usize] {
                 Some(c) => c.act(&obs),

@@ -18,6 +18,7 @@ pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
             name: name.into(),
             params: Default::default(),
             fault: None,
+            control_period_s: None,
         }),
         time_limit_s,
         ..RunSpec::default()
@@ -493,4 +494,84 @@ fn a_situation_spec_names_known_controllers_and_only_the_agent_an_external_one()
         "{e}"
     );
     assert!(read("[mission.agent_controller]\nname = \"cmd:my_robot --fast\"\n").is_ok());
+}
+
+#[test]
+fn a_control_period_latches_each_controllers_command_between_its_decisions() {
+    // The agent decides every 5 steps (0.5 s at 0.1 s), the peer every 3: between decisions
+    // each robot's latched command is the one it last gave, and a decision may change it.
+    let mut s = rear_approach();
+    s.robots[1].controller.control_period_s = Some(0.3);
+    let mut spec = spec(Some("snd_follow"), 20.0);
+    spec.controller.as_mut().unwrap().control_period_s = Some(0.5);
+    let mut r = Run::new(&s, &spec, 0).unwrap();
+    let mut last = [(0.0, 0.0); 2];
+    let mut changed_on = [Vec::new(), Vec::new()];
+    for step in 0..100u64 {
+        assert_eq!(r.acts_now(0), step % 5 == 0);
+        assert_eq!(r.acts_now(1), step % 3 == 0);
+        if r.step(None) {
+            break;
+        }
+        for (id, period) in [(0usize, 5u64), (1, 3)] {
+            let command = r.world().robots()[id].command;
+            if command != last[id] {
+                assert_eq!(
+                    step % period,
+                    0,
+                    "robot {id} changed command on step {step}"
+                );
+                changed_on[id].push(step);
+            }
+            last[id] = command;
+        }
+    }
+    // SND's command does change from one decision to the next while it drives.
+    assert!(changed_on[0].len() > 3, "{changed_on:?}");
+    // The same run with every-step control differs: the period is not a no-op.
+    let every = run(&s, &self::spec(Some("snd_follow"), 20.0), 0).unwrap();
+    let latched = run(&s, &spec, 0).unwrap();
+    assert_ne!(every.trajectory, latched.trajectory);
+}
+
+#[test]
+fn a_control_period_must_be_a_whole_number_of_steps() {
+    let error = |json: &str| RunSpec::from_json(json, "run").unwrap_err().to_string();
+    assert_eq!(
+        error(r#"{"controller": {"name": "snd_follow", "control_period_s": 0.25}}"#),
+        "run.controller.control_period_s: 0.25 s is not a whole number of 0.1 s simulator steps"
+    );
+    assert_eq!(
+        error(r#"{"controller": {"name": "snd_follow", "control_period_s": -1}}"#),
+        "run.controller.control_period_s: -1 is not in (0, 3600]"
+    );
+    assert!(RunSpec::from_json(
+        r#"{"controller": {"name": "snd_follow", "control_period_s": 0.3}}"#,
+        "run"
+    )
+    .is_ok());
+    // A peer's period is checked against the run's step when the run starts.
+    let mut s = rear_approach();
+    s.robots[1].controller.control_period_s = Some(0.05);
+    let e = Run::new(&s, &spec(None, 10.0), 0).err().unwrap();
+    assert_eq!(
+        e.to_string(),
+        "robots[1].controller.control_period_s: 0.05 s is not a whole number of 0.1 s simulator \
+         steps"
+    );
+}
+
+#[test]
+fn peers_whose_controllers_sense_carry_the_laser() {
+    let mut s = rear_approach();
+    let r = Run::new(&s, &spec(None, 10.0), 0).unwrap();
+    assert!(r.world().has_laser(0) && !r.world().has_laser(1));
+    assert!(r.world().observe(1).unwrap().ranges.is_empty());
+    s.robots[1].controller = ControllerSpec::named("vo");
+    let r = Run::new(&s, &spec(None, 10.0), 0).unwrap();
+    assert!(r.world().has_laser(1));
+    let seen = r.world().observe(1).unwrap();
+    assert_eq!(seen.ranges.len(), 181);
+    // The peer behind the agent sees it ahead.
+    assert_eq!(seen.tracks.iter().map(|t| t.id).collect::<Vec<_>>(), [0]);
 }

@@ -54,7 +54,8 @@ pub struct SimSpec {
     /// Largest change of turn rate, degrees/s², in (0, 36000]; none by default.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_turn_accel_deg_s2: Option<f64>,
-    /// The agent's laser.
+    /// The laser: the agent's, and that of every peer whose controller senses (`vo`, `dwa`,
+    /// `snd`, `snd_follow`).
     #[serde(default)]
     pub laser: LaserSpec,
 }
@@ -172,6 +173,9 @@ pub struct Observation {
     pub ranges: Vec<f64>,
     /// Beam bearings relative to the heading, radians.
     pub angles: Vec<f64>,
+    /// The laser's maximum range, metres: a reading of this much is no return (Player's laser
+    /// data carries it, and SND reads it from there).
+    pub max_range_m: f64,
     /// Own pose.
     pub pose: Pose,
     /// Own velocity (v, ω).
@@ -194,6 +198,8 @@ pub struct World {
     /// touch the grid, which settles most moves without testing cells.
     clearance_m: Vec<f32>,
     robots: Vec<RobotState>,
+    /// Which robots carry the laser: the agent always, a peer when its controller senses.
+    lasers: Vec<bool>,
     bearings: Vec<f64>,
     /// (cos, sin) of each bearing: a beam's direction is the heading's rotation of these, which
     /// spares a sine and a cosine per beam per scan.
@@ -272,11 +278,17 @@ impl World {
             .collect();
         let bearings = spec.laser.bearings();
         let bearing_dirs = bearings.iter().map(|b| (b.cos(), b.sin())).collect();
+        let lasers = situation
+            .robots
+            .iter()
+            .map(|r| r.role == Role::Agent)
+            .collect();
         Ok(Self {
             spec,
             map,
             clearance_m,
             robots,
+            lasers,
             bearings,
             bearing_dirs,
             time_s: 0.0,
@@ -529,13 +541,31 @@ impl World {
         )
     }
 
-    /// What robot `id` senses now. Only the agent carries the laser.
+    /// Mount the laser on robot `id` too (a peer whose controller senses; the agent always
+    /// carries one).
+    pub fn fit_laser(&mut self, id: u32) -> Result<(), String> {
+        let n = self.robots.len();
+        let laser = self
+            .lasers
+            .get_mut(id as usize)
+            .ok_or_else(|| format!("no robot {id}: the world has {n}"))?;
+        *laser = true;
+        Ok(())
+    }
+
+    /// Whether robot `id` carries the laser.
+    pub fn has_laser(&self, id: u32) -> bool {
+        self.lasers.get(id as usize).copied().unwrap_or(false)
+    }
+
+    /// What robot `id` senses now: its pose, velocity and stall flag, and, if it carries the
+    /// laser, a scan and the robots the scan sees.
     pub fn observe(&self, id: u32) -> Result<Observation, String> {
         let r = self
             .robots
             .get(id as usize)
             .ok_or_else(|| format!("no robot {id}: the world has {}", self.robots.len()))?;
-        let (ranges, angles, tracks) = if r.role == Role::Agent {
+        let (ranges, angles, tracks) = if self.lasers[id as usize] {
             let (ranges, seen) = self.scan_seeing(id as usize);
             let tracks = self
                 .robots
@@ -557,6 +587,7 @@ impl World {
         Ok(Observation {
             ranges,
             angles,
+            max_range_m: self.spec.laser.range_m,
             pose: r.pose,
             velocity: r.velocity,
             stalled: r.stalled,

@@ -20,6 +20,7 @@ fn spec(name: &str, fault: Option<&str>) -> ControllerSpec {
         name: name.into(),
         params: BTreeMap::new(),
         fault: fault.map(str::to_string),
+        control_period_s: None,
     }
 }
 

@@ -414,6 +414,7 @@ fn parameters_are_checked_and_named() {
         name: "snd".into(),
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
         fault: None,
+        control_period_s: None,
     };
     let err = |p: &[(&str, f64)]| {
         crate::control::build(&spec(p), "agent")
@@ -437,7 +438,7 @@ fn parameters_are_checked_and_named() {
     let body = SndConfig::read(&BTreeMap::new(), "").unwrap();
     let r = Body::default().enclosing_radius();
     assert_eq!(body.resolve(r), SndParams::with_radius(r));
-    assert_eq!(body.max_range_m(), 10.0);
+    assert_eq!(body.max_range_m(), None);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -466,6 +467,7 @@ fn named(name: &str) -> ControllerSpec {
         name: name.into(),
         params: Default::default(),
         fault: None,
+        control_period_s: None,
     }
 }
 
@@ -619,4 +621,31 @@ fn time_per_step() {
         d.case,
         per_scan * 1e6
     );
+}
+
+#[test]
+fn snd_takes_its_maximum_range_from_the_laser_unless_told() {
+    // Every beam reads 5 m. From a 5 m laser that is no return at all (free space); SND told
+    // that the maximum is 10 m takes it for a ring of obstacles at 5 m.
+    let robot = crate::test_data::robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd");
+    let obs = |max_range_m: f64| Observation {
+        ranges: vec![5.0; 181],
+        angles: (0..181).map(|i| f64::from(i - 90).to_radians()).collect(),
+        max_range_m,
+        pose: robot.start,
+        velocity: (0.0, 0.0),
+        stalled: false,
+        time_s: 0.0,
+        tracks: Vec::new(),
+    };
+    let nearness = |params: &[(&str, f64)], max_range_m: f64| {
+        let params = params.iter().map(|&(k, v)| (k.to_string(), v)).collect();
+        let mut snd = Snd::from_params(&params, "c").unwrap();
+        snd.reset(&robot);
+        snd.act(&obs(max_range_m));
+        snd.decision().pnd.iter().filter(|&&p| p > 0.0).count()
+    };
+    assert_eq!(nearness(&[], 5.0), 0);
+    assert!(nearness(&[], 10.0) > 100);
+    assert!(nearness(&[("max_range_m", 10.0)], 5.0) > 100);
 }
