@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -52,6 +52,11 @@ bench-search: install-test
 # cells covered and the seeded faults' kill rate (about 15 minutes on 2 cores).
 bench-coverage: install-test
 	$(BIN)/python benches/situation_coverage.py
+
+# The default campaign under the default and paper run profiles, beside the paper's score
+# distribution, over 3 seeds (about 4 minutes on 2 cores).
+bench-profiles: install-test
+	$(BIN)/python benches/profiles.py
 
 # IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
 # with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).

@@ -252,7 +252,8 @@ def express_job(spec: CampaignSpec, index: int, seed: int, genes: Sequence[int |
         except ValueError as e:
             raise _core.SpecError(f"vary.{path!r}: {e}") from None
     situation = _resolve(situation, index)
-    _core.check_run_spec(json.dumps(run))
+    # Stored as the core resolves it, its profile's fields written out: the store says what ran.
+    run = json.loads(_core.check_run_spec(json.dumps(run)))
     return Job(index=index, seed=seed, situation=situation, run=run)
 
 

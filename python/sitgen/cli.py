@@ -1119,6 +1119,19 @@ def presets(
 
 
 @app.command()
+def profiles(
+    name: Annotated[str | None, typer.Argument(help="Print this profile's TOML.")] = None,
+) -> None:
+    """List the run profiles (`[run] profile = NAME`), or print one with its sources."""
+    if name is None:
+        for profile in _core.profile_names():
+            text = _core.profile_text(profile).splitlines()[0].lstrip("# ")
+            typer.echo(f"{profile:10} {text}")
+    else:
+        typer.echo(_core.profile_text(name), nl=False)
+
+
+@app.command()
 def schema(
     situation: Annotated[
         bool, typer.Option("--situation", help="The schema of situation files instead.")

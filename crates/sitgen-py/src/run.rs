@@ -10,7 +10,7 @@ use pyo3::types::PyDict;
 use sitgen_core::control;
 use sitgen_core::mission::ControllerSpec;
 use sitgen_core::monitor;
-use sitgen_core::run::{Run, RunRecord, RunSpec};
+use sitgen_core::run::{profile, Run, RunRecord, RunSpec};
 use sitgen_core::situation::Situation;
 
 use crate::sim::observation_dict;
@@ -152,6 +152,23 @@ fn check_run_spec(spec_json: &str) -> PyResult<String> {
     serde_json::to_string(&spec).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
+/// Names of the run profiles.
+#[pyfunction]
+fn profile_names() -> Vec<&'static str> {
+    profile::NAMES.to_vec()
+}
+
+/// The TOML text of a run profile, with the source of every line.
+#[pyfunction]
+fn profile_text(name: &str) -> PyResult<&'static str> {
+    profile::text(name).ok_or_else(|| {
+        SpecError::new_err(format!(
+            "run.profile: unknown profile `{name}`; expected one of {}",
+            profile::NAMES.join(", ")
+        ))
+    })
+}
+
 /// Check a controller name as run specs do (`control::check`: a built-in name, or a
 /// well-formed `python:`/`cmd:` one); the error names `field`, wherever the name came from.
 #[pyfunction]
@@ -169,5 +186,7 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRun>()?;
     m.add_function(wrap_pyfunction!(check_run_spec, m)?)?;
     m.add_function(wrap_pyfunction!(check_controller, m)?)?;
+    m.add_function(wrap_pyfunction!(profile_names, m)?)?;
+    m.add_function(wrap_pyfunction!(profile_text, m)?)?;
     Ok(())
 }

@@ -28,10 +28,17 @@ use crate::sim::{Observation, SimSpec, World};
 use crate::situation::Situation;
 use crate::spec::{join, SpecError};
 
+pub mod profile;
+
 /// How to run a situation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RunSpec {
+    /// A named run profile laid under this spec's own fields (docs/profiles.md): `default`
+    /// (sitgen's defaults) or `paper` (Arnold & Alexander's Player/Stage setting). Default:
+    /// none, sitgen's defaults.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<String>,
     /// The agent's controller; default: the one the situation names (`snd_follow` unless its
     /// mission said otherwise). `python:module:Class` and `cmd:program args` are run by the
     /// Python layer.
@@ -59,6 +66,7 @@ fn default_time_limit_s() -> f64 {
 impl Default for RunSpec {
     fn default() -> Self {
         Self {
+            profile: None,
             controller: None,
             time_limit_s: default_time_limit_s(),
             sim: SimSpec::default(),
@@ -92,14 +100,14 @@ impl RunSpec {
         self.scoring.validate(&join(path, "scoring"))
     }
 
-    /// Parse and validate a run spec from JSON; errors name the field under `path`.
+    /// Parse and validate a run spec from JSON, its profile (if it names one) laid under its
+    /// own fields; errors name the field under `path`.
     pub fn from_json(text: &str, path: &str) -> Result<Self, SpecError> {
-        let mut de = serde_json::Deserializer::from_str(text);
-        let spec: RunSpec = serde_path_to_error::deserialize(&mut de).map_err(|e| {
-            // serde_json appends where in the text; the field path says it better.
-            let message = e.inner().to_string();
-            let message = message.split(" at line ").next().unwrap_or_default();
-            SpecError::new(join(path, &e.path().to_string()), message)
+        let mut value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| SpecError::new(path, format!("expected a JSON object: {e}")))?;
+        profile::resolve(&mut value, path)?;
+        let spec: RunSpec = serde_path_to_error::deserialize(value).map_err(|e| {
+            SpecError::new(join(path, &e.path().to_string()), e.inner().to_string())
         })?;
         spec.validate(path)?;
         Ok(spec)
