@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -57,6 +57,11 @@ bench-coverage: install-test
 # distribution, over 3 seeds (about 4 minutes on 2 cores).
 bench-profiles: install-test
 	$(BIN)/python benches/profiles.py
+
+# A vo agent among vo peers against the same among blind peers: oscillations, reciprocal ones,
+# collisions; draws docs/vo-*.png (about 3 minutes on 2 cores).
+bench-vo: install-test
+	$(BIN)/python benches/vo_reciprocal.py
 
 # IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
 # with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).
