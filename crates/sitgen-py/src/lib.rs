@@ -3,6 +3,7 @@
 
 mod campaign;
 mod coverage;
+mod episodes;
 mod failure;
 mod fault;
 mod interchange;
@@ -42,6 +43,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     situation::register(m)?;
     sim::register(m)?;
     run::register(m)?;
+    episodes::register(m)?;
     campaign::register(m)?;
     failure::register(m)?;
     coverage::register(m)?;

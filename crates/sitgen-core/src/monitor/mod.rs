@@ -562,6 +562,17 @@ impl Monitor {
         self.waypoints.reached(id)
     }
 
+    /// The waypoints robot `id` has yet to reach on one pass of its route, in order, as the
+    /// monitor counts them (empty once it is complete).
+    pub fn route_ahead(&self, id: u32) -> Vec<(f64, f64)> {
+        self.waypoints.ahead(id as usize)
+    }
+
+    /// The events so far, those still lasting without an end.
+    pub fn events_so_far(&self) -> &[Event] {
+        &self.log.events
+    }
+
     /// Whether robot `id` has driven its whole route.
     pub fn route_completed(&self, id: u32) -> bool {
         self.waypoints.completed()[id as usize]

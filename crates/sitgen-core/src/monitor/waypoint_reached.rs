@@ -82,6 +82,11 @@ impl Detector {
         }
     }
 
+    /// The waypoints robot `i` has yet to reach on its one pass, in order.
+    pub(super) fn ahead(&self, i: usize) -> Vec<(f64, f64)> {
+        self.routes[i].remaining()
+    }
+
     pub(super) fn observe(&mut self, frame: &Frame<'_>, log: &mut Log) {
         for r in frame.robots() {
             let i = r.id as usize;

@@ -28,6 +28,7 @@ use crate::sim::{Observation, SimSpec, World};
 use crate::situation::Situation;
 use crate::spec::{join, SpecError};
 
+pub mod episodes;
 pub mod profile;
 
 /// How to run a situation.
@@ -278,6 +279,49 @@ impl Run {
             .map_or(0, |m| m.waypoints_reached(self.agent))
     }
 
+    /// The waypoints the agent has yet to reach, in order, as the monitor counts them.
+    pub fn agent_route_ahead(&self) -> Vec<(f64, f64)> {
+        self.live_monitor().route_ahead(self.agent)
+    }
+
+    /// How far the agent is from the end of its route along it, metres: straight to the next
+    /// waypoint it has to reach, then leg by leg (0 once complete).
+    pub fn agent_distance_to_go_m(&self) -> f64 {
+        let pose = self.world.robots()[self.agent as usize].pose;
+        let mut at = (pose.x_m, pose.y_m);
+        let mut total = 0.0;
+        for next in self.agent_route_ahead() {
+            total += (next.0 - at.0).hypot(next.1 - at.1);
+            at = next;
+        }
+        total
+    }
+
+    /// The penalty points the run has earned so far: every scored event as if it ended now
+    /// (those still lasting count up to now). The timeout, decided only at the end, is not in
+    /// it.
+    pub fn penalty_so_far(&self) -> f64 {
+        let now = self.world.time_s();
+        let (agent, score_peers) = (self.agent, self.scoring.score_peers);
+        let events: Vec<Event> = self
+            .live_monitor()
+            .events_so_far()
+            .iter()
+            .map(|e| Event {
+                end_s: e.end_s.or(Some(now)),
+                scored: score_peers || e.concerns(agent),
+                ..e.clone()
+            })
+            .collect();
+        scoring::score(&events, &self.scoring).total
+    }
+
+    pub(crate) fn live_monitor(&self) -> &Monitor {
+        self.monitor
+            .as_ref()
+            .expect("the monitor lives until the end")
+    }
+
     /// `situation`'s robots as they stand now (the situation this run was started with): each
     /// at its pose, at rest, with the rest of its route as its controller's route follower
     /// has it (or, for a controller that follows none, the waypoints the monitor has not yet
@@ -305,6 +349,11 @@ impl Run {
                 }
             })
             .collect()
+    }
+
+    /// How the run ended, once it has.
+    pub fn outcome(&self) -> Option<&Outcome> {
+        self.ended.as_ref().map(|(outcome, _)| outcome)
     }
 
     /// Whether the run has ended.
