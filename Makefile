@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -62,6 +62,10 @@ bench-profiles: install-test
 # collisions; draws docs/vo-*.png (about 3 minutes on 2 cores).
 bench-vo: install-test
 	$(BIN)/python benches/vo_reciprocal.py
+
+# Environment steps per second of sitgen.gym, one world and vectorised (about 2 minutes).
+bench-gym: install-test
+	$(BIN)/python benches/gym_env.py
 
 # IR-SIM is not a dependency of sitgen: the comparison gets a virtual environment of its own,
 # with ir-sim and sitgen built from this tree (again on each run, so it measures the tree).

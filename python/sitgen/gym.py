@@ -10,10 +10,10 @@
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
 
 Each episode is a situation generated from ``spec`` (a situation spec: path, TOML text or dict;
-default: sitgen's defaults) with a seed drawn from the environment's random generator, run
-under ``run`` (a run spec: time limit, simulator, monitor, scoring, ``profile``; its
-``controller.control_period_s``, if any, is how long each action holds). The peers drive as the
-situation says; the learner drives the agent.
+default :data:`DEFAULT_SPEC`, the paper campaign's base) with a seed drawn from the
+environment's random generator, run under ``run`` (a run spec: time limit, simulator, monitor,
+scoring, ``profile``; its ``controller.control_period_s``, if any, is how long each action
+holds). The peers drive as the situation says; the learner drives the agent.
 
 - **Observation** (a dict of float32 arrays): ``ranges``, the laser (metres, one per beam,
   ``range_m`` when nothing is hit); ``goal``, the next waypoint of the route in the robot's
@@ -55,6 +55,12 @@ from sitgen.situation import generate_situation
 ENV_ID = "sitgen/Navigate-v0"
 PENALTY_WEIGHT = 0.05
 """Metres of progress one penalty point is worth, by default."""
+DEFAULT_SPEC: dict[str, Any] = {
+    "terrain": {"preset": "rocky_desert"},
+    "mission": {"peers_min": 0, "peers_max": 5},
+}
+"""The situation spec episodes are drawn from by default: the paper campaign's base (a 50 m
+rocky desert, 0-5 peers that avoid nothing)."""
 GENERATION_TRIES = 20
 """Seeds tried for one episode before a spec that keeps failing to generate is an error."""
 
@@ -73,7 +79,7 @@ class _Worlds:
         n: int,
         threads: int = 0,
     ) -> None:
-        self.spec = spec if spec is not None else {}
+        self.spec = spec if spec is not None else DEFAULT_SPEC
         self.core = _core.Episodes(json.dumps(dict(run or {})), n, threads)
         resolved = json.loads(self.core.spec_json)
         self.run = resolved

@@ -141,11 +141,11 @@ impl PyEpisodes {
         }
         let commands: Vec<(f64, f64)> = array.rows().into_iter().map(|r| (r[0], r[1])).collect();
         let episodes = self.episodes.get_mut().unwrap_or_else(|e| e.into_inner());
-        let (steps, seen) = py.detach(|| {
-            let steps = episodes.step(&commands);
-            let seen: Vec<_> = (0..episodes.len()).map(|i| episodes.observe(i)).collect();
-            (steps, seen)
-        });
+        let steps = py.detach(|| episodes.step(&commands));
+        let seen: Vec<_> = steps
+            .iter()
+            .map(|s| s.as_ref().map(|s| s.observation.clone()))
+            .collect();
         let out = PyDict::new(py);
         self.fill_observations(py, &seen, &out)?;
         let field = |f: fn(&sitgen_core::run::episodes::EpisodeStep) -> f64| {

@@ -22,7 +22,7 @@ use crate::spec::SpecError;
 pub const AGENT: &str = "python:sitgen.gym:agent";
 
 /// What the agent senses at the start of a decision, with where it is headed.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeObservation {
     /// The agent's observation (laser, pose, velocity, ...).
     pub observation: Observation,
@@ -42,6 +42,8 @@ pub struct EpisodeStep {
     pub events: Vec<Event>,
     /// How the run ended, if it ended during this step or before.
     pub ended: Option<Outcome>,
+    /// What the agent senses after the step (sensed on the step's thread, beside the run).
+    pub observation: EpisodeObservation,
 }
 
 struct Episode {
@@ -124,20 +126,8 @@ impl Episodes {
 
     /// What the agent of slot `i` senses now; `None` for an empty slot.
     pub fn observe(&self, i: usize) -> Option<EpisodeObservation> {
-        let run = &self.slots[i].as_ref()?.run;
-        let observation = run.agent_observation();
-        let pose = observation.pose;
-        let goal = run
-            .agent_route_ahead()
-            .first()
-            .map_or((0.0, 0.0), |&(x, y)| {
-                let (dx, dy) = (x - pose.x_m, y - pose.y_m);
-                let (s, c) = pose.heading_rad.sin_cos();
-                (c * dx + s * dy, -s * dx + c * dy)
-            });
-        Some(EpisodeObservation { observation, goal })
+        self.slots[i].as_ref().map(|e| sense(&e.run))
     }
-
     /// One decision in every slot: `commands[i]` drives slot `i` for the agent's control
     /// period. An empty slot gives `None`; a run that has ended stays where it ended and
     /// reports its outcome again, with nothing gained.
@@ -168,6 +158,21 @@ impl Episodes {
     }
 }
 
+/// What the agent of `run` senses now, with its next waypoint in its own frame.
+fn sense(run: &Run) -> EpisodeObservation {
+    let observation = run.agent_observation();
+    let pose = observation.pose;
+    let goal = run
+        .agent_route_ahead()
+        .first()
+        .map_or((0.0, 0.0), |&(x, y)| {
+            let (dx, dy) = (x - pose.x_m, y - pose.y_m);
+            let (s, c) = pose.heading_rad.sin_cos();
+            (c * dx + s * dy, -s * dx + c * dy)
+        });
+    EpisodeObservation { observation, goal }
+}
+
 impl Episode {
     fn decide(&mut self, command: Command, steps: u64) -> EpisodeStep {
         for _ in 0..steps {
@@ -183,6 +188,7 @@ impl Episode {
             penalty: penalty - self.penalty,
             events: events[self.events_seen..].to_vec(),
             ended: self.run.outcome().cloned(),
+            observation: sense(&self.run),
         };
         (self.to_go_m, self.penalty, self.events_seen) = (to_go_m, penalty, events.len());
         step
