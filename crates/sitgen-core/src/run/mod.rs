@@ -1,9 +1,13 @@
 //! A run: one situation driven to its end, watched, and scored.
 //!
 //! Each step, in this order (the paper's Player/Stage loop made synchronous):
-//! 1. every robot observes the world as the last step left it (only the agent has a laser);
-//! 2. every controller acts on its observation — the agent's is a built-in controller, or the
-//!    command comes from outside (a Python or external controller driven by the Python layer);
+//! 1. every robot whose controller decides this step (every `control_period_s`; between, its
+//!    last command stays in force) observes the world as the last step left it (the agent, and
+//!    each peer whose controller senses, carries the laser; the agent's scans every step, for
+//!    the monitor);
+//! 2. those controllers act on their observations — the agent's is a built-in controller, or
+//!    the command comes from outside (a Python or external controller driven by the Python
+//!    layer);
 //! 3. a command that is not finite ends the run with outcome `error`;
 //! 4. the world steps ([`World::step`]);
 //! 5. the monitor watches the new state, the coverage observer marks the cells of the
