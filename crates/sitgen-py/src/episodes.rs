@@ -115,7 +115,7 @@ impl PyEpisodes {
     /// (n × 2), float32.
     fn observe<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let seen: Vec<_> = {
-            let episodes = self.lock();
+            let mut episodes = self.lock();
             (0..episodes.len()).map(|i| episodes.observe(i)).collect()
         };
         let out = PyDict::new(py);

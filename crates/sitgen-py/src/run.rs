@@ -85,7 +85,7 @@ impl PyRun {
 
     /// What the agent senses now, plus `waypoints_reached` (as the monitor counts them).
     fn observe_agent<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let run = self.live()?;
+        let mut run = self.live()?;
         let d = observation_dict(py, run.agent_observation())?;
         d.set_item("waypoints_reached", run.agent_waypoints_reached())?;
         Ok(d)

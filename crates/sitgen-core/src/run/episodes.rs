@@ -5,7 +5,7 @@
 //! the agent's control period (one simulator step unless its `control_period_s` says more; the
 //! command stays in force over it), on a thread pool, each run on its own: the result of a slot
 //! never depends on the others or on the thread count. It reports what a learner is rewarded
-//! and told with: the metres of route the agent made good ([`Run::agent_distance_to_go_m`]
+//! and told with: the metres of route the agent made good (its distance to go along the route
 //! before less after), the penalty points it earned ([`Run::penalty_so_far`] after less
 //! before), the events that began, and how the run ended, if it did.
 
@@ -116,7 +116,7 @@ impl Episodes {
     pub fn reset(&mut self, i: usize, situation: &Situation, seed: u64) -> Result<(), SpecError> {
         let run = Run::new(situation, &self.spec, seed)?;
         self.slots[i] = Some(Episode {
-            to_go_m: run.agent_distance_to_go_m(),
+            to_go_m: to_go_m(&run, &run.agent_route_ahead()),
             penalty: 0.0,
             events_seen: 0,
             run,
@@ -125,8 +125,11 @@ impl Episodes {
     }
 
     /// What the agent of slot `i` senses now; `None` for an empty slot.
-    pub fn observe(&self, i: usize) -> Option<EpisodeObservation> {
-        self.slots[i].as_ref().map(|e| sense(&e.run))
+    pub fn observe(&mut self, i: usize) -> Option<EpisodeObservation> {
+        self.slots[i].as_mut().map(|e| {
+            let ahead = e.run.agent_route_ahead();
+            sense(&mut e.run, &ahead)
+        })
     }
     /// One decision in every slot: `commands[i]` drives slot `i` for the agent's control
     /// period. An empty slot gives `None`; a run that has ended stays where it ended and
@@ -158,19 +161,35 @@ impl Episodes {
     }
 }
 
-/// What the agent of `run` senses now, with its next waypoint in its own frame.
-fn sense(run: &Run) -> EpisodeObservation {
+/// What the agent of `run` senses now, with the next of the waypoints `ahead` (the route it has
+/// yet to reach) in its own frame.
+fn sense(run: &mut Run, ahead: &[(f64, f64)]) -> EpisodeObservation {
     let observation = run.agent_observation();
     let pose = observation.pose;
-    let goal = run
-        .agent_route_ahead()
-        .first()
-        .map_or((0.0, 0.0), |&(x, y)| {
-            let (dx, dy) = (x - pose.x_m, y - pose.y_m);
-            let (s, c) = pose.heading_rad.sin_cos();
-            (c * dx + s * dy, -s * dx + c * dy)
-        });
+    let goal = ahead.first().map_or((0.0, 0.0), |&(x, y)| {
+        let (dx, dy) = (x - pose.x_m, y - pose.y_m);
+        let (s, c) = pose.heading_rad.sin_cos();
+        (c * dx + s * dy, -s * dx + c * dy)
+    });
     EpisodeObservation { observation, goal }
+}
+
+/// Metres from `from` through every point of `ahead` in turn.
+fn distance_along(from: (f64, f64), ahead: &[(f64, f64)]) -> f64 {
+    let mut at = from;
+    let mut total = 0.0;
+    for &next in ahead {
+        total += (next.0 - at.0).hypot(next.1 - at.1);
+        at = next;
+    }
+    total
+}
+
+/// How far the agent of `run` is from the end of its route along it: straight to the next
+/// waypoint it has to reach, then leg by leg (0 once complete).
+fn to_go_m(run: &Run, ahead: &[(f64, f64)]) -> f64 {
+    let pose = run.world().robots()[run.agent() as usize].pose;
+    distance_along((pose.x_m, pose.y_m), ahead)
 }
 
 impl Episode {
@@ -180,15 +199,17 @@ impl Episode {
                 break;
             }
         }
-        let to_go_m = self.run.agent_distance_to_go_m();
+        let ahead = self.run.agent_route_ahead();
+        let to_go_m = to_go_m(&self.run, &ahead);
         let penalty = self.run.penalty_so_far();
+        let observation = sense(&mut self.run, &ahead);
         let events = self.run.live_monitor().events_so_far();
         let step = EpisodeStep {
             progress_m: self.to_go_m - to_go_m,
             penalty: penalty - self.penalty,
             events: events[self.events_seen..].to_vec(),
             ended: self.run.outcome().cloned(),
-            observation: sense(&self.run),
+            observation,
         };
         (self.to_go_m, self.penalty, self.events_seen) = (to_go_m, penalty, events.len());
         step

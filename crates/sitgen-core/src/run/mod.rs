@@ -179,6 +179,8 @@ pub struct Run {
     controllers: Vec<Option<Box<dyn Controller>>>,
     /// Steps between each robot's decisions (its controller's `control_period_s`).
     periods: Vec<u64>,
+    /// The agent's observation of the world as it stands, once asked for before the step.
+    agent_scan: Option<Observation>,
     agent: u32,
     scoring: ScoringSpec,
     limit_steps: u64,
@@ -231,6 +233,7 @@ impl Run {
             coverage: Some(coverage),
             controllers,
             periods,
+            agent_scan: None,
             agent,
             scoring: spec.scoring.clone(),
             limit_steps,
@@ -268,11 +271,17 @@ impl Run {
         self.agent
     }
 
-    /// What the agent senses now (for an external controller).
-    pub fn agent_observation(&self) -> Observation {
-        self.world
-            .observe(self.agent)
-            .expect("the agent is in the world")
+    /// What the agent senses now (for an external controller). The scan is kept for the
+    /// coming step, which would otherwise cast the same beams again (noise is keyed by step and
+    /// robot, so it is the same scan either way).
+    pub fn agent_observation(&mut self) -> Observation {
+        self.agent_scan
+            .get_or_insert_with(|| {
+                self.world
+                    .observe(self.agent)
+                    .expect("the agent is in the world")
+            })
+            .clone()
     }
 
     /// How many waypoints of its route the agent has reached, as the monitor sees it (the
@@ -288,36 +297,21 @@ impl Run {
         self.live_monitor().route_ahead(self.agent)
     }
 
-    /// How far the agent is from the end of its route along it, metres: straight to the next
-    /// waypoint it has to reach, then leg by leg (0 once complete).
-    pub fn agent_distance_to_go_m(&self) -> f64 {
-        let pose = self.world.robots()[self.agent as usize].pose;
-        let mut at = (pose.x_m, pose.y_m);
-        let mut total = 0.0;
-        for next in self.agent_route_ahead() {
-            total += (next.0 - at.0).hypot(next.1 - at.1);
-            at = next;
-        }
-        total
-    }
-
     /// The penalty points the run has earned so far: every scored event as if it ended now
     /// (those still lasting count up to now). The timeout, decided only at the end, is not in
     /// it.
     pub fn penalty_so_far(&self) -> f64 {
-        let now = self.world.time_s();
-        let (agent, score_peers) = (self.agent, self.scoring.score_peers);
-        let events: Vec<Event> = self
-            .live_monitor()
-            .events_so_far()
-            .iter()
-            .map(|e| Event {
-                end_s: e.end_s.or(Some(now)),
-                scored: score_peers || e.concerns(agent),
-                ..e.clone()
-            })
-            .collect();
-        scoring::score(&events, &self.scoring).total
+        scoring::points_until(
+            self.live_monitor().events_so_far(),
+            &self.scoring,
+            self.world.time_s(),
+            |e| self.scored(e),
+        )
+    }
+
+    /// Whether an event counts toward the score: the agent's, or any with `score_peers`.
+    fn scored(&self, e: &Event) -> bool {
+        self.scoring.score_peers || e.concerns(self.agent)
     }
 
     pub(crate) fn live_monitor(&self) -> &Monitor {
@@ -382,7 +376,12 @@ impl Run {
             }
             // The agent's laser scans every step whether or not its controller acts: what it
             // saw is the monitor's to know.
-            let obs = self.world.observe(id).expect("ids are the world's");
+            let kept = if id == self.agent {
+                self.agent_scan.take()
+            } else {
+                None
+            };
+            let obs = kept.unwrap_or_else(|| self.world.observe(id).expect("ids are the world's"));
             if id == self.agent {
                 seen = obs.tracks.iter().map(|t| t.id).collect();
                 if !acts {
@@ -405,6 +404,7 @@ impl Run {
         self.world
             .step(&commands)
             .expect("commands are finite and for known robots");
+        self.agent_scan = None;
         self.record_poses();
         let monitor = self
             .monitor
@@ -454,12 +454,10 @@ impl Run {
             )
         });
         let agent = self.agent;
-        let score_peers = self.scoring.score_peers;
-        let events = self.monitor.take().expect("finished once").finish(
-            self.world.steps(),
-            outcome == Outcome::Timeout,
-            |e| score_peers || e.concerns(agent),
-        );
+        let monitor = self.monitor.take().expect("finished once");
+        let events = monitor.finish(self.world.steps(), outcome == Outcome::Timeout, |e| {
+            self.scored(e)
+        });
         let score = scoring::score(&events, &self.scoring);
         let failure = failure::classify(&events, agent);
         let coverage = self

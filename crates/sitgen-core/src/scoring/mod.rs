@@ -40,6 +40,13 @@ pub struct Penalty {
     pub per_s: f64,
 }
 
+impl Penalty {
+    /// The points of an event that lasted `seconds`.
+    pub fn points(&self, seconds: f64) -> f64 {
+        self.start + self.per_s * seconds
+    }
+}
+
 /// How runs are scored.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -113,13 +120,30 @@ pub struct Score {
     pub breakdown: BTreeMap<String, ScoreLine>,
 }
 
+/// The points of the events `scored` picks as if the run stopped at `now_s`: one still lasting
+/// counts up to then. A running total, for rewards; it needs no copy of the log.
+pub fn points_until(
+    events: &[Event],
+    spec: &ScoringSpec,
+    now_s: f64,
+    scored: impl Fn(&Event) -> bool,
+) -> f64 {
+    events
+        .iter()
+        .filter(|e| scored(e))
+        .map(|e| {
+            spec.penalty(e.kind)
+                .points(e.end_s.unwrap_or(now_s) - e.start_s)
+        })
+        .sum()
+}
+
 /// Score the events marked `scored`, in log order (so the sum is the same wherever it runs).
 pub fn score(events: &[Event], spec: &ScoringSpec) -> Score {
     let mut out = Score::default();
     for e in events.iter().filter(|e| e.scored) {
-        let p = spec.penalty(e.kind);
         let seconds = e.duration_s();
-        let points = p.start + p.per_s * seconds;
+        let points = spec.penalty(e.kind).points(seconds);
         if points == 0.0 {
             continue;
         }
