@@ -257,10 +257,12 @@ def export(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
         "export"
     ),
+    spec: RunSpecOption = None,
     allow_edited: AllowEditedOption = False,
 ) -> None:
-    """Export a situation for Player/Stage or ROS, or a campaign's tables for analysis
-    (pandas, polars, DuckDB)."""
+    """Export a situation for Stage (with how it is run: --spec's laser, limits and time limit,
+    every robot driven by its sitgen controller, docs/stage.md) or ROS, or a campaign's tables
+    for analysis (pandas, polars, DuckDB)."""
     if _is_store(source):
         from sitgen.rank import export_tables
 
@@ -274,8 +276,70 @@ def export(
         return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")
-    for path in Situation.load(source, allow_edited).export(output, format):
+    run_spec = _read_run_spec(spec)
+    for path in Situation.load(source, allow_edited).export(output, format, run=run_spec):
         typer.echo(f"wrote {path}")
+
+
+@app.command("serve-controller")
+def serve_controller_command(
+    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    robot: Annotated[int, typer.Option("--robot", help="The robot's id.")],
+    run_spec: Annotated[
+        Path | None,
+        typer.Option("--run-spec", help="Run spec (TOML or JSON; `sitgen export` writes run.json)."),
+    ] = None,
+    allow_edited: AllowEditedOption = False,
+) -> None:
+    """Answer the controller protocol on stdin/stdout with one robot's built-in controller:
+    another simulator (Stage, through integrations/stage) sends observations, sitgen the
+    commands (docs/stage.md)."""
+    from sitgen.crosscheck import serve_controller
+
+    serve_controller(Situation.load(situation, allow_edited), _read_run_spec(run_spec), robot)
+
+
+@app.command()
+def crosscheck(
+    situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
+    stage: Annotated[
+        Path,
+        typer.Option("--stage", help="The Stage 4.3 binary (integrations/stage/build.sh)."),
+    ],
+    plugin: Annotated[
+        Path | None,
+        typer.Option("--plugin", help="Folder of sitgen_stage.so (default: Stage's own)."),
+    ] = None,
+    spec: RunSpecOption = None,
+    time_limit: TimeLimitOption = None,
+    keep: Annotated[
+        Path | None, typer.Option("--keep", help="Keep Stage's world and log in this folder.")
+    ] = None,
+    as_json: Annotated[
+        Path | None, typer.Option("--json", help="Write the whole report here (JSON).")
+    ] = None,
+    allow_edited: AllowEditedOption = False,
+) -> None:
+    """Run a situation in sitgen and in the real Stage and compare them: pose divergence per
+    robot, first stalls, both event logs from sitgen's monitor, and Stage's scans against
+    sitgen's laser from the same poses (docs/stage.md says which differences are design)."""
+    from sitgen.crosscheck import StageError, StageTool, crosscheck, report_text
+    from sitgen.run import run_spec_with
+
+    try:
+        tool = StageTool.find(stage, plugin)
+        report = crosscheck(
+            Situation.load(situation, allow_edited),
+            run_spec_with(_read_run_spec(spec), time_limit),
+            tool,
+            keep,
+        )
+    except StageError as e:
+        raise UsageError(str(e)) from None
+    if as_json is not None:
+        as_json.parent.mkdir(parents=True, exist_ok=True)
+        as_json.write_text(json.dumps(report, indent=1))
+    typer.echo(report_text(report), nl=False)
 
 
 def _is_store(path: Path) -> bool:

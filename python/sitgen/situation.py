@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from functools import cached_property
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -128,10 +129,14 @@ class Situation:
         """Whether the map and robots still give the recorded hash (False after an edit)."""
         return _core.situation_content_hash(self._json) == self.content_hash
 
-    def export(self, directory: str | Path, format: str = "stage") -> list[Path]:
-        """Write Player/Stage (``stage``) or ROS map_server (``ros``) files; returns them."""
+    def export(
+        self, directory: str | Path, format: str = "stage", run: Mapping[str, Any] | None = None
+    ) -> list[Path]:
+        """Write Stage (``stage``: the world with the run's laser, limits and time limit, and
+        every robot driven by its sitgen controller through ``integrations/stage``) or ROS
+        map_server (``ros``) files; returns them. ``run``: the run spec (default: defaults)."""
         if format == "stage":
-            return _core.export_stage(self._json, Path(directory))
+            return _core.export_stage(self._json, json.dumps(dict(run or {})), Path(directory))
         if format == "ros":
             return _core.export_ros(self._json, Path(directory))
         raise _core.SpecError(f"format: `{format}` is not one of stage, ros")

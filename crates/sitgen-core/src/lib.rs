@@ -10,11 +10,12 @@
 //! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out),
 //! [`mission`] (placement and routes), [`situation`] (the situation file), [`sim`] (the
 //! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties),
-//! [`failure`] (failure classes), [`coverage`] (situation coverage) and [`run`] (one situation
-//! driven to its end).
+//! [`failure`] (failure classes), [`coverage`] (situation coverage), [`run`] (one situation
+//! driven to its end) and [`crosscheck`] (the same situation run by Stage, compared).
 
 pub mod control;
 pub mod coverage;
+pub mod crosscheck;
 pub mod failure;
 pub mod geometry;
 pub mod grid;

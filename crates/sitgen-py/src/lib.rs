@@ -3,6 +3,7 @@
 
 mod campaign;
 mod coverage;
+mod crosscheck;
 mod episodes;
 mod failure;
 mod fault;
@@ -49,5 +50,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     coverage::register(m)?;
     fault::register(m)?;
     shrink::register(m)?;
+    crosscheck::register(m)?;
     Ok(())
 }

@@ -64,10 +64,12 @@ fn situation_map<'py>(py: Python<'py>, json: &str) -> PyResult<(Bound<'py, PyAny
     Ok((occupied.into_any(), map.resolution_m))
 }
 
-/// Write the situation as a Player/Stage world into `dir`; returns the files written.
+/// Write the situation, run as the run spec (JSON, checked) says, as a Stage world into
+/// `dir`; returns the files written.
 #[pyfunction]
-fn export_stage(json: &str, dir: PathBuf) -> PyResult<Vec<PathBuf>> {
-    stage::write_stage(&read(json)?, &dir).map_err(PyOSError::new_err)
+fn export_stage(json: &str, run_json: &str, dir: PathBuf) -> PyResult<Vec<PathBuf>> {
+    let run = sitgen_core::run::RunSpec::from_json(run_json, "run").map_err(spec_error)?;
+    stage::write_stage(&read(json)?, &run, &dir).map_err(PyOSError::new_err)
 }
 
 /// Write the situation's map as ROS map_server files into `dir`; returns the files written.

@@ -34,6 +34,7 @@ use crate::spec::{join, SpecError};
 
 pub mod episodes;
 pub mod profile;
+pub mod serve;
 
 /// How to run a situation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -202,10 +203,7 @@ impl Run {
         let mut controllers = Vec::with_capacity(situation.robots.len());
         let mut periods = Vec::with_capacity(situation.robots.len());
         for r in &situation.robots {
-            let (controller, path) = match &spec.controller {
-                Some(c) if r.id == agent => (c, "run.controller".to_string()),
-                _ => (&r.controller, format!("robots[{}].controller", r.id)),
-            };
+            let (controller, path) = serve::controller_spec(situation, spec, r.id);
             periods.push(control::period_steps(controller, spec.sim.dt_s, &path)?);
             if is_external(&controller.name) {
                 if r.id != agent {
@@ -404,6 +402,28 @@ impl Run {
         self.world
             .step(&commands)
             .expect("commands are finite and for known robots");
+        self.watch_step(&seen)
+    }
+
+    /// One step of another simulator's run of the same situation (a replay of its log, e.g.
+    /// Stage's through `integrations/stage`): the world is put where that step left it
+    /// ([`World::replay`]) and watched, recorded and ended as [`Run::step`] does; `seen` are
+    /// the robots the agent's scan before the step saw. Returns whether the run has ended.
+    pub fn replay_step(
+        &mut self,
+        states: &[(crate::situation::Pose, (f64, f64), bool)],
+        seen: &[u32],
+    ) -> Result<bool, String> {
+        if self.ended.is_some() {
+            return Ok(true);
+        }
+        self.world.replay(self.world.steps() + 1, states)?;
+        Ok(self.watch_step(seen))
+    }
+
+    /// After the world has stepped: record the poses, let the monitor and the coverage
+    /// observer watch, and end the run on completion or at the time limit.
+    fn watch_step(&mut self, seen: &[u32]) -> bool {
         self.agent_scan = None;
         self.record_poses();
         let monitor = self
@@ -412,7 +432,7 @@ impl Run {
             .expect("the monitor lives until the end");
         let frame = Frame {
             step: self.world.steps(),
-            seen_by_agent: &seen,
+            seen_by_agent: seen,
             world: &self.world,
         };
         monitor.observe(&frame);

@@ -541,6 +541,44 @@ impl World {
         )
     }
 
+    /// Put the world where another simulator's step `steps` left it (a replay of its log):
+    /// each robot's pose, velocity and stall flag, in id order. A stalled robot's contacts are
+    /// what its refused move would overlap here, probing up to three steps' travel along it,
+    /// since the other simulator's geometry (Stage's 2 cm raster) may refuse a move a little
+    /// before sitgen's exact shapes touch; the map's edge or a wall if nothing is found.
+    pub fn replay(&mut self, steps: u64, states: &[(Pose, (f64, f64), bool)]) -> Result<(), String> {
+        if states.len() != self.robots.len() {
+            return Err(format!(
+                "{} robots in the step, but the world has {}",
+                states.len(),
+                self.robots.len()
+            ));
+        }
+        for (r, &(pose, velocity, stalled)) in self.robots.iter_mut().zip(states) {
+            r.pose = pose;
+            r.velocity = velocity;
+            r.command = velocity;
+            r.stalled = stalled;
+        }
+        let dt = self.spec.dt_s;
+        for i in 0..self.robots.len() {
+            let r = &self.robots[i];
+            if !r.stalled {
+                self.robots[i].contacts.clear();
+                continue;
+            }
+            let (pose, (v, w)) = (r.pose, r.velocity);
+            let contacts = (1..=3)
+                .map(|k| self.contacts_at(i, &integrate(&pose, v, w, k as f64 * dt)))
+                .find(|c| !c.is_empty())
+                .unwrap_or_else(|| vec![Contact::Wall]);
+            self.robots[i].contacts = contacts;
+        }
+        self.steps = steps;
+        self.time_s = steps as f64 * dt;
+        Ok(())
+    }
+
     /// Mount the laser on robot `id` too (a peer whose controller senses; the agent always
     /// carries one).
     pub fn fit_laser(&mut self, id: u32) -> Result<(), String> {
