@@ -146,14 +146,46 @@ def test_stage_export_writes_a_loadable_world(tmp_path: Path) -> None:
     s = sitgen.generate_situation(preset_spec("indoor"), seed=4)
     files = s.export(tmp_path / "stage", "stage")
     names = sorted(p.name for p in files)
-    assert names == ["sitgen.inc", "situation.png", "situation.world"]
+    assert names == [
+        "edge.png",
+        "run.json",
+        "sitgen.inc",
+        "situation.json",
+        "situation.world",
+        "terrain.png",
+    ]
     world = (tmp_path / "stage" / "situation.world").read_text()
-    assert 'include "sitgen.inc"' in world and 'bitmap "situation.png"' in world
-    bitmap = np.asarray(Image.open(tmp_path / "stage" / "situation.png"))
-    # Stage reads a pixel as an obstacle when it is <= 127; the one-pixel frame is dark.
-    inner = bitmap[1:-1, 1:-1] <= 127
-    assert np.array_equal(inner, s.grid.occupied)
-    assert (bitmap[0] <= 127).all() and (bitmap[:, -1] <= 127).all()
+    assert 'include "sitgen.inc"' in world and 'bitmap "terrain.png"' in world
+    bitmap = np.asarray(Image.open(tmp_path / "stage" / "terrain.png"))
+    # Stage reads a pixel as an obstacle when it is <= 127: one pixel per map cell.
+    assert np.array_equal(bitmap <= 127, s.grid.occupied)
+    # The edge is a one-pixel frame around the map, free inside.
+    edge = np.asarray(Image.open(tmp_path / "stage" / "edge.png")) <= 127
+    assert edge.shape == (s.grid.occupied.shape[0] + 2, s.grid.occupied.shape[1] + 2)
+    assert edge[0].all() and edge[-1].all() and edge[:, 0].all() and edge[:, -1].all()
+    assert not edge[1:-1, 1:-1].any()
+    # The situation travels with the world, for the plugin's controllers.
+    assert sitgen.Situation.load(tmp_path / "stage" / "situation.json").content_hash == (
+        s.content_hash
+    )
+
+
+def test_stage_export_takes_the_run_spec(tmp_path: Path) -> None:
+    import json
+
+    s = sitgen.generate_situation(preset_spec("caves"), seed=4)
+    run = {"profile": "paper", "time_limit_s": 120}
+    s.export(tmp_path, "stage", run=run)
+    resolved = json.loads((tmp_path / "run.json").read_text())
+    assert resolved["time_limit_s"] == 120 and resolved["sim"]["laser"]["beams"] == 180
+    assert resolved["controller"]["control_period_s"] == 0.5
+    world = (tmp_path / "situation.world").read_text()
+    assert "quit_time 120.1" in world
+    include = (tmp_path / "sitgen.inc").read_text()
+    assert "fov 180 samples 180" in include
+    assert "velocity_bounds [-0.5 0.5 0 0 0 0 -90 90]" in include
+    with pytest.raises(sitgen.SpecError, match=r"run\.time_limit_s"):
+        s.export(tmp_path / "bad", "stage", run={"time_limit_s": -1})
 
 
 def test_ros_export_round_trips_through_load_map(tmp_path: Path) -> None:
@@ -210,7 +242,8 @@ def test_the_stage_scaling_rule_matches_the_shared_worlds_and_our_export(
     s = sitgen.generate_situation(preset_spec("rocky_desert"), seed=2)
     s.export(tmp_path, "stage")
     world = (tmp_path / "situation.world").read_text()
-    size_line = next(line for line in world.splitlines() if line.strip().startswith("size ["))
+    terrain = world[world.index("sitgen_terrain\n(") :]
+    size_line = next(line for line in terrain.splitlines() if line.strip().startswith("size ["))
     sx, sy, _ = (float(v) for v in size_line.strip()[6:-1].split())
-    mx, my = _stage_m_per_px(tmp_path / "situation.png", sx, sy)
+    mx, my = _stage_m_per_px(tmp_path / "terrain.png", sx, sy)
     assert mx == pytest.approx(s.grid.resolution) and my == pytest.approx(s.grid.resolution)

@@ -287,7 +287,9 @@ def serve_controller_command(
     robot: Annotated[int, typer.Option("--robot", help="The robot's id.")],
     run_spec: Annotated[
         Path | None,
-        typer.Option("--run-spec", help="Run spec (TOML or JSON; `sitgen export` writes run.json)."),
+        typer.Option(
+            "--run-spec", help="Run spec (TOML or JSON; `sitgen export` writes run.json)."
+        ),
     ] = None,
     allow_edited: AllowEditedOption = False,
 ) -> None:

@@ -180,15 +180,14 @@ def report_text(report: Mapping[str, Any]) -> str:
     for m in report["events"]:
         other = "-" if m["other"] is None else m["other"]
         first = " / ".join(_fmt_s(t) for t in m["first_s"])
-        lines.append(
-            f"  {m['kind']} {m['robot']} {other}: {m['sitgen']} / {m['stage']} ({first})"
-        )
+        lines.append(f"  {m['kind']} {m['robot']} {other}: {m['sitgen']} / {m['stage']} ({first})")
     s = report["scans"]
     both = s["beams"] - s["both_max"] - s["stage_only_hit"] - s["sitgen_only_hit"]
     lines.append(
         f"scans (Stage against sitgen's laser from the same poses): {s['scans']} scans, "
         f"{s['beams']} beams; both open {s['both_max']}, both hit {both}, only Stage hit "
-        f"{s['stage_only_hit']}, only sitgen hit {s['sitgen_only_hit']}"
+        f"{s['stage_only_hit']}, only sitgen hit {s['sitgen_only_hit']} "
+        f"({s['sitgen_only_hit_near_max']} in the last tenth of the range)"
     )
     lines.append(
         f"  where both hit: median {s['median_abs_m'] * 100:.2f} cm, 95% "

@@ -7,9 +7,9 @@ core checks every file read, so a bad file raises :exc:`sitgen.SpecError` naming
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 

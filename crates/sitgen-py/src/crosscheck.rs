@@ -13,8 +13,7 @@ use crate::SpecError;
 fn parts(situation_json: &str, run_json: &str) -> PyResult<(Situation, RunSpec)> {
     let situation =
         Situation::from_json(situation_json).map_err(|e| SpecError::new_err(e.to_string()))?;
-    let run =
-        RunSpec::from_json(run_json, "run").map_err(|e| SpecError::new_err(e.to_string()))?;
+    let run = RunSpec::from_json(run_json, "run").map_err(|e| SpecError::new_err(e.to_string()))?;
     Ok((situation, run))
 }
 

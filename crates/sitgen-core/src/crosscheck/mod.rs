@@ -53,7 +53,11 @@ pub struct LogStep {
 /// The plugin's log; errors name the line and what was wrong.
 pub fn read_log(text: &str, robots: usize) -> Result<Vec<LogStep>, String> {
     let mut steps: Vec<LogStep> = Vec::new();
-    for (n, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+    for (n, line) in text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty())
+    {
         let at = |why: String| format!("Stage log line {}: {why}", n + 1);
         let s: LogStep = serde_json::from_str(line).map_err(|e| at(e.to_string()))?;
         if s.step != steps.len() as u64 {
@@ -119,6 +123,9 @@ pub struct ScanComparison {
     pub stage_only_hit: u64,
     /// Beams where sitgen hit something and Stage read the maximum.
     pub sitgen_only_hit: u64,
+    /// Of those, the beams where sitgen's hit is in the last tenth of the range: Stage's ray
+    /// walk spends its budget before the true range (`docs/stage.md`).
+    pub sitgen_only_hit_near_max: u64,
     /// Of the beams where both hit: the median, 95th percentile and largest |difference|, m.
     pub median_abs_m: f64,
     /// See [`ScanComparison::median_abs_m`].
@@ -242,7 +249,12 @@ fn compare_scan(
         match (open(a), open(b)) {
             (true, true) => cmp.both_max += 1,
             (false, true) => cmp.stage_only_hit += 1,
-            (true, false) => cmp.sitgen_only_hit += 1,
+            (true, false) => {
+                cmp.sitgen_only_hit += 1;
+                if b >= 0.9 * max_range {
+                    cmp.sitgen_only_hit_near_max += 1;
+                }
+            }
             (false, false) => diffs.push((a - b).abs()),
         }
     }
@@ -305,7 +317,13 @@ pub fn compare(situation: &Situation, run: &RunSpec, log: &[LogStep]) -> Result<
                 scans.first = (ranges.clone(), ours.clone());
             }
             let theirs = &entry.robots[agent].seen;
-            compare_scan(&mut scans, &mut diffs, (ranges, theirs), (&ours, &seen), max_range);
+            compare_scan(
+                &mut scans,
+                &mut diffs,
+                (ranges, theirs),
+                (&ours, &seen),
+                max_range,
+            );
         }
     }
     diffs.sort_by(f64::total_cmp);

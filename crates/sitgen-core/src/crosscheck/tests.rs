@@ -106,10 +106,7 @@ fn a_displaced_robot_shows_as_divergence_and_scan_differences() {
 fn bad_logs_name_the_line() {
     let s = situation("caves", 1, 5);
     let e = read_log("{\"step\": 0, \"time\": 0, \"robots\": []}", 2).unwrap_err();
-    assert_eq!(
-        e,
-        "Stage log line 1: robots [], expected ids 0..2 in order"
-    );
+    assert_eq!(e, "Stage log line 1: robots [], expected ids 0..2 in order");
     let e = read_log("not json", 2).unwrap_err();
     assert!(e.starts_with("Stage log line 1: "), "{e}");
     assert_eq!(

@@ -261,7 +261,11 @@ pub fn edge_frame(rows: usize, cols: usize) -> OccupancyGrid {
 
 /// Write the world, its includes and bitmaps, the situation and the resolved run spec into
 /// `dir` (created if needed); returns their paths.
-pub fn write_stage(situation: &Situation, run: &RunSpec, dir: &Path) -> Result<Vec<PathBuf>, String> {
+pub fn write_stage(
+    situation: &Situation,
+    run: &RunSpec,
+    dir: &Path,
+) -> Result<Vec<PathBuf>, String> {
     run.validate("run").map_err(|e| e.to_string())?;
     let map = situation.map.decode().map_err(|e| e.to_string())?;
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
@@ -277,7 +281,10 @@ pub fn write_stage(situation: &Situation, run: &RunSpec, dir: &Path) -> Result<V
         serde_json::to_string_pretty(run).expect("run specs serialise"),
     )?;
     write_image(&map.grid, &path(BITMAP_FILE))?;
-    write_image(&edge_frame(map.grid.rows, map.grid.cols), &path(EDGE_BITMAP_FILE))?;
+    write_image(
+        &edge_frame(map.grid.rows, map.grid.cols),
+        &path(EDGE_BITMAP_FILE),
+    )?;
     Ok([
         WORLD_FILE,
         INCLUDE_FILE,
@@ -339,7 +346,10 @@ mod tests {
         let origins = tuples(&world, "origin");
         // The window's size is in pixels (2 values); every model's size has 3.
         assert_eq!(sizes[0].len(), 2);
-        assert!(sizes[1..].iter().all(|t| t.len() == 3), "size takes 3 values");
+        assert!(
+            sizes[1..].iter().all(|t| t.len() == 3),
+            "size takes 3 values"
+        );
         assert!(
             poses.iter().chain(&origins).all(|t| t.len() == 4),
             "pose/origin take 4"
@@ -370,7 +380,10 @@ mod tests {
             1,
             "only the agent senses among straight peers"
         );
-        assert_eq!(world.matches("ctrl \"sitgen_stage ").count(), s.robots.len());
+        assert_eq!(
+            world.matches("ctrl \"sitgen_stage ").count(),
+            s.robots.len()
+        );
         assert!((value(&world, "quit_time") - 600.1).abs() < 1e-9);
         let edge = edge_frame(3, 4);
         assert!((0..6).all(|c| edge.get(0, c) && edge.get(4, c)));
@@ -384,10 +397,16 @@ mod tests {
         let inc = include_text(&RunSpec::default());
         let line = world.lines().find(|l| l.contains("sitgen_laser(")).unwrap();
         let inside = &line[line.find('[').unwrap() + 1..line.find(']').unwrap()];
-        let mount: Vec<f64> = inside.split_whitespace().map(|v| v.parse().unwrap()).collect();
+        let mount: Vec<f64> = inside
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
         let laser_height = tuples(&inc, "size").last().unwrap()[2];
         let beam_z = ROBOT_HEIGHT_M + mount[2] + laser_height / 2.0;
-        assert!(beam_z > 0.0 && beam_z < ROBOT_HEIGHT_M, "beam at {beam_z} m");
+        assert!(
+            beam_z > 0.0 && beam_z < ROBOT_HEIGHT_M,
+            "beam at {beam_z} m"
+        );
     }
 
     #[test]
@@ -413,7 +432,11 @@ mod tests {
         );
         // Intensities tell robots apart.
         for r in &s.robots {
-            assert!(world.contains(&format!("ranger_return {}\n  ctrl \"sitgen_stage {}\"", r.id + 2, r.id)));
+            assert!(world.contains(&format!(
+                "ranger_return {}\n  ctrl \"sitgen_stage {}\"",
+                r.id + 2,
+                r.id
+            )));
         }
     }
 }

@@ -163,7 +163,9 @@ impl Served {
                     self.command = self.controller.act(&obs);
                 }
                 let (v, omega) = self.command;
-                Ok(Some(serde_json::json!({"v": v, "omega": omega}).to_string()))
+                Ok(Some(
+                    serde_json::json!({"v": v, "omega": omega}).to_string(),
+                ))
             }
             Message::End => Ok(None),
         }
@@ -200,7 +202,9 @@ mod tests {
             assert!(reply.contains("\"ready\":true"));
         }
         assert_eq!(
-            served[0].answer(r#"{"type":"reset","robot_id":1}"#).unwrap_err(),
+            served[0]
+                .answer(r#"{"type":"reset","robot_id":1}"#)
+                .unwrap_err(),
             "reset for robot 1, but this controller serves robot 0"
         );
         for _ in 0..150 {
@@ -217,7 +221,10 @@ mod tests {
                 }
                 let reply: serde_json::Value =
                     serde_json::from_str(&sv.answer(&m.to_string()).unwrap().unwrap()).unwrap();
-                expected.push((reply["v"].as_f64().unwrap(), reply["omega"].as_f64().unwrap()));
+                expected.push((
+                    reply["v"].as_f64().unwrap(),
+                    reply["omega"].as_f64().unwrap(),
+                ));
             }
             if r.step(None) {
                 break;

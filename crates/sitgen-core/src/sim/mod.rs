@@ -546,7 +546,11 @@ impl World {
     /// what its refused move would overlap here, probing up to three steps' travel along it,
     /// since the other simulator's geometry (Stage's 2 cm raster) may refuse a move a little
     /// before sitgen's exact shapes touch; the map's edge or a wall if nothing is found.
-    pub fn replay(&mut self, steps: u64, states: &[(Pose, (f64, f64), bool)]) -> Result<(), String> {
+    pub fn replay(
+        &mut self,
+        steps: u64,
+        states: &[(Pose, (f64, f64), bool)],
+    ) -> Result<(), String> {
         if states.len() != self.robots.len() {
             return Err(format!(
                 "{} robots in the step, but the world has {}",
