@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -78,3 +78,8 @@ $(IRSIM_VENV)/bin/python:
 bench-irsim: $(IRSIM_VENV)/bin/python
 	$(IRSIM_VENV)/bin/pip install -q 'ir-sim>=2.12,<3' .
 	$(IRSIM_VENV)/bin/python benches/irsim_compare.py
+
+# Stage 4.3 from ../shared/tools/stage and the sitgen_stage plugin, into target/stage (about 3
+# minutes; installs the Debian packages Stage's build needs). The cross-check tests use it.
+stage:
+	bash integrations/stage/build.sh
