@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym stage
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -83,3 +83,8 @@ bench-irsim: $(IRSIM_VENV)/bin/python
 # minutes; installs the Debian packages Stage's build needs). The cross-check tests use it.
 stage:
 	bash integrations/stage/build.sh
+
+# The Stage cross-check on every preset (two situations each, 30 s): the figures of
+# docs/stage.md (about 30 s after `make stage`).
+bench-stage: install-test
+	$(BIN)/python benches/stage_crosscheck.py
