@@ -33,12 +33,13 @@ def main() -> None:
             both = sc["beams"] - sc["both_max"] - sc["stage_only_hit"] - sc["sitgen_only_hit"]
             agent_5s = max(e for t, e, _ in r["divergence"][0]["series"] if t <= 5)
             peers = max((d["max_position_m"] for d in r["divergence"][1:]), default=0.0)
+            near_max = sc["sitgen_only_hit_near_max"]
             print(
                 f"{preset:>12} {seed}  {len(r['divergence']):>6} {wall:>6.1f} "
                 f"{r['start_pose_error_m']:>7.0e} {both:>9} {sc['median_abs_m'] * 100:>9.2f} "
                 f"{sc['p95_abs_m'] * 100:>6.1f} {sc['within_3cm']:>9.3f} "
                 f"{sc['stage_only_hit'] / sc['beams']:>10.2%} "
-                f"{sc['sitgen_only_hit'] / sc['beams']:>11.2%}({sc['sitgen_only_hit_near_max']:>4}) "
+                f"{sc['sitgen_only_hit'] / sc['beams']:>11.2%}({near_max:>4}) "
                 f"{sc['same_robots_seen']:>4}/{sc['scans']:<4} {agent_5s:>10.3f} {peers:>11.3f} "
                 f"{r['sitgen']['score']:g}/{r['stage']['score']:g}",
                 flush=True,
