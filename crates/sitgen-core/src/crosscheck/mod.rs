@@ -326,6 +326,14 @@ pub fn compare(situation: &Situation, run: &RunSpec, log: &[LogStep]) -> Result<
             );
         }
     }
+    if !replay.ended() {
+        return Err(format!(
+            "the Stage log ends at step {} before the run ended (time limit {} s): Stage stopped \
+             early",
+            log.len() - 1,
+            run.time_limit_s
+        ));
+    }
     diffs.sort_by(f64::total_cmp);
     scans.median_abs_m = quantile(&diffs, 0.5);
     scans.p95_abs_m = quantile(&diffs, 0.95);

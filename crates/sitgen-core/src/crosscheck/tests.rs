@@ -103,6 +103,19 @@ fn a_displaced_robot_shows_as_divergence_and_scan_differences() {
 }
 
 #[test]
+fn a_log_that_stops_before_the_run_ends_is_refused() {
+    let run: RunSpec = serde_json::from_str(r#"{"time_limit_s": 10}"#).unwrap();
+    let s = situation("caves", 1, 5);
+    let text = own_log(&s, &run);
+    let short: Vec<&str> = text.lines().take(40).collect();
+    let log = read_log(&short.join("\n"), 2).unwrap();
+    assert_eq!(
+        compare(&s, &run, &log).unwrap_err(),
+        "the Stage log ends at step 39 before the run ended (time limit 10 s): Stage stopped early"
+    );
+}
+
+#[test]
 fn bad_logs_name_the_line() {
     let s = situation("caves", 1, 5);
     let e = read_log("{\"step\": 0, \"time\": 0, \"robots\": []}", 2).unwrap_err();
