@@ -21,7 +21,7 @@ def main() -> None:
         sys.exit(f"{e} (run `make stage` first)")
     print(
         "situation        robots wall_s start_m  both_hit median_cm p95_cm within3cm "
-        "stage_only sitgen_only(near_max) same_seen agent_5s_m peers_max_m scores"
+        "stage_only sitgen_only(near_max) same_seen agent_5s_m peers_max_m first_stalls scores"
     )
     for preset in PRESETS:
         for seed in (1, 2):
@@ -34,6 +34,11 @@ def main() -> None:
             agent_5s = max(e for t, e, _ in r["divergence"][0]["series"] if t <= 5)
             peers = max((d["max_position_m"] for d in r["divergence"][1:]), default=0.0)
             near_max = sc["sitgen_only_hit_near_max"]
+            stalls = ",".join(
+                f"{a}/{b}"
+                for a, b in zip(r["sitgen"]["first_stall"], r["stage"]["first_stall"], strict=True)
+                if a is not None or b is not None
+            )
             print(
                 f"{preset:>12} {seed}  {len(r['divergence']):>6} {wall:>6.1f} "
                 f"{r['start_pose_error_m']:>7.0e} {both:>9} {sc['median_abs_m'] * 100:>9.2f} "
@@ -41,6 +46,7 @@ def main() -> None:
                 f"{sc['stage_only_hit'] / sc['beams']:>10.2%} "
                 f"{sc['sitgen_only_hit'] / sc['beams']:>11.2%}({near_max:>4}) "
                 f"{sc['same_robots_seen']:>4}/{sc['scans']:<4} {agent_5s:>10.3f} {peers:>11.3f} "
+                f"{stalls or '-':>12} "
                 f"{r['sitgen']['score']:g}/{r['stage']['score']:g}",
                 flush=True,
             )

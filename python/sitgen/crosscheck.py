@@ -17,6 +17,7 @@ import subprocess
 import sys
 import tempfile
 from collections.abc import Mapping
+from contextlib import nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -121,12 +122,14 @@ def crosscheck(
     ``sitgen_core::crosscheck::Report``). ``folder`` keeps Stage's world and log (default: a
     temporary folder, removed after)."""
     resolved = _core.check_run_spec(json.dumps(dict(run_spec)))
-    if folder is not None:
-        folder.mkdir(parents=True, exist_ok=True)
-        log = run_stage(situation, run_spec, tool, folder, timeout_s)
-    else:
-        with tempfile.TemporaryDirectory(prefix="sitgen-stage-") as tmp:
-            log = run_stage(situation, run_spec, tool, Path(tmp), timeout_s)
+    where = (
+        nullcontext(str(folder))
+        if folder is not None
+        else tempfile.TemporaryDirectory(prefix="sitgen-stage-")
+    )
+    with where as path:
+        Path(path).mkdir(parents=True, exist_ok=True)
+        log = run_stage(situation, run_spec, tool, Path(path), timeout_s)
     report: dict[str, Any] = json.loads(_core.crosscheck_stage(situation.to_json(), resolved, log))
     return report
 

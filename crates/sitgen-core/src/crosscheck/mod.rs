@@ -18,7 +18,8 @@ use crate::monitor::{Event, EventKind, Party};
 use crate::run::{Outcome, Run, RunSpec};
 use crate::situation::{Pose, Situation};
 
-/// One robot in one step of the plugin's log.
+/// One robot in one step of the plugin's log (its `command` is for people; the comparison
+/// reads what the robot did).
 #[derive(Debug, Clone, Deserialize)]
 pub struct LogRobot {
     /// Robot id.
@@ -35,8 +36,6 @@ pub struct LogRobot {
     /// Robots that scan saw.
     #[serde(default)]
     pub seen: Vec<u32>,
-    /// The command the robot's controller answered.
-    pub command: [f64; 2],
 }
 
 /// One step of the plugin's log; step 0 is the start.
@@ -63,8 +62,8 @@ pub fn read_log(text: &str, robots: usize) -> Result<Vec<LogStep>, String> {
         if s.step != steps.len() as u64 {
             return Err(at(format!("step {}, expected {}", s.step, steps.len())));
         }
-        let ids: Vec<u32> = s.robots.iter().map(|r| r.id).collect();
-        if ids != (0..robots as u32).collect::<Vec<_>>() {
+        if !s.robots.iter().map(|r| r.id).eq(0..robots as u32) {
+            let ids: Vec<u32> = s.robots.iter().map(|r| r.id).collect();
             return Err(at(format!(
                 "robots {ids:?}, expected ids 0..{robots} in order"
             )));

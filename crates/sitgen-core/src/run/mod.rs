@@ -122,6 +122,20 @@ impl RunSpec {
 
 pub use crate::control::is_external;
 
+/// The controller robot `id` runs under `run` (the run spec's for the agent, if it names one,
+/// else the situation's) and the field that names it.
+pub fn controller_spec<'a>(
+    situation: &'a Situation,
+    run: &'a RunSpec,
+    id: u32,
+) -> (&'a ControllerSpec, String) {
+    let r = &situation.robots[id as usize];
+    match &run.controller {
+        Some(c) if r.role == crate::situation::Role::Agent => (c, "run.controller".to_string()),
+        _ => (&r.controller, format!("robots[{id}].controller")),
+    }
+}
+
 /// Most steps a run may take: 10⁷ (a day at 10 ms steps is 8.6 × 10⁶), so that a tiny `dt_s`
 /// cannot ask for a run that never ends.
 pub const MAX_STEPS: f64 = 1e7;
@@ -203,7 +217,7 @@ impl Run {
         let mut controllers = Vec::with_capacity(situation.robots.len());
         let mut periods = Vec::with_capacity(situation.robots.len());
         for r in &situation.robots {
-            let (controller, path) = serve::controller_spec(situation, spec, r.id);
+            let (controller, path) = controller_spec(situation, spec, r.id);
             periods.push(control::period_steps(controller, spec.sim.dt_s, &path)?);
             if is_external(&controller.name) {
                 if r.id != agent {

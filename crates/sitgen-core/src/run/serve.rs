@@ -4,7 +4,7 @@
 //! sitgen's own controllers (`integrations/stage/`, `docs/stage.md`).
 //!
 //! The controller is the one a run of the situation under the run spec gives the robot
-//! ([`controller_spec`]), reset with the robot's route, and it decides every
+//! ([`super::controller_spec`]), reset with the robot's route, and it decides every
 //! `control_period_s` as in [`crate::run::Run`]: between decisions the last command is
 //! answered again. The simulator's reset needs only `robot_id`; the reply carries what the
 //! simulator must match (`dt_s`, `control_period_s`, the laser's beams).
@@ -12,26 +12,11 @@
 use serde::Deserialize;
 
 use crate::control::{self, Command, Controller};
-use crate::mission::ControllerSpec;
 use crate::sim::{Observation, Track};
 use crate::situation::{Pose, Situation};
 use crate::spec::SpecError;
 
-use super::RunSpec;
-
-/// The controller robot `id` runs under `run` (the run spec's for the agent, if it names one,
-/// else the situation's) and the field that names it.
-pub fn controller_spec<'a>(
-    situation: &'a Situation,
-    run: &'a RunSpec,
-    id: u32,
-) -> (&'a ControllerSpec, String) {
-    let r = &situation.robots[id as usize];
-    match &run.controller {
-        Some(c) if r.role == crate::situation::Role::Agent => (c, "run.controller".to_string()),
-        _ => (&r.controller, format!("robots[{id}].controller")),
-    }
-}
+use super::{controller_spec, RunSpec};
 
 /// One robot's controller, answering protocol messages.
 pub struct Served {
@@ -230,8 +215,12 @@ mod tests {
                 break;
             }
             for (state, cmd) in r.world().robots().iter().zip(&expected) {
-                let limit = run.sim.max_speed_m_s;
-                assert!((state.command.0 - cmd.0.clamp(-limit, limit)).abs() < 1e-12);
+                let (v, w) = (
+                    run.sim.max_speed_m_s,
+                    run.sim.max_turn_rate_deg_s.to_radians(),
+                );
+                assert!((state.command.0 - cmd.0.clamp(-v, v)).abs() < 1e-12);
+                assert!((state.command.1 - cmd.1.clamp(-w, w)).abs() < 1e-12);
             }
         }
         assert!(served[0].answer(r#"{"type":"end"}"#).unwrap().is_none());
