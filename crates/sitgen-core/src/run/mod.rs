@@ -603,10 +603,16 @@ pub fn par_map<T: Sync, R: Send>(
 /// robots packs into a few hundred kilobytes.
 pub fn pack_trajectory(trajectory: &[f64]) -> Vec<u8> {
     use std::io::Write;
-    let mut enc = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::new(6));
-    for &v in trajectory {
-        enc.write_all(&(v as f32).to_le_bytes())
-            .expect("writing to memory");
-    }
+    // One buffer, compressed in one call: the encoder clears its output buffer on every
+    // write, so writing value by value cost more than the compression itself.
+    let raw: Vec<u8> = trajectory
+        .iter()
+        .flat_map(|&v| (v as f32).to_le_bytes())
+        .collect();
+    let mut enc = flate2::write::ZlibEncoder::new(
+        Vec::with_capacity(raw.len() / 2),
+        flate2::Compression::new(6),
+    );
+    enc.write_all(&raw).expect("writing to memory");
     enc.finish().expect("writing to memory")
 }

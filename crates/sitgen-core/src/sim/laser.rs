@@ -112,15 +112,15 @@ impl LaserSpec {
 /// Distance along the ray from `(ox, oy)` in unit direction `(dx, dy)` to where it enters the
 /// first occupied cell, or `max` if it meets none within `max` or leaves the map first.
 ///
-/// With `clearance` (each cell centre's distance to the nearest occupied cell centre, metres,
-/// row-major like the grid) the walk leaps across open ground: from a cell whose clearance is
-/// `d`, no occupied square is nearer than `d − res·√2` to any point of the cell, so the ray
-/// jumps that far and the cell walk starts again there. The result is the same crossing the
+/// With `leaps` ([`leap_table`] of each cell centre's distance `d` to the nearest occupied
+/// cell centre) the walk leaps across open ground: from a cell whose clearance is `d`, no
+/// occupied square is nearer than `d − res·√2` to any point of the cell, so the ray jumps that
+/// far and the cell walk starts again there. The result is the same crossing the
 /// plain walk finds (the walk resumes before any occupied cell); open maps with 10 m rays cost
 /// a few leaps instead of a hundred cells.
 pub fn ray_to_grid(
     map: &Map,
-    clearance: Option<&[f32]>,
+    leaps: Option<&[f64]>,
     (ox, oy): (f64, f64),
     (dx, dy): (f64, f64),
     max: f64,
@@ -130,7 +130,6 @@ pub fn ray_to_grid(
     let (cols, rows) = (g.cols as i64, g.rows as i64);
     // Leaping pays only when it skips a few cells.
     let leap_min = 3.0 * res;
-    let cell_reach = res * std::f64::consts::SQRT_2;
     let delta_u = if dx != 0.0 {
         res / dx.abs()
     } else {
@@ -176,9 +175,8 @@ pub fn ray_to_grid(
         let mut t_w = t0 + first_crossing(py, cw, dy, res);
         let mut t = t0;
         loop {
-            if let Some(clear) = clearance {
-                // Less a micrometre, for the f32 rounding of the clearance.
-                let leap = f64::from(clear[index]) - cell_reach - 1e-6;
+            if let Some(leaps) = leaps {
+                let leap = leaps[index];
                 if leap >= leap_min {
                     t0 = t + leap;
                     if t0 >= max {
@@ -212,6 +210,18 @@ pub fn ray_to_grid(
             }
         }
     }
+}
+
+/// How far a ray may leap from each cell (see [`ray_to_grid`]), from each cell centre's
+/// clearance (metres, row-major like the grid): the clearance less half a cell diagonal on
+/// either side, less a micrometre for the f32 rounding of the clearance. Computed once per
+/// world, since the conversion and the subtractions sat on the chain of every leap.
+pub fn leap_table(map: &Map, clearance: &[f32]) -> Vec<f64> {
+    let cell_reach = map.resolution_m * std::f64::consts::SQRT_2;
+    clearance
+        .iter()
+        .map(|&c| f64::from(c) - cell_reach - 1e-6)
+        .collect()
 }
 
 /// Distance along a ray (coordinate `o`, direction component `d`) from inside cell `cell` to

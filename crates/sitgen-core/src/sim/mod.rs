@@ -23,6 +23,8 @@
 pub mod collision;
 pub mod laser;
 
+use std::sync::Mutex;
+
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -197,6 +199,8 @@ pub struct World {
     /// whose enclosing circle is nearer than this (less half a cell diagonal) to nothing cannot
     /// touch the grid, which settles most moves without testing cells.
     clearance_m: Vec<f32>,
+    /// How far a laser ray may leap from each cell ([`laser::leap_table`]).
+    leap_m: Vec<f64>,
     robots: Vec<RobotState>,
     /// Which robots carry the laser: the agent always, a peer when its controller senses.
     lasers: Vec<bool>,
@@ -204,9 +208,50 @@ pub struct World {
     /// (cos, sin) of each bearing: a beam's direction is the heading's rotation of these, which
     /// spares a sine and a cosine per beam per scan.
     bearing_dirs: Vec<(f64, f64)>,
+    /// The terrain part of each robot's last scan, by robot index: a robot standing still (a
+    /// controller locked up, a robot stalled against a wall: a third of the agent's steps in
+    /// the default campaign) sees the same walls, since the terrain never changes, so only
+    /// the robots are traced again.
+    wall_scans: WallScans,
     time_s: f64,
     steps: u64,
     seed: u64,
+}
+
+/// Each robot's last [`WallScan`], by robot index (a lock, uncontended, so that a world can be
+/// shared with threads that only read it).
+#[derive(Debug)]
+struct WallScans(Mutex<Vec<Option<WallScan>>>);
+
+impl WallScans {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Option<WallScan>>> {
+        // A panic elsewhere cannot leave a half-written entry: entries are replaced whole.
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Clone for WallScans {
+    fn clone(&self) -> Self {
+        Self(Mutex::new(self.lock().clone()))
+    }
+}
+
+/// Ranges to the terrain alone, beam by beam, from one exact pose.
+#[derive(Debug, Clone)]
+struct WallScan {
+    pose: (u64, u64, u64),
+    ranges: Vec<f64>,
+}
+
+impl WallScan {
+    /// A pose as a cache key: its exact bits.
+    fn key(pose: &Pose) -> (u64, u64, u64) {
+        (
+            pose.x_m.to_bits(),
+            pose.y_m.to_bits(),
+            pose.heading_rad.to_bits(),
+        )
+    }
 }
 
 /// Unicycle motion over `dt` from `pose` at constant (v, ω), exactly.
@@ -261,7 +306,8 @@ impl World {
         let clearance_m = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols)
             .into_iter()
             .map(|d2| (d2.sqrt() * map.resolution_m) as f32)
-            .collect();
+            .collect::<Vec<_>>();
+        let leap_m = laser::leap_table(&map, &clearance_m);
         let robots = situation
             .robots
             .iter()
@@ -287,10 +333,12 @@ impl World {
             spec,
             map,
             clearance_m,
+            leap_m,
             robots,
             lasers,
             bearings,
             bearing_dirs,
+            wall_scans: WallScans(Mutex::new(vec![None; situation.robots.len()])),
             time_s: 0.0,
             steps: 0,
             seed,
@@ -532,13 +580,7 @@ impl World {
             _ => f64::INFINITY,
         };
         let edge = leave(origin.0, dir.0, w).min(leave(origin.1, dir.1, h));
-        ray_to_grid(
-            &self.map,
-            Some(&self.clearance_m),
-            origin,
-            dir,
-            max.min(edge),
-        )
+        ray_to_grid(&self.map, Some(&self.leap_m), origin, dir, max.min(edge))
     }
 
     /// Put the world where another simulator's step `steps` left it (a replay of its log):
@@ -643,6 +685,12 @@ impl World {
         self.scan_seeing(i).0
     }
 
+    /// Forget every robot's last scan of the terrain, so that the next scan traces every beam
+    /// (the laser benchmark measures tracing, not the reuse).
+    pub fn forget_scans(&self) {
+        self.wall_scans.lock().fill(None);
+    }
+
     /// One laser scan, and the ids of the robots that some beam hits first.
     pub fn scan_seeing(&self, i: usize) -> (Vec<f64>, Vec<u32>) {
         let laser = &self.spec.laser;
@@ -674,18 +722,14 @@ impl World {
                 stream::SENSOR_NOISE,
             )
         });
+        let walls = self.wall_scan(i, origin, (c, s));
         let ranges = self
             .bearing_dirs
             .iter()
-            .map(|&(cb, sb)| {
+            .zip(walls.iter())
+            .map(|(&(cb, sb), &wall)| {
                 let dir = (c * cb - s * sb, s * cb + c * sb);
-                let mut t = ray_to_grid(
-                    &self.map,
-                    Some(&self.clearance_m),
-                    origin,
-                    dir,
-                    laser.range_m,
-                );
+                let mut t = wall;
                 let mut hit_robot = None;
                 for (id, rect, to, radius) in &others {
                     let along = to.0 * dir.0 + to.1 * dir.1;
@@ -710,6 +754,32 @@ impl World {
             })
             .collect();
         (ranges, seen)
+    }
+}
+
+impl World {
+    /// Robot `i`'s beams' ranges to the terrain from `origin` with heading (cos, sin) `(c,
+    /// s)`: the last ones when it has not moved since (the same bits), else traced afresh.
+    fn wall_scan(&self, i: usize, origin: (f64, f64), (c, s): (f64, f64)) -> Vec<f64> {
+        let key = WallScan::key(&self.robots[i].pose);
+        let mut cache = self.wall_scans.lock();
+        if let Some(scan) = cache[i].as_ref().filter(|scan| scan.pose == key) {
+            return scan.ranges.clone();
+        }
+        let range = self.spec.laser.range_m;
+        let ranges: Vec<f64> = self
+            .bearing_dirs
+            .iter()
+            .map(|&(cb, sb)| {
+                let dir = (c * cb - s * sb, s * cb + c * sb);
+                ray_to_grid(&self.map, Some(&self.leap_m), origin, dir, range)
+            })
+            .collect();
+        cache[i] = Some(WallScan {
+            pose: key,
+            ranges: ranges.clone(),
+        });
+        ranges
     }
 }
 

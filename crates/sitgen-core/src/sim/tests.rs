@@ -297,7 +297,7 @@ proptest! {
             let a = choices.uniform(-3.2, 3.2);
             let dir = (a.cos(), a.sin());
             let plain = laser::ray_to_grid(w.map(), None, origin, dir, 10.0);
-            let leaping = laser::ray_to_grid(w.map(), Some(&w.clearance_m), origin, dir, 10.0);
+            let leaping = laser::ray_to_grid(w.map(), Some(&w.leap_m), origin, dir, 10.0);
             prop_assert!((plain - leaping).abs() < 1e-9, "{:?} {}: {} vs {}", origin, a, plain, leaping);
         }
     }
