@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import heapq
 import json
 import math
 import os
@@ -42,7 +43,7 @@ from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from importlib import resources
 from pathlib import Path
@@ -334,6 +335,76 @@ def check_workers(workers: int | None, backend: str) -> int:
     return workers
 
 
+PACK_ALL = (-math.inf, False)
+"""The pack rule that packs every run's trajectory (see ``_core.run_jobs``)."""
+
+DEFAULT_KEEP = "top:50"
+"""What a campaign keeps whole by default: the runs the report's default 50 pages show."""
+
+
+class Keep:
+    """Which runs a campaign stores whole (situation, specs, event log, trajectory), as
+    ``--keep-trajectories`` says: ``all``, ``failures`` (runs with a failure class),
+    ``top:K`` (the K highest-scoring so far; a run pushed out is reduced to its summary) or
+    ``none``. The rest keep their summary and are re-simulated on demand
+    (:mod:`sitgen.recall`). A run that could not be run is always kept whole."""
+
+    def __init__(self, text: str) -> None:
+        mode, _, count = text.partition(":")
+        self.text = text
+        self.mode = mode
+        self.k = 0
+        if mode == "top" and count.isdigit() and int(count) >= 1:
+            self.k = int(count)
+        elif mode not in ("all", "failures", "none") or count:
+            raise _core.SpecError(
+                f"--keep-trajectories: `{text}` is not one of all, failures, top:K (K a whole "
+                "number of runs, at least 1), none"
+            )
+        self._top: list[tuple[float, int]] = []
+        """The runs kept by ``top:K``: a heap of (score, −id), the lowest-ranked first."""
+
+    def start(self, store: Store) -> None:
+        """Resume: ``top:K`` goes on from the best runs the store keeps whole."""
+        if self.mode != "top":
+            return
+        rows = store.db.execute(
+            "SELECT id, score FROM runs WHERE kept IS NOT 0 AND outcome != 'error' "
+            "ORDER BY score DESC, id LIMIT ?",
+            (self.k,),
+        )
+        self._top = [(score, -run_id) for run_id, score in rows]
+        heapq.heapify(self._top)
+
+    def pack_rule(self) -> tuple[float, bool]:
+        """Which runs' trajectories are worth packing now: (minimum score, any failure)."""
+        if self.mode == "all":
+            return PACK_ALL
+        if self.mode == "failures":
+            return (math.inf, True)
+        if self.mode == "top" and len(self._top) >= self.k:
+            # A run that scores below the K-th best so far can never be kept.
+            return (self._top[0][0], False)
+        return PACK_ALL if self.mode == "top" else (math.inf, False)
+
+    def admit(self, row: RunRow) -> tuple[RunRow, list[int]]:
+        """``row`` marked whole or summary, and the runs it pushes out of the ``top:K``."""
+        if row.record is None or self.mode == "all":
+            return row, []
+        if self.mode == "none":
+            return replace(row, keep=False), []
+        if self.mode == "failures":
+            return replace(row, keep=row.record.get("failure") is not None), []
+        rank = (float(row.record["score"]["total"]), -row.id)
+        if len(self._top) < self.k:
+            heapq.heappush(self._top, rank)
+            return row, []
+        if rank > self._top[0]:
+            _, pushed_out = heapq.heapreplace(self._top, rank)
+            return row, [-pushed_out]
+        return replace(row, keep=False), []
+
+
 def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
     """The stored form of a job's result."""
     record = json.loads(result["record"]) if result["ok"] else None
@@ -421,8 +492,11 @@ class Executor:
         backend: str = "local",
         address: str | None = None,
         user: bool = False,
+        pack_rule: Callable[[], tuple[float, bool]] = lambda: PACK_ALL,
     ) -> None:
         self.workers = max(1, workers)
+        self.pack_rule = pack_rule
+        """Which of the jobs submitted now get their trajectory packed (see :class:`Keep`)."""
         self.backend = backend
         self.user = user
         """Whether any job may have a Python or external controller (then: a process pool)."""
@@ -477,7 +551,8 @@ class Executor:
                 batch = yield from self._take(jobs, self.window - len(inflight))
                 if batch:
                     inflight.update((j.index, j) for j in batch)
-                    stream.submit([(j.index, _core_args(j)) for j in batch])
+                    rule = self.pack_rule()
+                    stream.submit([(j.index, _core_args(j), rule) for j in batch])
                 if not inflight:
                     return
                 index, result = next(stream)
@@ -542,7 +617,8 @@ class Executor:
             while not exhausted and not self._stopping and len(pending) < 2 * self.workers:
                 chunk = yield from self._take(jobs, batch)
                 if chunk:
-                    pending[self._remote.remote([_core_args(j) for j in chunk])] = chunk
+                    args = [_core_args(j) for j in chunk]
+                    pending[self._remote.remote(args, [self.pack_rule()] * len(chunk))] = chunk
                 else:
                     exhausted = not self._stopping
             if not pending:
@@ -583,11 +659,13 @@ def _shut(pool: ProcessPoolExecutor) -> None:
         process.join()
 
 
-def _ray_batch(args: list[tuple[str, int, str, int]]) -> list[dict[str, Any]]:
+def _ray_batch(
+    args: list[tuple[str, int, str, int]], pack: list[tuple[float, bool]]
+) -> list[dict[str, Any]]:
     """One batch on a Ray worker: the same Rust call the local backend makes, one thread."""
     from sitgen import _core as core
 
-    return [dict(r) for r in core.run_jobs(args, 1)]
+    return [dict(r) for r in core.run_jobs(args, 1, pack)]
 
 
 @dataclass(frozen=True)
@@ -617,10 +695,13 @@ def run_campaign(
     address: str | None = None,
     on_progress: Callable[[int, int], None] | None = None,
     stop: Callable[[], bool] | None = None,
+    keep_trajectories: str = DEFAULT_KEEP,
 ) -> CampaignResult:
     """Run (or resume) a campaign into the store ``db``: the spec and its controllers are
     checked first (:func:`check_campaign`), runs already stored are skipped, jobs are built as
-    they are needed; ``stop()`` is checked after every run."""
+    they are needed, runs are kept whole as ``keep_trajectories`` says (:class:`Keep`);
+    ``stop()`` is checked after every run."""
+    keep = Keep(keep_trajectories)
     n = spec.n if n is None else n
     if not 0 <= n <= MAX_RUNS:
         raise _core.SpecError(f"--n: {n} is not in [0, {MAX_RUNS}]")
@@ -637,14 +718,16 @@ def run_campaign(
         todo = n - sum(1 for i in done if i < n)
         if on_progress:
             on_progress(n - todo, n)
-        executor = Executor(workers, backend, address, user=user)
+        keep.start(store)
+        executor = Executor(workers, backend, address, user=user, pack_rule=keep.pack_rule)
         jobs = stream_jobs(spec, seed, (i for i in range(n) if i not in done))
         ran = 0
         if stop is not None and stop():
             executor.stop()
         for job, result in executor.results(jobs):
+            row, pushed_out = keep.admit(_row(job, result))
             # One transaction per run: a kill loses only the runs in flight.
-            store.add_runs([_row(job, result)])
+            store.add_runs([row], demote=pushed_out)
             ran += 1
             if on_progress:
                 on_progress(n - todo + ran, n)

@@ -208,16 +208,17 @@ def show(
         if not _is_store(source):
             raise UsageError("--run needs a campaign store (.db), not a situation file")
         require_store(source)
+        from sitgen.recall import whole_run
+
         with Store(source) as store:
             row = store.run_row(run_id)
-            trajectory = store.trajectory(run_id)
-        if row["situation"] is None:
+            whole = whole_run(store, run_id)
+        if whole is None:
             raise UsageError(f"run {run_id} has no situation (generation failed)")
-        events = [json.loads(line) for line in row["events_jsonl"].splitlines()]
+        events = [json.loads(line) for line in whole.events_jsonl.splitlines()]
         dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
         # Drawn as it was run, even where an older sitgen placed a robot across the map's edge.
-        situation = Situation(row["situation"], check_start=False)
-        save_situation_figure(situation, output, trajectory, events, dt_s)
+        save_situation_figure(whole.situation, output, whole.trajectory, events, dt_s)
     typer.echo(f"wrote {output}")
 
 
@@ -566,8 +567,17 @@ def campaign(
             "(sitgen shrink; kept in the store).",
         ),
     ] = 0,
+    keep_trajectories: Annotated[
+        str,
+        typer.Option(
+            "--keep-trajectories",
+            help="Runs stored whole (situation, event log, trajectory): all, failures, top:K "
+            "or none; the rest keep a summary (under 1 KB) and are re-simulated when shown. "
+            "Default top:50, the runs the report shows.",
+        ),
+    ] = "top:50",
 ) -> None:
-    """Generate N randomised situations, run them all, store everything, rank the runs.
+    """Generate N randomised situations, run them all, store them, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
     from sitgen.campaign import run_campaign
 
@@ -587,6 +597,7 @@ def campaign(
             address=address,
             on_progress=on_progress,
             stop=stop,
+            keep_trajectories=keep_trajectories,
         ),
     )
     _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)

@@ -11,14 +11,13 @@ fell in which cells (docs/coverage.md).
 from __future__ import annotations
 
 import itertools
-import json
 import math
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from typing import Any
 
 from sitgen import _core
-from sitgen.store import Store
+from sitgen.store import Store, unpack_json
 
 
 @dataclass(frozen=True)
@@ -67,7 +66,7 @@ def stored(store: Store) -> tuple[list[RunCoverage], int]:
         if raw is None:
             unobserved += 1
             continue
-        data = json.loads(raw)
+        data = unpack_json(raw)
         runs.append(
             RunCoverage(
                 run_id,

@@ -288,7 +288,7 @@ class Situations:
         if self.stored is not None:
             row = self.stored.run_row(self.order[i])
             # A stored situation that could not be built is not retried: it kills nothing.
-            error = None if row["situation"] else "spec: its situation could not be built"
+            error = None if row["content_hash"] else "spec: its situation could not be built"
             seed = row["situation_seed"]
             return Job(i, seed, row["situation_spec"], row["run_spec"], error)
         if self.barn is not None:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from sitgen import _core
-from sitgen.store import Store
+from sitgen.store import Store, events_digest
 
 RANK_COLUMNS = (
     "rank",
@@ -123,19 +123,14 @@ class Rerun:
 def rerun(db: str | Path, run_id: int) -> Rerun:
     """Regenerate run ``run_id``'s situation from its spec and seed, run it again, and compare
     the situation's content hash, the event log (bytes) and the score with what is stored."""
+    from sitgen.recall import regenerate
     from sitgen.run import run
-    from sitgen.situation import Situation, generate_situation
 
     with Store(db) as store:
         stored = store.run_row(run_id)
     lines = [f"run {run_id}: situation seed {stored['situation_seed']}, {stored['controller']}"]
     try:
-        spec = stored["situation_spec"]
-        situation = (
-            Situation(json.dumps(spec), check_start=False)
-            if "format" in spec  # given whole, not generated
-            else generate_situation(spec, seed=stored["situation_seed"])
-        )
+        situation = regenerate(stored)
     except _core.GenerationFailed as e:
         same = stored["content_hash"] is None
         lines.append(f"generation fails again: {e}" if same else f"generation now fails: {e}")
@@ -147,8 +142,9 @@ def rerun(db: str | Path, run_id: int) -> Rerun:
     # The stored run spec names the controller if the campaign gave one (with its parameters
     # and any seeded fault); otherwise the situation's own drives, as it did.
     record = run(situation, seed=stored["run_seed"], spec=stored["run_spec"])
-    same_log = record.events_jsonl == stored["events_jsonl"]
-    events = len(stored["events_jsonl"].splitlines())
+    # A run kept as a summary has only its log's digest: the same bytes give the same digest.
+    same_log = events_digest(record.events_jsonl) == stored["events_sha256"]
+    events = len(record.events_jsonl.splitlines())
     lines.append(f"event log {'identical' if same_log else 'DIFFERS'} ({events} events)")
     same_score = record.score == stored["score"]
     lines.append(

@@ -29,6 +29,7 @@ from sitgen.coverage import RunCoverage, dimensions, stored, summarise
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
+from sitgen.recall import whole_run
 from sitgen.search import SearchReplay, elite_grid, replay
 from sitgen.situation import Situation
 from sitgen.store import KINDS, Store, main_events
@@ -400,17 +401,21 @@ def _index(
 ) -> str:
     campaign = store.campaign() or {}
     scores = [r["score"] for r in rows]
+    # From each run's summary, which every run keeps (a run kept as a summary has no rows in
+    # the events table): the penalised kinds' counts, the agent's waypoints and its route.
     kinds: dict[str, list[int]] = {}
-    for kind, count, runs in store.db.execute(
-        "SELECT kind, count(*), count(DISTINCT run_id) FROM events WHERE scored = 1 "
-        "GROUP BY kind ORDER BY kind"
-    ):
-        kinds[kind] = [count, runs]
     run_kinds: dict[int, set[str]] = {}
-    for run_id, kind in store.db.execute(
-        "SELECT DISTINCT run_id, kind FROM events WHERE scored = 1"
-    ):
-        run_kinds.setdefault(run_id, set()).add(kind)
+    for r in rows:
+        counts = {k: int(b["count"]) for k, b in r["breakdown"].items()}
+        counts["waypoint_reached"] = r["waypoints_reached"]
+        counts["route_completed"] = int(r["outcome"] == "completed")
+        for kind, count in counts.items():
+            if count:
+                kinds.setdefault(kind, [0, 0])
+                kinds[kind][0] += count
+                kinds[kind][1] += 1
+                run_kinds.setdefault(r["run"], set()).add(kind)
+    kinds = dict(sorted(kinds.items()))
     outcomes: dict[str, int] = {}
     present: dict[str, tuple[str, int]] = {}
     for r in rows:
@@ -695,14 +700,13 @@ def _run_page(
     """The page and its data script for one run; None if the run has no situation.
     ``distinct`` is the distinct failure the run belongs to, if any."""
     row = store.run_row(run_id)
-    if row["situation"] is None:
+    # Shown as it was run, even where an older sitgen placed a robot across the map's edge; a
+    # run kept as a summary is re-simulated.
+    whole = whole_run(store, run_id)
+    if whole is None or whole.trajectory is None:
         return None
-    # Shown as it was run, even where an older sitgen placed a robot across the map's edge.
-    situation = Situation(row["situation"], check_start=False)
-    trajectory = store.trajectory(run_id)
-    if trajectory is None:
-        return None
-    events = [json.loads(line) for line in row["events_jsonl"].splitlines()]
+    situation, trajectory = whole.situation, whole.trajectory
+    events = [json.loads(line) for line in whole.events_jsonl.splitlines()]
     breakdown = json.loads(
         store.db.execute("SELECT breakdown FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
     )

@@ -63,7 +63,7 @@ from sitgen.campaign import (
     vary_order,
 )
 from sitgen.failures import classes as failure_classes
-from sitgen.store import KINDS, Store, StoreError
+from sitgen.store import KINDS, Store, StoreError, unpack_json
 
 if TYPE_CHECKING:
     from ribs.archives import GridArchive
@@ -593,7 +593,7 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "bearing": features.get("bearing"),
                 "min_clearance_m": clearance,
                 "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
-                "cells": tuple(json.loads(coverage)["cells"]) if coverage else (),
+                "cells": tuple(unpack_json(coverage)["cells"]) if coverage else (),
                 "terrain": terrain,
                 "peers": peers,
             }

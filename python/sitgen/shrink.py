@@ -602,16 +602,18 @@ def shrink_run(
 ) -> ShrinkResult:
     """Shrink stored run ``run_id`` (its situation, run spec and seed) and keep the result in
     the store's ``shrinks`` table."""
+    from sitgen.recall import whole_run
     from sitgen.store import Store
 
     with Store(db) as store:
         row = store.run_row(run_id)
-    if row["failure"] is None:
-        raise ShrinkError(NOTHING_TO_SHRINK)
-    if row["situation"] is None:
+        if row["failure"] is None:
+            raise ShrinkError(NOTHING_TO_SHRINK)
+        whole = whole_run(store, run_id)
+    if whole is None:
         raise ShrinkError("its situation was not generated, so there is nothing to shrink")
     result = shrink(
-        Situation(row["situation"], check_start=False),
+        whole.situation,
         row["run_spec"],
         row["run_seed"],
         failure_class,

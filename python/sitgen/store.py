@@ -8,6 +8,7 @@ runs already stored.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import sqlite3
@@ -20,7 +21,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -66,7 +67,9 @@ CREATE TABLE IF NOT EXISTS runs (
     generation INTEGER,
     parents TEXT,
     genes TEXT,
-    coverage TEXT
+    coverage TEXT,
+    kept INTEGER,
+    events_sha256 TEXT
 );
 CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
 CREATE INDEX IF NOT EXISTS runs_by_failure_class ON runs (failure_class, score DESC, id);
@@ -175,6 +178,10 @@ class RunRow:
     """The runs a search mutated to make it (empty for a fresh draw; None in a campaign)."""
     genes: dict[str, Any] | None = None
     """A search's genome for it: each varied field's draw and the situation seed."""
+    keep: bool = True
+    """Store the run whole (its situation, specs, event log and trajectory), or only its
+    summary (a campaign's run: its specs follow from the campaign, and the rest comes back by
+    re-simulation, :mod:`sitgen.recall`)."""
 
 
 KINDS = {"campaign": "campaign", "fault_evaluation": "fault evaluation", "search": "search"}
@@ -265,6 +272,10 @@ class Store:
                 # Version 6 adds each run's situation coverage (NULL for runs stored before:
                 # coverage is observed during a run and cannot be read back from its log).
                 self._add_run_columns("coverage TEXT")
+            if version < 7:
+                # Version 7 stores some runs as a summary only (kept = 0) and each run's event
+                # log digest; runs stored before are whole (kept NULL) with their log.
+                self._add_run_columns("kept INTEGER", "events_sha256 TEXT")
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -452,11 +463,23 @@ class Store:
 
     # Writing.
 
-    def add_runs(self, rows: Iterable[RunRow]) -> None:
-        """Store finished runs, all or none."""
+    def add_runs(self, rows: Iterable[RunRow], demote: Iterable[int] = ()) -> None:
+        """Store finished runs, and reduce the runs ``demote`` to their summary, all or
+        none."""
         with self.db:
             for row in rows:
                 self._add_run(row)
+            for run_id in demote:
+                self._demote(run_id)
+
+    def _demote(self, run_id: int) -> None:
+        """Keep only run ``run_id``'s summary (a campaign's run; see :attr:`RunRow.keep`)."""
+        self.db.execute("UPDATE situations SET spec = '', situation = NULL WHERE id = ?", (run_id,))
+        self.db.execute(
+            "UPDATE runs SET run_spec = '', events_jsonl = '', kept = 0 WHERE id = ?", (run_id,)
+        )
+        self.db.execute("DELETE FROM events WHERE run_id = ?", (run_id,))
+        self.db.execute("DELETE FROM trajectories WHERE run_id = ?", (run_id,))
 
     def _add_run(self, row: RunRow) -> None:
         situation = json.loads(row.situation_json) if row.situation_json else None
@@ -467,17 +490,20 @@ class Store:
             or spec.get("terrain", {}).get("source", {}).get("kind")
             or ("given" if "format" in spec else None)
         )
+        # A summary keeps what ranks, groups and finds the run again, not what re-simulation
+        # gives back; a run that failed is always kept whole (there is nothing to re-run).
+        whole = row.keep or row.record is None
         self.db.execute(
             "INSERT INTO situations (id, seed, spec, terrain, peers, content_hash, situation) "
             "VALUES (?, ?, ?, ?, ?, ?, ?)",
             (
                 row.id,
                 row.situation_seed,
-                json.dumps(row.situation_spec, sort_keys=True),
+                json.dumps(row.situation_spec, sort_keys=True) if whole else "",
                 terrain,
                 len(situation["robots"]) - 1 if situation else None,
                 situation["provenance"]["content_hash"] if situation else None,
-                row.situation_json,
+                row.situation_json if whole else None,
             ),
         )
         rec = row.record or {
@@ -501,13 +527,13 @@ class Store:
             "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
             "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
             "waypoints, events_jsonl, failure_class, failure, generation, parents, genes, "
-            "coverage) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "coverage, kept, events_sha256) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 row.id,
                 row.id,
                 row.controller,
-                json.dumps(row.run_spec, sort_keys=True),
+                json.dumps(row.run_spec, sort_keys=True) if whole else "",
                 row.run_seed,
                 rec["outcome"],
                 rec["reason"],
@@ -519,15 +545,19 @@ class Store:
                 min(agent_clearances) if agent_clearances else None,
                 reached,
                 waypoints,
-                row.events_jsonl,
+                row.events_jsonl if whole else "",
                 failure["class"] if failure else None,
                 json.dumps(failure, sort_keys=True) if failure else None,
                 row.generation,
                 None if row.parents is None else json.dumps(list(row.parents)),
                 None if row.genes is None else json.dumps(row.genes, sort_keys=True),
-                json.dumps(rec["coverage"], sort_keys=True) if rec.get("coverage") else None,
+                pack_json(rec["coverage"]) if rec.get("coverage") else None,
+                int(whole),
+                events_digest(row.events_jsonl),
             ),
         )
+        if not whole:
+            return
         self.db.executemany(
             "INSERT INTO events (run_id, seq, kind, start_s, end_s, robot, other, scored, "
             "details) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -609,28 +639,53 @@ class Store:
         return [r[0] for r in self.db.execute("SELECT score FROM runs ORDER BY id")]
 
     def run_row(self, run_id: int) -> dict[str, Any]:
+        """Run ``run_id`` as stored: its situation (None if it was never generated, or the
+        run is kept as a summary: see ``kept``), specs, seeds and event log ('' for a
+        summary; ``events_sha256`` is its digest)."""
         row = self.db.execute(
             "SELECT r.id, s.seed, s.spec, s.situation, s.content_hash, r.run_spec, r.run_seed, "
-            "r.controller, r.score, r.events_jsonl, r.outcome, r.failure FROM runs r "
+            "r.controller, r.score, r.events_jsonl, r.outcome, r.failure, r.kept, "
+            "r.events_sha256 FROM runs r "
             "JOIN situations s ON s.id = r.situation_id WHERE r.id = ?",
             (run_id,),
         ).fetchone()
         if row is None:
             raise StoreError(f"{self.path}: no run {run_id}")
+        kept = row[12] != 0
+        situation_spec, run_spec = (
+            (json.loads(row[2]), json.loads(row[5])) if kept else self._job_specs(run_id)
+        )
         return {
             "id": row[0],
             "situation_seed": row[1],
-            "situation_spec": json.loads(row[2]),
+            "situation_spec": situation_spec,
             "situation": row[3],
             "content_hash": row[4],
-            "run_spec": json.loads(row[5]),
+            "run_spec": run_spec,
             "run_seed": row[6],
             "controller": row[7],
             "score": row[8],
             "events_jsonl": row[9],
             "outcome": row[10],
             "failure": json.loads(row[11]) if row[11] else None,
+            "kept": kept,
+            "events_sha256": row[13] or events_digest(row[9]),
         }
+
+    def _job_specs(self, run_id: int) -> tuple[dict[str, Any], dict[str, Any]]:
+        """The situation and run specs of a campaign's run kept as a summary: its job, built
+        again from the campaign's spec and seed (the build is deterministic)."""
+        from sitgen.campaign import build_job, campaign_from_data
+
+        campaign = self.campaign()
+        if campaign is None or self.kind() != "campaign":
+            raise StoreError(f"{self.path}: run {run_id} is a summary, but no campaign is stored")
+        job = build_job(campaign_from_data(campaign["spec"]), campaign["seed"], run_id)
+        # Stored specs went through JSON with sorted keys; so do these, to compare equal.
+        return (
+            json.loads(json.dumps(job.situation, sort_keys=True)),
+            json.loads(json.dumps(job.run, sort_keys=True)),
+        )
 
     def trajectory(self, run_id: int) -> npt.NDArray[np.float32] | None:
         row = self.db.execute(
@@ -661,6 +716,23 @@ class Store:
             for c in self.db.execute(f"PRAGMA table_info({table})")
             if (table, c[1]) not in {("situations", "situation"), ("trajectories", "data")}
         ]
+
+
+def pack_json(value: Any) -> bytes:
+    """A JSON value as a stored column holds a long one: sorted-key JSON, zlib'd (a run's
+    coverage: its cell names repeat, and shrink to about two fifths)."""
+    return zlib.compress(json.dumps(value, sort_keys=True).encode(), 9)
+
+
+def unpack_json(stored: str | bytes) -> Any:
+    """A JSON column's value: zlib'd (:func:`pack_json`) or, as stores before version 7 hold
+    it, text."""
+    return json.loads(zlib.decompress(stored) if isinstance(stored, bytes) else stored)
+
+
+def events_digest(events_jsonl: str) -> str:
+    """The digest a stored run keeps of its event log: what re-simulation must reproduce."""
+    return hashlib.sha256(events_jsonl.encode()).hexdigest()
 
 
 def main_events(breakdown: dict[str, Any]) -> str:

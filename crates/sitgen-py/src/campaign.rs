@@ -40,26 +40,52 @@ fn job(
 
 type JobTuple = (String, u64, String, u64);
 
+/// Which finished runs get their trajectory packed: a score of at least the first, or (if
+/// the second is true) any failure. A campaign keeping only some trajectories skips the
+/// compression of the others; by default every run's is packed.
+type PackRule = (f64, bool);
+
+const PACK_ALL: PackRule = (f64::NEG_INFINITY, false);
+
 /// Generate and run `jobs` — (situation spec JSON, situation seed, run spec JSON, run seed) —
 /// on `threads` threads. Returns one dict per job, in order: `ok`; then `error`, or
-/// `situation` (JSON), `record` (JSON), `events_jsonl`, `trajectory` (zlib f32 bytes),
-/// `robots`.
+/// `situation` (JSON), `record` (JSON), `events_jsonl`, `trajectory` (zlib f32 bytes; None
+/// where the job's entry of `pack` says not to keep it), `robots`.
 #[pyfunction]
+#[pyo3(signature = (jobs, threads, pack=None))]
 fn run_jobs<'py>(
     py: Python<'py>,
     jobs: Vec<JobTuple>,
     threads: usize,
+    pack: Option<Vec<PackRule>>,
 ) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    if let Some(rules) = &pack {
+        if rules.len() != jobs.len() {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "pack: {} rules for {} jobs",
+                rules.len(),
+                jobs.len()
+            )));
+        }
+    }
     let parsed: Vec<Result<Job, String>> =
         jobs.iter().enumerate().map(|(i, j)| job(i, j)).collect();
+    let rule = |i: usize| pack.as_ref().map_or(PACK_ALL, |rules| rules[i]);
     let good: Vec<Job> = parsed
         .iter()
         .filter_map(|j| j.as_ref().ok().cloned())
         .collect();
+    let good_rules: Vec<PackRule> = parsed
+        .iter()
+        .enumerate()
+        .filter(|(_, j)| j.is_ok())
+        .map(|(i, _)| rule(i))
+        .collect();
     let results = py.detach(|| {
         run_batch(&good, threads)
             .into_iter()
-            .map(pack)
+            .zip(good_rules)
+            .map(|(result, rule)| pack_result(result, rule))
             .collect::<Vec<_>>()
     });
     let mut results = results.into_iter();
@@ -76,11 +102,12 @@ fn run_jobs<'py>(
 }
 
 /// A finished job, serialised off the GIL: (situation, record, events, trajectory, robots).
-type Packed = Result<(String, String, String, Vec<u8>, usize), String>;
+type Packed = Result<(String, String, String, Option<Vec<u8>>, usize), String>;
 
-fn pack(result: JobResult) -> Packed {
+fn pack_result(result: JobResult, (min_score, failures): PackRule) -> Packed {
     result.map(|(s, rec)| {
-        let packed = pack_trajectory(&rec.trajectory);
+        let keep = rec.score.total >= min_score || (failures && rec.failure.is_some());
+        let packed = keep.then(|| pack_trajectory(&rec.trajectory));
         let record = serde_json::to_string(&rec).expect("records serialize");
         (s.to_json(), record, rec.events_jsonl(), packed, rec.robots)
     })
@@ -94,7 +121,7 @@ fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
             d.set_item("situation", situation)?;
             d.set_item("record", record)?;
             d.set_item("events_jsonl", events)?;
-            d.set_item("trajectory", PyBytes::new(py, &trajectory))?;
+            d.set_item("trajectory", trajectory.map(|t| PyBytes::new(py, &t)))?;
             d.set_item("robots", robots)?;
         }
         Err(e) => {
@@ -112,7 +139,7 @@ fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
 /// started finish and starts no more: those not started come back as (job id, None).
 #[pyclass(name = "JobStream", module = "sitgen._core")]
 pub struct JobStream {
-    jobs: Mutex<Option<Sender<(usize, JobTuple)>>>,
+    jobs: Mutex<Option<Sender<(usize, JobTuple, PackRule)>>>,
     results: Mutex<Receiver<(usize, Option<Packed>)>>,
     stop: Arc<AtomicBool>,
 }
@@ -121,7 +148,7 @@ pub struct JobStream {
 impl JobStream {
     #[new]
     fn new(threads: usize) -> PyResult<Self> {
-        let (job_tx, job_rx) = channel::<(usize, JobTuple)>();
+        let (job_tx, job_rx) = channel::<(usize, JobTuple, PackRule)>();
         let (tx, rx) = channel();
         let stop = Arc::new(AtomicBool::new(false));
         let stopping = Arc::clone(&stop);
@@ -135,9 +162,9 @@ impl JobStream {
                 job_rx
                     .into_iter()
                     .par_bridge()
-                    .for_each_with(tx, |tx, (id, tuple)| {
+                    .for_each_with(tx, |tx, (id, tuple, rule)| {
                         let result = (!stopping.load(Ordering::Relaxed))
-                            .then(|| job(id, &tuple).and_then(|j| pack(run_job(&j))));
+                            .then(|| job(id, &tuple).and_then(|j| pack_result(run_job(&j), rule)));
                         // The receiver is gone only if Python dropped the stream.
                         let _ = tx.send((id, result));
                     })
@@ -150,8 +177,9 @@ impl JobStream {
         })
     }
 
-    /// Queue jobs: (job id, (situation spec JSON, situation seed, run spec JSON, run seed)).
-    fn submit(&self, jobs: Vec<(usize, JobTuple)>) -> PyResult<()> {
+    /// Queue jobs: (job id, (situation spec JSON, situation seed, run spec JSON, run seed),
+    /// pack rule (min score, failures): which finished runs get their trajectory packed).
+    fn submit(&self, jobs: Vec<(usize, JobTuple, PackRule)>) -> PyResult<()> {
         let guard = self.jobs.lock().unwrap_or_else(|e| e.into_inner());
         let sender = guard
             .as_ref()

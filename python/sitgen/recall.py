@@ -1,0 +1,91 @@
+"""A stored run, whole: its situation, trajectory and event log, from the store where the run
+was kept whole, else by re-simulation.
+
+A campaign may keep only some runs whole (``--keep-trajectories``); the rest are stored as a
+summary (score, outcome, failure class, coverage, the event log's digest). Every run is
+deterministic, so a summary's run is regenerated from its spec and seed and run again, and
+the result is checked against what was stored: the situation's content hash, the event log's
+digest and the score. ``show``, ``report`` and ``shrink`` read runs through here; ``rerun``
+uses the same regeneration to confirm a stored run.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from sitgen import _core
+from sitgen.run import RunRecord, run
+from sitgen.situation import Situation, generate_situation
+from sitgen.store import Store, StoreError, events_digest
+
+
+@dataclass(frozen=True)
+class WholeRun:
+    """A stored run with everything a figure, a replay or a shrink needs."""
+
+    situation: Situation
+    trajectory: npt.NDArray[np.float32] | None
+    """Poses (x, y, heading) per step per robot; None only for a run stored whole before
+    trajectories were kept."""
+    events_jsonl: str
+    resimulated: bool
+    """Whether it came from re-simulation rather than from the store."""
+
+
+def regenerate(row: dict[str, Any]) -> Situation:
+    """The situation of stored run ``row`` (:meth:`Store.run_row`), made again from its spec
+    and seed (or read back, if it was given whole). Raises GenerationFailed."""
+    spec = row["situation_spec"]
+    if "format" in spec:  # given whole, not generated
+        return Situation(json.dumps(spec), check_start=False)
+    return generate_situation(spec, seed=row["situation_seed"])
+
+
+def resimulate(row: dict[str, Any]) -> tuple[Situation, RunRecord]:
+    """Stored run ``row`` generated and run again, as it was run."""
+    situation = regenerate(row)
+    # The stored run spec names the controller if the campaign gave one (with its parameters
+    # and any seeded fault); otherwise the situation's own drives, as it did.
+    return situation, run(situation, seed=row["run_seed"], spec=row["run_spec"])
+
+
+def whole_run(store: Store, run_id: int) -> WholeRun | None:
+    """Run ``run_id`` whole; None if its situation was never generated. Raises StoreError if
+    re-simulation does not give back the run that was stored (another sitgen version)."""
+    row = store.run_row(run_id)
+    if row["content_hash"] is None:
+        return None
+    if row["kept"] and row["situation"] is not None:
+        situation = Situation(row["situation"], check_start=False)
+        trajectory = store.trajectory(run_id)
+        if trajectory is not None:
+            return WholeRun(situation, trajectory, row["events_jsonl"], resimulated=False)
+    try:
+        situation, record = resimulate(row)
+    except _core.GenerationFailed as e:
+        raise StoreError(
+            f"{store.path}: run {run_id}: its situation no longer generates: {e}"
+        ) from None
+    differs = [
+        what
+        for what, same in (
+            ("situation", situation.content_hash == row["content_hash"]),
+            ("event log", events_digest(record.events_jsonl) == row["events_sha256"]),
+            ("score", record.score == row["score"]),
+        )
+        if not same
+    ]
+    if differs:
+        version = (store.campaign() or {}).get("sitgen_version", "another version")
+        raise StoreError(
+            f"{store.path}: run {run_id} was stored as a summary and re-simulating it gives a "
+            f"different {', '.join(differs)} (stored by sitgen {version}, this is "
+            f"{_core.__version__})"
+        )
+    trajectory = record.trajectory.astype(np.float32)
+    return WholeRun(situation, trajectory, record.events_jsonl, resimulated=True)
