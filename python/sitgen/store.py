@@ -376,7 +376,9 @@ class Store:
                 self.db.execute(
                     "INSERT INTO campaign (id, spec, seed, n, sitgen_version, created_at) "
                     "VALUES (1, ?, ?, ?, ?, ?)",
-                    (json.dumps(spec, sort_keys=True), seed, n, version, created_at),
+                    # In its own order: the order of [vary] is the order genes are drawn in,
+                    # which a summary's job is built again with.
+                    (json.dumps(spec), seed, n, version, created_at),
                 )
                 for table, plan in plans.items():
                     if plan is not None:
@@ -406,8 +408,10 @@ class Store:
                 f"{self.path} holds another {KINDS[wanted]} ({differs}); give a new --db to "
                 "start this one, or the same spec and seed to resume it"
             )
-        if n > stored["n"]:
-            with self.db:
+        with self.db:
+            # Stores before version 7 sorted the spec's keys; the jobs are drawn in its order.
+            self.db.execute("UPDATE campaign SET spec = ? WHERE id = 1", (json.dumps(spec),))
+            if n > stored["n"]:
                 self.db.execute("UPDATE campaign SET n = ? WHERE id = 1", (n,))
 
     def kind(self) -> str:

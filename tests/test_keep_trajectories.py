@@ -1,0 +1,121 @@
+"""Campaigns that keep only some runs whole (``--keep-trajectories``): which runs are kept,
+what a summary holds, and that a summary's run comes back by re-simulation exactly as the
+run was (the same log, the same trajectory), through ``show``, ``rerun`` and ``report``."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sitgen.recall import whole_run
+from sitgen.store import Store, StoreError
+from tests.conftest import run_cli
+from tests.test_campaign import SMALL, write_spec
+
+SPEC = SMALL.replace("n = 8", "n = 12")
+
+
+def campaign(tmp_path: Path, keep: str, name: str) -> Path:
+    db = tmp_path / f"{name}.db"
+    done = run_cli(
+        "campaign", str(write_spec(tmp_path, SPEC)), "--db", str(db), "--seed", "4",
+        "--workers", "2", "--keep-trajectories", keep,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return db
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The same campaign kept ``all``, ``none``, ``top:3`` and ``failures``."""
+    tmp = tmp_path_factory.mktemp("keep")
+    return {keep: campaign(tmp, keep, keep.replace(":", "")) for keep in ("all", "none", "top:3")}
+
+
+def table(db: Path, sql: str) -> list[tuple[object, ...]]:
+    with sqlite3.connect(db) as c:
+        return c.execute(sql).fetchall()
+
+
+def test_top_k_keeps_exactly_the_k_best_runs_whole(stores: dict[str, Path]) -> None:
+    db = stores["top:3"]
+    ranked = [r[0] for r in table(db, "SELECT id FROM runs ORDER BY score DESC, id")]
+    whole = {r[0] for r in table(db, "SELECT id FROM runs WHERE kept = 1")}
+    assert whole == set(ranked[:3])
+    assert {r[0] for r in table(db, "SELECT run_id FROM trajectories")} == whole
+    assert {r[0] for r in table(db, "SELECT DISTINCT run_id FROM events")} <= whole
+    # The summaries: no specs, situation, log or trajectory; what ranks and groups them stays.
+    for spec, situation, run_spec, log, digest, content_hash in table(
+        db,
+        "SELECT s.spec, s.situation, r.run_spec, r.events_jsonl, r.events_sha256, "
+        "s.content_hash FROM runs r JOIN situations s ON s.id = r.id WHERE r.kept = 0",
+    ):
+        assert (spec, situation, run_spec, log) == ("", None, "", "")
+        assert isinstance(digest, str) and len(digest) == 64 and content_hash
+    # Ranking and distinct failures read summaries as they read whole runs.
+    assert table(db, "SELECT id, score, failure_class FROM runs ORDER BY id") == table(
+        stores["all"], "SELECT id, score, failure_class FROM runs ORDER BY id"
+    )
+
+
+def test_a_summary_is_re_simulated_to_the_run_that_was_stored(stores: dict[str, Path]) -> None:
+    with Store(stores["all"]) as full, Store(stores["none"]) as summary:
+        for run_id in range(12):
+            kept, again = whole_run(full, run_id), whole_run(summary, run_id)
+            assert kept is not None and again is not None
+            assert not kept.resimulated and again.resimulated
+            assert again.events_jsonl == kept.events_jsonl
+            assert again.situation.content_hash == kept.situation.content_hash
+            assert kept.trajectory is not None and again.trajectory is not None
+            assert np.array_equal(again.trajectory, kept.trajectory)
+            # The specs a summary's job is built again from are those the whole run stored.
+            a, b = full.run_row(run_id), summary.run_row(run_id)
+            assert (a["situation_spec"], a["run_spec"]) == (b["situation_spec"], b["run_spec"])
+
+
+def test_a_summary_that_re_simulates_differently_is_refused(
+    stores: dict[str, Path], tmp_path: Path
+) -> None:
+    db = tmp_path / "tampered.db"
+    db.write_bytes(stores["none"].read_bytes())
+    with sqlite3.connect(db) as c:
+        c.execute("UPDATE runs SET score = score + 1 WHERE id = 2")
+    with Store(db) as store, pytest.raises(StoreError, match="run 2 .* different score"):
+        whole_run(store, 2)
+
+
+def test_show_rerun_and_report_work_on_summaries(stores: dict[str, Path], tmp_path: Path) -> None:
+    db = stores["none"]
+    figure = tmp_path / "run.png"
+    done = run_cli("show", str(db), "--run", "5", "-o", str(figure))
+    assert done.returncode == 0, done.stderr
+    assert figure.read_bytes().startswith(b"\x89PNG")
+    done = run_cli("rerun", str(db), "5")
+    assert done.returncode == 0, done.stderr
+    assert "event log identical" in done.stdout
+    out = tmp_path / "report"
+    done = run_cli("report", str(db), "-o", str(out), "--top", "4")
+    assert done.returncode == 0, done.stderr
+    best = table(db, "SELECT id FROM runs ORDER BY score DESC, id LIMIT 4")
+    for (run_id,) in best:
+        assert (out / f"run-{run_id}.html").exists()
+        assert (out / f"run-{run_id}.js").read_text().count("trajectory") >= 1
+
+
+def test_failures_keeps_the_runs_with_a_failure_class(tmp_path: Path) -> None:
+    db = campaign(tmp_path, "failures", "failures")
+    rows = table(db, "SELECT kept, failure_class IS NOT NULL FROM runs")
+    assert rows and all(kept == failed for kept, failed in rows)
+
+
+@pytest.mark.parametrize("keep", ["top:0", "top:", "some", "top:-2", "all:3"])
+def test_a_bad_keep_option_is_a_one_line_error(tmp_path: Path, keep: str) -> None:
+    db = tmp_path / "bad.db"
+    done = run_cli("campaign", "--n", "2", "--db", str(db), "--keep-trajectories", keep)
+    assert done.returncode != 0
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--keep-trajectories" in lines[0] and keep in lines[0]
+    assert not db.exists()
