@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage stage
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -62,6 +62,18 @@ bench-profiles: install-test
 # collisions; draws docs/vo-*.png (about 3 minutes on 2 cores).
 bench-vo: install-test
 	$(BIN)/python benches/vo_reciprocal.py
+
+# Where a step's time goes: the reference scene without Python under perf (Linux perf needed).
+profile:
+	cargo build --release -q -p sitgen-core --example reference_scene
+	perf record -F 2000 -g -o target/perf.data target/release/examples/reference_scene 10 runs
+	perf report -i target/perf.data --no-children --sort symbol --stdio 2>/dev/null \
+		| grep -E '^ +[0-9]' | head -30
+
+# 100,000 runs of the paper's campaign (60 s limit) through Ray on this machine: runs/s, memory
+# over the campaign, store bytes per run without trajectories (about 40 minutes on 2 cores).
+bench-scale: install-test
+	$(BIN)/python benches/scale.py
 
 # Environment steps per second of sitgen.gym, one world and vectorised (about 2 minutes).
 bench-gym: install-test

@@ -4,14 +4,17 @@ run was (the same log, the same trajectory), through ``show``, ``rerun`` and ``r
 
 from __future__ import annotations
 
+import math
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from sitgen.campaign import Keep
 from sitgen.recall import whole_run
-from sitgen.store import Store, StoreError
+from sitgen.store import RunRow, Store, StoreError
 from tests.conftest import run_cli
 from tests.test_campaign import SMALL, write_spec
 
@@ -83,7 +86,7 @@ def test_a_summary_that_re_simulates_differently_is_refused(
     db.write_bytes(stores["none"].read_bytes())
     with sqlite3.connect(db) as c:
         c.execute("UPDATE runs SET score = score + 1 WHERE id = 2")
-    with Store(db) as store, pytest.raises(StoreError, match="run 2 .* different score"):
+    with Store(db) as store, pytest.raises(StoreError, match=r"run 2 .* different score"):
         whole_run(store, 2)
 
 
@@ -119,3 +122,37 @@ def test_a_bad_keep_option_is_a_one_line_error(tmp_path: Path, keep: str) -> Non
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "--keep-trajectories" in lines[0] and keep in lines[0]
     assert not db.exists()
+
+
+def summary_row(run_id: int, score: float, failure: str | None = None) -> RunRow:
+    record = {"score": {"total": score}, "failure": {"class": failure} if failure else None}
+    return RunRow(
+        id=run_id, situation_seed=0, situation_spec={}, situation_json=None, run_spec={},
+        run_seed=0, controller="snd_follow", record=record, error=None, events_jsonl="",
+        trajectory=None, robots=1,
+    )  # fmt: skip
+
+
+def test_top_k_pushes_out_the_lowest_ranked_and_raises_the_packing_bar() -> None:
+    keep = Keep("top:2")
+    assert keep.pack_rule() == (-math.inf, False)
+    kept = [keep.admit(summary_row(i, s)) for i, s in enumerate([5.0, 9.0, 1.0, 7.0, 9.0])]
+    # 5 and 9 fill it; 1 is below both; 7 pushes 5 out; the second 9 ties the first but ranks
+    # after it (id order), and pushes 7 out.
+    assert [(row.keep, out) for row, out in kept] == [
+        (True, []), (True, []), (False, []), (True, [0]), (True, [3]),
+    ]  # fmt: skip
+    assert keep.pack_rule() == (9.0, False)
+
+
+def test_the_other_modes_admit_as_they_say() -> None:
+    assert Keep("all").admit(summary_row(0, 0.0))[0].keep
+    assert not Keep("none").admit(summary_row(0, 1e6))[0].keep
+    failures = Keep("failures")
+    assert failures.admit(summary_row(0, 0.0, "drove_into_wall"))[0].keep
+    assert not failures.admit(summary_row(1, 1e6))[0].keep
+    assert failures.pack_rule() == (math.inf, True)
+    assert Keep("none").pack_rule() == (math.inf, False)
+    # A run that could not be run is kept whole whatever the mode: there is nothing to re-run.
+    error = replace(summary_row(2, 0.0), record=None, error="generation failed")
+    assert Keep("none").admit(error)[0].keep
