@@ -168,12 +168,15 @@ def bench_campaign(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
                 raise SystemExit(
                     f"campaign failed: {proc.stderr.read().decode() if proc.stderr else ''}"
                 )
+            store_bytes = db.stat().st_size
         peak_mib = usage.ru_maxrss / 1024
         out[f"workers_{workers}"] = {
             "wall_s": wall,
             "runs_per_s": n / wall,
+            "runs_per_hour_per_core": n / wall * 3600 / workers,
             "speedup_vs_paper": PAPER_S * n / 500 / wall,
             "peak_rss_mib": peak_mib,
+            "store_bytes_per_run": store_bytes / max(n, 1),
         }
         rows.append(
             (f"campaign {n} situations, {workers} worker(s)", {
@@ -182,7 +185,9 @@ def bench_campaign(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
         )  # fmt: skip
         print(
             f"campaign {n} runs, {workers} worker(s): {wall:.1f} s, {n / wall:.1f} runs/s, "
-            f"{PAPER_S * n / 500 / wall:,.0f}× the paper's ~17 h, peak memory {peak_mib:.0f} MiB"
+            f"{PAPER_S * n / 500 / wall:,.0f}× the paper's ~17 h, peak memory {peak_mib:.0f} MiB, "
+            f"store {store_bytes / max(n, 1) / 1024:.1f} KB a run (the default "
+            "--keep-trajectories top:50)"
         )
         out[f"workers_{workers}"]["summary"] = summary.strip().splitlines()[1:2]
     return out
