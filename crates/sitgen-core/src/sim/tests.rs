@@ -383,6 +383,41 @@ fn tracks_are_the_robots_the_laser_sees_now() {
     );
 }
 
+#[test]
+fn a_robot_standing_still_reuses_its_terrain_scan_but_sees_robots_move() {
+    // A wall 3 m ahead of the agent; a peer drives across the beams in between while the
+    // agent stands still, then the agent turns.
+    let wall: Vec<(usize, usize)> = (50..150).map(|r| (r, 80)).collect();
+    let up = std::f64::consts::FRAC_PI_2;
+    let mut w = world(
+        200,
+        &wall,
+        vec![robot(0, 5.0, 10.0, 0.0), robot(1, 6.5, 7.0, up)],
+    );
+    let fresh = |w: &World| {
+        w.forget_scans();
+        w.scan(0)
+    };
+    let mut saw_peer = 0;
+    for _ in 0..60 {
+        let (reused, seen) = w.scan_seeing(0);
+        assert_eq!(reused, fresh(&w), "a reused scan reads as a fresh one");
+        saw_peer += usize::from(seen.contains(&1));
+        w.step(&[(1, 0.8, 0.0)]).unwrap();
+    }
+    assert!(
+        saw_peer > 5,
+        "the peer crossed the beams ({saw_peer} scans saw it)"
+    );
+    let ahead = w.scan(0)[90];
+    assert!(
+        (ahead - 3.0).abs() < 0.02,
+        "the wall again once it passed: {ahead}"
+    );
+    w.step(&[(0, 0.0, 0.5)]).unwrap();
+    assert_eq!(w.scan(0), fresh(&w), "a turned robot traces again");
+}
+
 /// Clearance from robot `i`'s footprint to the nearest occupied cell or the map's edge, by
 /// brute force: every occupied cell's square measured with `Rect::distance`, and the edges.
 fn brute_wall_clearance(w: &World, i: usize) -> f64 {
