@@ -42,6 +42,19 @@ def tree_rss_mib(root: psutil.Process) -> float:
     return total / 2**20
 
 
+def rss_by_process_mib(root: psutil.Process) -> dict[str, float]:
+    """Resident memory of the campaign's processes, grouped by name (Ray's workers are
+    ``ray::…``): where the memory is."""
+    groups: dict[str, float] = {}
+    for p in [root, *root.children(recursive=True)]:
+        try:
+            name = "sitgen (the CLI)" if p.pid == root.pid else p.name()
+            groups[name] = groups.get(name, 0.0) + p.memory_info().rss / 2**20
+        except psutil.NoSuchProcess:
+            continue
+    return dict(sorted(groups.items(), key=lambda kv: -kv[1]))
+
+
 def runs_stored(db: Path) -> int:
     if not db.exists():
         return 0
@@ -80,6 +93,7 @@ def main() -> None:
             proc = subprocess.Popen(command, stdout=o, stderr=e)
         root = psutil.Process(proc.pid)
         samples: list[dict[str, float]] = []
+        by_process: dict[str, float] = {}
         while proc.poll() is None:
             time.sleep(args.sample_s)
             if proc.poll() is not None:
@@ -97,6 +111,8 @@ def main() -> None:
                 "driver_cpu_s": cpu.user + cpu.system,
             }
             samples.append(sample)
+            if sample["runs"] < args.n:
+                by_process = rss_by_process_mib(root)
             print(
                 f"{sample['wall_s']:7.0f} s  {sample['runs']:7d} runs  "
                 f"{sample['rss_mib']:7.0f} MiB",
@@ -129,6 +145,7 @@ def main() -> None:
         "driver_cpu_ms_per_run": driver_ms,
         "peak_rss_mib": max((s["rss_mib"] for s in samples), default=0.0),
         "rss_mib_by_tenth": [round(s["rss_mib"], 1) for s in tenths],
+        "rss_mib_by_process": by_process,
         "samples": samples,
         "summary": out.strip().splitlines()[:2],
     }
@@ -140,6 +157,11 @@ def main() -> None:
     print(
         f"memory (all processes): peak {result['peak_rss_mib']:.0f} MiB; at each tenth of the "
         f"campaign {', '.join(f'{m:.0f}' for m in result['rss_mib_by_tenth'])} MiB"
+    )
+    print(
+        "memory by process, last sample under way: "
+        + ", ".join(f"{name} {mib:.0f}" for name, mib in by_process.items())
+        + " MiB"
     )
     print(f"store: {size / 2**20:.1f} MiB, {size / max(ran, 1):.0f} bytes per run")
     print(

@@ -351,7 +351,6 @@ class Keep:
 
     def __init__(self, text: str) -> None:
         mode, _, count = text.partition(":")
-        self.text = text
         self.mode = mode
         self.k = 0
         if mode == "top" and count.isdigit() and int(count) >= 1:
@@ -378,14 +377,14 @@ class Keep:
 
     def pack_rule(self) -> tuple[float, bool]:
         """Which runs' trajectories are worth packing now: (minimum score, any failure)."""
-        if self.mode == "all":
-            return PACK_ALL
+        if self.mode == "none":
+            return (math.inf, False)
         if self.mode == "failures":
             return (math.inf, True)
         if self.mode == "top" and len(self._top) >= self.k:
             # A run that scores below the K-th best so far can never be kept.
             return (self._top[0][0], False)
-        return PACK_ALL if self.mode == "top" else (math.inf, False)
+        return PACK_ALL
 
     def admit(self, row: RunRow) -> tuple[RunRow, list[int]]:
         """``row`` marked whole or summary, and the runs it pushes out of the ``top:K``."""

@@ -212,7 +212,7 @@ def show(
 
         with Store(source) as store:
             row = store.run_row(run_id)
-            whole = whole_run(store, run_id)
+            whole = whole_run(store, row)
         if whole is None:
             raise UsageError(f"run {run_id} has no situation (generation failed)")
         events = [json.loads(line) for line in whole.events_jsonl.splitlines()]
@@ -568,18 +568,18 @@ def campaign(
         ),
     ] = 0,
     keep_trajectories: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--keep-trajectories",
             help="Runs stored whole (situation, event log, trajectory): all, failures, top:K "
             "or none; the rest keep a summary (under 1 KB) and are re-simulated when shown. "
             "Default top:50, the runs the report shows.",
         ),
-    ] = "top:50",
+    ] = None,
 ) -> None:
     """Generate N randomised situations, run them all, store them, rank the runs.
     Ctrl-C stops after the runs in flight; the same command again resumes."""
-    from sitgen.campaign import run_campaign
+    from sitgen.campaign import DEFAULT_KEEP, run_campaign
 
     parsed = _campaign_spec(spec)
     total_n = parsed.n if n is None else n
@@ -597,7 +597,7 @@ def campaign(
             address=address,
             on_progress=on_progress,
             stop=stop,
-            keep_trajectories=keep_trajectories,
+            keep_trajectories=keep_trajectories or DEFAULT_KEEP,
         ),
     )
     _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)

@@ -54,10 +54,11 @@ def resimulate(row: dict[str, Any]) -> tuple[Situation, RunRecord]:
     return situation, run(situation, seed=row["run_seed"], spec=row["run_spec"])
 
 
-def whole_run(store: Store, run_id: int) -> WholeRun | None:
-    """Run ``run_id`` whole; None if its situation was never generated. Raises StoreError if
-    re-simulation does not give back the run that was stored (another sitgen version)."""
-    row = store.run_row(run_id)
+def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
+    """Stored run ``row`` (:meth:`Store.run_row`) whole; None if its situation was never
+    generated. Raises StoreError if re-simulation does not give back the run that was stored
+    (another sitgen version)."""
+    run_id = row["id"]
     if row["content_hash"] is None:
         return None
     if row["kept"] and row["situation"] is not None:

@@ -702,7 +702,7 @@ def _run_page(
     row = store.run_row(run_id)
     # Shown as it was run, even where an older sitgen placed a robot across the map's edge; a
     # run kept as a summary is re-simulated.
-    whole = whole_run(store, run_id)
+    whole = whole_run(store, row)
     if whole is None or whole.trajectory is None:
         return None
     situation, trajectory = whole.situation, whole.trajectory

@@ -609,7 +609,7 @@ def shrink_run(
         row = store.run_row(run_id)
         if row["failure"] is None:
             raise ShrinkError(NOTHING_TO_SHRINK)
-        whole = whole_run(store, run_id)
+        whole = whole_run(store, row)
     if whole is None:
         raise ShrinkError("its situation was not generated, so there is nothing to shrink")
     result = shrink(

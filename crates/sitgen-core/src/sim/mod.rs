@@ -209,9 +209,8 @@ pub struct World {
     /// spares a sine and a cosine per beam per scan.
     bearing_dirs: Vec<(f64, f64)>,
     /// The terrain part of each robot's last scan, by robot index: a robot standing still (a
-    /// controller locked up, a robot stalled against a wall: a third of the agent's steps in
-    /// the default campaign) sees the same walls, since the terrain never changes, so only
-    /// the robots are traced again.
+    /// controller locked up, a robot stalled against a wall) sees the same walls, since the
+    /// terrain never changes, so only the robots are traced again.
     wall_scans: WallScans,
     time_s: f64,
     steps: u64,
