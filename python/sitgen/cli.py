@@ -6,6 +6,7 @@ the field or file, and exit 2 (bad input) or 1 (generation or I/O failed); never
 
 from __future__ import annotations
 
+import copy
 import json
 import sqlite3
 import sys
@@ -26,6 +27,7 @@ from sitgen.terrain import Grid, generate_terrain
 
 if TYPE_CHECKING:
     from sitgen.campaign import CampaignSpec
+    from sitgen.weights import Weights
 
 T = TypeVar("T")
 
@@ -85,6 +87,34 @@ AllowEditedOption = Annotated[
 
 class UsageError(Exception):
     """Bad command-line input that is not a spec field (exit 2)."""
+
+
+WeightsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--weights",
+        help="Learned weights (TOML, from `sitgen weights fit`): score runs by them.",
+    ),
+]
+
+
+def _weights(path: Path | None, db: Path | None = None) -> Weights | None:
+    """The weights file ``path`` (None if not given), checked; with ``db``, checked to rescore
+    its stored runs."""
+    if path is None:
+        return None
+    from sitgen.store import Store
+    from sitgen.weights import JudgementError, check_rescorable, load_weights
+
+    try:
+        weights = load_weights(path)
+        if db is not None:
+            require_store(db)
+            with Store(db) as store:
+                check_rescorable(store, weights, str(path))
+    except JudgementError as e:
+        raise UsageError(str(e)) from None
+    return weights
 
 
 def _coverage_target(spec: dict[str, Any]) -> str:
@@ -232,6 +262,7 @@ def report(
         int,
         typer.Option("--top", min=0, help="Top runs that get a page (and every representative)."),
     ] = 50,
+    weights: WeightsOption = None,
 ) -> None:
     """Write an HTML triage report of a campaign: distinct failures first, ranked runs, score
     distribution, and for the top runs and each distinct failure's representative a page with
@@ -239,7 +270,8 @@ def report(
     from sitgen.report import write_report
 
     require_store(db)
-    pages = write_report(db, output, top)
+    learned = _weights(weights, db)
+    pages = write_report(db, output, top, learned, str(weights or ""))
     typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
 
@@ -809,6 +841,7 @@ def search(
     backend: BackendOption = "local",
     address: AddressOption = None,
     top: Annotated[int, typer.Option("--top", help="Distinct failures in the summary.")] = 5,
+    weights: WeightsOption = None,
 ) -> None:
     """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
     situation seed, each cell of the archive (failure class × terrain by default) holding its
@@ -818,6 +851,15 @@ def search(
     from sitgen.search import SearchPlan, SearchProgress, SearchResult, run_search
 
     parsed = _campaign_spec(spec)
+    learned = _weights(weights)
+    if learned is not None:
+        from sitgen.campaign import campaign_from_data
+
+        # The runs are scored by the weights as they run (the objective is their score), and
+        # the stored spec says so: a summary's run is rebuilt and re-simulated from it.
+        source = copy.deepcopy(parsed.source)
+        source.setdefault("run", {})["scoring"] = learned.table()
+        parsed = campaign_from_data(source)
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     plan = SearchPlan(strategy, names, objective, threshold)
 
@@ -994,6 +1036,7 @@ def rank(
         str | None,
         typer.Option("--class", help="Only runs of this failure class (see `sitgen failures`)."),
     ] = None,
+    weights: WeightsOption = None,
 ) -> None:
     """The runs of a campaign, most dangerous first."""
     from sitgen.failures import FailureFilterError
@@ -1002,8 +1045,9 @@ def rank(
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, csv, json")
     require_store(db)
+    learned = _weights(weights, db)
     try:
-        rows = ranked_rows(db, top, failure_class, distinct)
+        rows = ranked_rows(db, top, failure_class, distinct, learned)
     except FailureFilterError as e:
         raise UsageError(str(e)) from None
     if format == "table":
@@ -1028,6 +1072,7 @@ def rank(
 def failures(
     db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
     format: Annotated[str, typer.Option("--format", "-f", help="table, json or csv.")] = "table",
+    weights: WeightsOption = None,
 ) -> None:
     """One row per distinct failure of a campaign, the most dangerous (best score) first: its
     class, sentence, runs, share of runs, best score, representative run and median duration."""
@@ -1037,7 +1082,10 @@ def failures(
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json, csv")
     require_store(db)
+    learned = _weights(weights, db)
     with Store(db) as store:
+        if learned is not None:
+            store.rescore(learned)
         found = distinct_failures(store)
     if format != "table":
         write_failures(found, format, sys.stdout)
@@ -1217,6 +1265,167 @@ def schema(
     """Print the JSON Schema of the situation spec (or of situation files)."""
     text = _core.situation_json_schema() if situation else _core.spec_json_schema()
     typer.echo(text, nl=False)
+
+
+@app.command()
+def judge(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    who: Annotated[
+        str | None, typer.Option("--who", help="Who is judging (default: the login name).")
+    ] = None,
+    port: Annotated[
+        int, typer.Option("--port", min=0, max=65535, help="Port on 127.0.0.1 (0: any free).")
+    ] = 8765,
+    open_browser: Annotated[
+        bool, typer.Option("--open/--no-open", help="Open the page in a browser.")
+    ] = True,
+) -> None:
+    """Judge pairs of runs in a local web page: two runs side by side (failure class, replay,
+    timeline, figure, events; not their scores), and which is more dangerous, or equal. Each
+    judgement goes into the store with who and when; the next pair is the most informative
+    left. Then `sitgen weights fit`. Serves on 127.0.0.1 only, until Ctrl-C."""
+    import getpass
+    import webbrowser
+
+    from sitgen.judge import JudgingServer
+    from sitgen.store import Store
+
+    require_store(db)
+    with Store(db):
+        pass  # an old store is upgraded (its judgements table made) before serving
+    try:
+        server = JudgingServer(db, who or getpass.getuser(), port)
+    except OSError as e:
+        raise UsageError(f"--port: cannot listen on 127.0.0.1:{port} ({e.strerror})") from None
+    typer.echo(f"judging runs of {db} as {server.who} at {server.url} (Ctrl-C to stop)")
+    if open_browser:
+        webbrowser.open(server.url)
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.shutdown()
+    with Store(db) as store:
+        typer.echo(f"{len(store.judgements())} judgements in {db}")
+
+
+judgements_app = typer.Typer(
+    help="Import or export an expert's pairwise judgements of runs (JSON).",
+    no_args_is_help=True,
+)
+app.add_typer(judgements_app, name="judgements")
+
+
+@judgements_app.command("import")
+def judgements_import(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    source: Annotated[
+        Path,
+        typer.Argument(help='JSON: a list of {"a": RUN, "b": RUN, "worse": "a" | "b" | "equal"}.'),
+    ],
+    who: Annotated[
+        str | None, typer.Option("--who", help="Who judged, for entries that do not say.")
+    ] = None,
+) -> None:
+    """Add judgements from a JSON file to the store (all of them, or none if one is bad)."""
+    import dataclasses
+
+    from sitgen.store import Store
+    from sitgen.weights import JudgementError, read_judgements
+
+    require_store(db)
+    with Store(db) as store:
+        try:
+            read = read_judgements(source, store)
+        except JudgementError as e:
+            raise UsageError(str(e)) from None
+        read = [dataclasses.replace(j, who=j.who or who or "") for j in read]
+        added = store.add_judgements(read, f"import {source.name}")
+        total = len(store.judgements())
+    typer.echo(f"imported {added} judgements from {source}; {total} in {db}")
+
+
+@judgements_app.command("export")
+def judgements_export(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="JSON file to write.")] = Path(
+        "judgements.json"
+    ),
+) -> None:
+    """Write the store's judgements as JSON (with who made each and when)."""
+    from sitgen.store import Store
+    from sitgen.weights import write_judgements
+
+    require_store(db)
+    with Store(db) as store:
+        written = write_judgements(store.judgements(), output)
+    typer.echo(f"wrote {written} judgements to {output}")
+
+
+weights_app = typer.Typer(help="Penalty weights learned from judgements.", no_args_is_help=True)
+app.add_typer(weights_app, name="weights")
+
+
+@weights_app.command("fit")
+def weights_fit(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite) holding the judged runs.")],
+    judgements: Annotated[
+        Path | None,
+        typer.Option(
+            "--judgements", help="Fit to this JSON file's judgements instead of the store's."
+        ),
+    ] = None,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Weights to write (TOML).")] = Path(
+        "weights.toml"
+    ),
+) -> None:
+    """Fit non-negative penalties (start points and points per second per event kind, points
+    per failure class where they help) to pairwise judgements with a Bradley–Terry model, and
+    print how well they reproduce held-out judgements (agreement, Kendall τ) beside the stored
+    scores. The file is a scoring table: `--weights` for rank, report, failures and search,
+    or paste it under a run spec's [scoring]."""
+    from sitgen.store import Store
+    from sitgen.weights import JudgementError, fit, read_judgements, weights_toml
+
+    require_store(db)
+    with Store(db) as store:
+        try:
+            judged = (
+                read_judgements(judgements, store) if judgements is not None
+                else store.judgements()
+            )  # fmt: skip
+            if not judged:
+                raise JudgementError(
+                    f"{db}: no judgements yet; judge runs with `sitgen judge {db}` or give "
+                    "--judgements FILE"
+                )
+            fitted = fit(store, judged)
+        except JudgementError as e:
+            raise UsageError(str(e)) from None
+    source = judgements or db
+    lines = fitted.summary()
+    comment = [
+        f"sitgen weights fitted by sitgen {_core.__version__} to {fitted.judgements} "
+        f"judgements ({source.name}) of {db.name}",
+        f"held-out agreement {fitted.held_out.agreement:.3f}, Kendall tau "
+        f"{fitted.held_out.tau:+.3f} (stored scores: {fitted.stored.agreement:.3f}, "
+        f"{fitted.stored.tau:+.3f})",
+        "A run spec's scoring table: use with --weights, or under [scoring] / [run.scoring].",
+    ]
+    output.write_text(weights_toml(fitted.weights, comment))
+    for line in lines:
+        typer.echo(line)
+    table = Table(title="fitted penalties (points)")
+    for column in ("event", "start", "per s"):
+        table.add_column(column, justify="left" if column == "event" else "right")
+    for kind, (start, per_s) in fitted.weights.penalties.items():
+        if start or per_s:
+            table.add_row(kind, f"{start:.1f}", f"{per_s:.2f}")
+    for key, points in fitted.weights.failure_classes.items():
+        table.add_row(f"class {key}", f"{points:.1f}", "")
+    Console().print(table)
+    typer.echo(f"wrote {output}; use it: sitgen rank {db} --weights {output}")
 
 
 def main() -> None:

@@ -8,10 +8,13 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from sitgen import _core
 from sitgen.store import Store, events_digest
+
+if TYPE_CHECKING:
+    from sitgen.weights import Weights
 
 RANK_COLUMNS = (
     "rank",
@@ -33,7 +36,7 @@ RANK_COLUMNS = (
     "reason",
 )
 
-TABLES = ("campaign", "situations", "runs", "events", "trajectories")
+TABLES = ("campaign", "situations", "runs", "events", "trajectories", "judgements")
 
 
 def ranked_rows(
@@ -41,15 +44,19 @@ def ranked_rows(
     top: int | None = None,
     failure_class: str | None = None,
     distinct: bool = False,
+    weights: Weights | None = None,
 ) -> list[dict[str, Any]]:
     """The top runs, most dangerous first, with their rank (1 = first). ``failure_class``
     keeps the runs of one class; ``distinct`` puts the representative of each distinct failure
-    first (best first, each marked with its ``distinct`` key), then the rest by score."""
+    first (best first, each marked with its ``distinct`` key), then the rest by score.
+    ``weights``: rescore every run by learned weights first."""
     from sitgen.failures import check_class, distinct_failures
 
     if failure_class is not None:
         check_class(failure_class)
     with Store(db) as store:
+        if weights is not None:
+            store.rescore(weights)
         rows = store.ranked(None if distinct else top, failure_class)
         if distinct:
             failures = [

@@ -77,7 +77,7 @@ def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
         for what, same in (
             ("situation", situation.content_hash == row["content_hash"]),
             ("event log", events_digest(record.events_jsonl) == row["events_sha256"]),
-            ("score", record.score == row["score"]),
+            ("score", record.score == row["stored_score"]),
         )
         if not same
     ]

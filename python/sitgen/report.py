@@ -33,6 +33,7 @@ from sitgen.recall import whole_run
 from sitgen.search import SearchReplay, elite_grid, replay
 from sitgen.situation import Situation
 from sitgen.store import KINDS, Store, main_events
+from sitgen.weights import Weights
 
 STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; color: #222; max-width: 1200px; }
@@ -398,6 +399,7 @@ def _index(
     pages: set[int],
     faults: FaultReport | None = None,
     search: SearchReplay | None = None,
+    weights_name: str = "",
 ) -> str:
     campaign = store.campaign() or {}
     scores = [r["score"] for r in rows]
@@ -445,6 +447,12 @@ def _index(
     ranks = {r["run"]: rank for rank, r in enumerate(rows, 1)}
     title = f"sitgen {KINDS[store.kind()]} report"
     body = [f"<h1>{title}</h1>"]
+    if weights_name:
+        body.append(
+            f"<p id='weights'>Scores, ranks and representatives under the learned weights of "
+            f"<code>{html.escape(weights_name)}</code> (<code>--weights</code>), rescored from "
+            "each run's breakdown and failure class.</p>"
+        )
     if faults is not None:
         body.append(_faults_section(faults, pages))
     if search is not None:
@@ -696,9 +704,11 @@ def _run_page(
     out: Path,
     db_name: str,
     distinct: DistinctFailure | None = None,
+    blind: bool = False,
 ) -> tuple[str, str] | None:
     """The page and its data script for one run; None if the run has no situation.
-    ``distinct`` is the distinct failure the run belongs to, if any."""
+    ``distinct`` is the distinct failure the run belongs to, if any. ``blind`` leaves out its
+    rank, score and breakdown (for judging runs by what happened, not by what they scored)."""
     row = store.run_row(run_id)
     # Shown as it was run, even where an older sitgen placed a robot across the map's edge; a
     # run kept as a summary is re-simulated.
@@ -732,9 +742,14 @@ def _run_page(
     }
     script = "window.SITGEN_RUN = " + json.dumps(data, separators=(",", ":")) + ";\n"
     end_s = (len(trajectory) - 1) * dt_s
-    body = [f"<p><a href='index.html'>← all runs</a></p><h1>Run {run_id} (rank {rank})</h1>"]
+    body = (
+        [f"<h1>Run {run_id}</h1>"]
+        if blind
+        else [f"<p><a href='index.html'>← all runs</a></p><h1>Run {run_id} (rank {rank})</h1>"]
+    )
+    score = "" if blind else f"score <b>{row['score']:.1f}</b>, "
     body.append(
-        f"<p>score <b>{row['score']:.1f}</b>, outcome <b>{row['outcome']}</b> "
+        f"<p>{score}outcome <b>{row['outcome']}</b> "
         f"({html.escape(reason)}),"
         f" {end_s:.1f} s, controller <code>{html.escape(row['controller'])}</code>,"
         f" {len(situation.robots) - 1} peers, situation seed {row['situation_seed']}</p>"
@@ -744,16 +759,8 @@ def _run_page(
         i for i in (failure or {}).get("events", []) if isinstance(i, int) and 0 <= i < len(events)
     )
     body.append(_failure_section(failure, events, distinct, run_id))
-    body.append("<h2>Why this rank</h2><table id='breakdown'>")
-    body.append("<tr><th>event</th><th>count</th><th>seconds</th><th>points</th></tr>")
-    ordered = sorted(breakdown.items(), key=lambda kv: -kv[1]["points"])
-    for kind, line in ordered:
-        body.append(
-            f"<tr><td>{kind}</td><td class='num'>{line['count']}</td>"
-            f"<td class='num'>{line['seconds']:.1f}</td>"
-            f"<td class='num'>{line['points']:.1f}</td></tr>"
-        )
-    body.append(f"</table><p>{html.escape(main_events(breakdown)) or 'no scored events'}</p>")
+    if not blind:
+        body.append(_why_this_rank(breakdown, row["score"]))
     body.append("<h2>Replay</h2><p class='controls'><button id='play'>play</button>")
     body.append("speed <select id='speed'>")
     body += [
@@ -788,6 +795,9 @@ def _run_page(
     )
     if deciding:
         body.append("<p>Marked: the events that decided the failure class.</p>")
+    if blind:
+        scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
+        return _page(f"sitgen run {run_id}", "".join(body), scripts), script
     body.append(_minimal_section(store, run_id, out))
     body.append(
         f"<h2>Rerun</h2><p><code>sitgen rerun {html.escape(db_name)} {run_id}</code> regenerates "
@@ -796,6 +806,28 @@ def _run_page(
     )
     scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
     return _page(f"sitgen run {run_id}", "".join(body), scripts), script
+
+
+def _why_this_rank(breakdown: dict[str, Any], score: float) -> str:
+    """The score's breakdown by event kind, and the points of the run's failure class where
+    the scoring gives some (the rest of the score)."""
+    body = ["<h2>Why this rank</h2><table id='breakdown'>"]
+    body.append("<tr><th>event</th><th>count</th><th>seconds</th><th>points</th></tr>")
+    ordered = sorted(breakdown.items(), key=lambda kv: -kv[1]["points"])
+    for kind, line in ordered:
+        body.append(
+            f"<tr><td>{kind}</td><td class='num'>{line['count']}</td>"
+            f"<td class='num'>{line['seconds']:.1f}</td>"
+            f"<td class='num'>{line['points']:.1f}</td></tr>"
+        )
+    class_points = score - sum(line["points"] for line in breakdown.values())
+    if abs(class_points) > 1e-6 * max(1.0, abs(score)):
+        body.append(
+            "<tr><td>its failure class</td><td></td><td></td>"
+            f"<td class='num'>{class_points:.1f}</td></tr>"
+        )
+    body.append(f"</table><p>{html.escape(main_events(breakdown)) or 'no scored events'}</p>")
+    return "".join(body)
 
 
 def _minimal_section(store: Store, run_id: int, out: Path) -> str:
@@ -925,13 +957,22 @@ def _event_line(e: dict[str, Any]) -> str:
     return f"{e['start_s']:7.1f}{end} s  robot {e['robot']}  {e['kind']}{other}{scored}"
 
 
-def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
+def write_report(
+    db: str | Path,
+    out: str | Path,
+    top: int = 50,
+    weights: Weights | None = None,
+    weights_name: str = "",
+) -> list[Path]:
     """Write the report of campaign store ``db`` into ``out``; returns the pages written. The
-    ``top`` runs get a page, and so does every distinct failure's representative."""
+    ``top`` runs get a page, and so does every distinct failure's representative. With
+    ``weights`` (read from ``weights_name``) every score is rescored by them."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
     with Store(db) as store:
+        if weights is not None:
+            store.rescore(weights)
         ranked = store.ranked()
         ranks = {r["run"]: rank for rank, r in enumerate(ranked, 1)}
         failures = distinct_failures(store)
@@ -957,5 +998,5 @@ def write_report(db: str | Path, out: str | Path, top: int = 50) -> list[Path]:
             pages.add(run_id)
             written.append(path)
         index = out / "index.html"
-        index.write_text(_index(store, ranked, failures, pages, faults, search))
+        index.write_text(_index(store, ranked, failures, pages, faults, search, weights_name))
     return [index, *written]

@@ -16,12 +16,15 @@ import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 
-SCHEMA_VERSION = 7
+if TYPE_CHECKING:
+    from sitgen.weights import Judgement, Weights
+
+SCHEMA_VERSION = 8
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -134,6 +137,18 @@ CREATE TABLE IF NOT EXISTS search (
 );
 """
 
+JUDGEMENT_SCHEMA = """
+CREATE TABLE IF NOT EXISTS judgements (
+    id INTEGER PRIMARY KEY,
+    a INTEGER NOT NULL REFERENCES runs (id),
+    b INTEGER NOT NULL REFERENCES runs (id),
+    worse TEXT NOT NULL CHECK (worse IN ('a', 'b', 'equal')),
+    who TEXT NOT NULL,
+    at TEXT NOT NULL,
+    source TEXT NOT NULL
+);
+"""
+
 TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
@@ -221,7 +236,9 @@ class Store:
             self._check_tables()
         if version is None:
             with self.db:
-                self.db.executescript(SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA + SEARCH_SCHEMA)
+                self.db.executescript(
+                    SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA + SEARCH_SCHEMA + JUDGEMENT_SCHEMA
+                )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
                     (str(SCHEMA_VERSION),),
@@ -276,6 +293,10 @@ class Store:
                 # Version 7 stores some runs as a summary only (kept = 0) and each run's event
                 # log digest; runs stored before are whole (kept NULL) with their log.
                 self._add_run_columns("kept INTEGER", "events_sha256 TEXT")
+            if version < 8:
+                # Version 8 adds an expert's pairwise judgements of runs (sitgen judge): one
+                # table, empty until then.
+                self.db.executescript(JUDGEMENT_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -457,6 +478,67 @@ class Store:
         for key in ("run_spec", "before", "after", "reductions"):
             out[key] = json.loads(out[key])
         return out
+
+    def add_judgements(self, judgements: Iterable[Judgement], source: str) -> int:
+        """Store judgements (all or none, in one transaction); ``source`` says where they came
+        from (``page``, ``import FILE``). Returns how many."""
+        rows = [(j.a, j.b, j.worse, j.who, j.at, source) for j in judgements]
+        with self.db:
+            self.db.executemany(
+                "INSERT INTO judgements (a, b, worse, who, at, source) VALUES (?, ?, ?, ?, ?, ?)",
+                rows,
+            )
+        return len(rows)
+
+    def judgements(self) -> list[Judgement]:
+        """Every stored judgement, in the order made."""
+        from sitgen.weights import Judgement
+
+        return [
+            Judgement(a, b, worse, who, at)
+            for a, b, worse, who, at in self.db.execute(
+                "SELECT a, b, worse, who, at FROM judgements ORDER BY id"
+            )
+        ]
+
+    def has_runs(self, ids: Iterable[int]) -> set[int]:
+        """Those of ``ids`` that are runs of this store."""
+        wanted = sorted(set(ids))
+        found: set[int] = set()
+        for i in range(0, len(wanted), 500):
+            chunk = wanted[i : i + 500]
+            found.update(
+                r[0]
+                for r in self.db.execute(
+                    f"SELECT id FROM runs WHERE id IN ({', '.join('?' for _ in chunk)})", chunk
+                )
+            )
+        return found
+
+    def rescore(self, weights: Weights) -> None:
+        """From now on, read every run's score and breakdown as ``weights`` give them, from
+        each run's stored breakdown and failure class (a temporary view shadows ``runs`` for
+        this connection only); the store becomes read-only, so nothing rescored is written."""
+        self.db.create_function(
+            "sitgen_score", 2, lambda b, c: weights.score(json.loads(b), c), deterministic=True
+        )
+        self.db.create_function(
+            "sitgen_breakdown",
+            1,
+            lambda b: json.dumps(weights.breakdown(json.loads(b)), sort_keys=True),
+            deterministic=True,
+        )
+        columns = [c[1] for c in self.db.execute("PRAGMA main.table_info(runs)")]
+        chosen = {
+            "score": "sitgen_score(breakdown, failure_class) AS score",
+            "breakdown": "sitgen_breakdown(breakdown) AS breakdown",
+        }
+        with self.db:
+            self.db.execute(
+                f"CREATE TEMP VIEW runs AS SELECT {', '.join(chosen.get(c, c) for c in columns)} "
+                "FROM main.runs"
+            )
+        self.db.execute("PRAGMA query_only = ON")
 
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
@@ -649,7 +731,7 @@ class Store:
         row = self.db.execute(
             "SELECT r.id, s.seed, s.spec, s.situation, s.content_hash, r.run_spec, r.run_seed, "
             "r.controller, r.score, r.events_jsonl, r.outcome, r.failure, r.kept, "
-            "r.events_sha256 FROM runs r "
+            "r.events_sha256, m.score FROM runs r JOIN main.runs m ON m.id = r.id "
             "JOIN situations s ON s.id = r.situation_id WHERE r.id = ?",
             (run_id,),
         ).fetchone()
@@ -674,6 +756,9 @@ class Store:
             "failure": json.loads(row[11]) if row[11] else None,
             "kept": kept,
             "events_sha256": row[13] or events_digest(row[9]),
+            # The score the run earned under its own scoring (``score`` is rescored where the
+            # store is read with learned weights).
+            "stored_score": row[14],
         }
 
     def _job_specs(self, run_id: int) -> tuple[dict[str, Any], dict[str, Any]]:

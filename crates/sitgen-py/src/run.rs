@@ -9,8 +9,9 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sitgen_core::control;
 use sitgen_core::mission::ControllerSpec;
-use sitgen_core::monitor;
+use sitgen_core::monitor::{self, EventKind};
 use sitgen_core::run::{profile, Run, RunRecord, RunSpec};
+use sitgen_core::scoring;
 use sitgen_core::situation::Situation;
 
 use crate::sim::observation_dict;
@@ -152,6 +153,18 @@ fn check_run_spec(spec_json: &str) -> PyResult<String> {
     serde_json::to_string(&spec).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
+/// The default penalty of every event kind, as `(kind, start, per_s)`, in the core's order.
+#[pyfunction]
+fn default_penalties() -> Vec<(&'static str, f64, f64)> {
+    EventKind::ALL
+        .iter()
+        .map(|&k| {
+            let p = scoring::default_penalty(k);
+            (k.name(), p.start, p.per_s)
+        })
+        .collect()
+}
+
 /// Names of the run profiles.
 #[pyfunction]
 fn profile_names() -> Vec<&'static str> {
@@ -185,6 +198,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRun>()?;
     m.add_function(wrap_pyfunction!(check_run_spec, m)?)?;
+    m.add_function(wrap_pyfunction!(default_penalties, m)?)?;
     m.add_function(wrap_pyfunction!(check_controller, m)?)?;
     m.add_function(wrap_pyfunction!(profile_names, m)?)?;
     m.add_function(wrap_pyfunction!(profile_text, m)?)?;

@@ -492,8 +492,8 @@ impl Run {
         let events = monitor.finish(self.world.steps(), outcome == Outcome::Timeout, |e| {
             self.scored(e)
         });
-        let score = scoring::score(&events, &self.scoring);
         let failure = failure::classify(&events, agent);
+        let score = scoring::score(&events, &self.scoring, failure.as_ref());
         let coverage = self
             .coverage
             .take()

@@ -282,7 +282,7 @@ fn score_arithmetic_is_exact_for_a_given_log() {
             per_s: 4.0,
         },
     );
-    let s = scoring::score(&events, &spec);
+    let s = scoring::score(&events, &spec, None);
     // Proximity: 2·10 + (3.5 + 0.5)·1 = 24; collision: 50 + 4·1 = 54; the unscored one adds 0.
     assert_eq!(s.total, 78.0);
     assert_eq!(s.breakdown["unsafe_proximity"].points, 24.0);
@@ -293,6 +293,45 @@ fn score_arithmetic_is_exact_for_a_given_log() {
         !s.breakdown.contains_key("waypoint_reached"),
         "kinds that earn nothing are left out"
     );
+}
+
+#[test]
+fn failure_class_points_are_added_once_for_the_run_class_only() {
+    let events = vec![Event {
+        kind: EventKind::Timeout,
+        start_s: 30.0,
+        end_s: None,
+        robot: 0,
+        other: None,
+        scored: true,
+        details: Default::default(),
+    }];
+    let failure = crate::failure::classify(&events, 0).expect("a timeout is a failure");
+    let mut spec = ScoringSpec::default();
+    spec.failure_classes
+        .insert(failure.class.key().to_string(), 250.0);
+    spec.failure_classes
+        .insert("drove_into_wall".into(), 1000.0);
+    let s = scoring::score(&events, &spec, Some(&failure));
+    assert_eq!(s.total, 20.0 + 250.0);
+    assert_eq!(s.failure_class_points, 250.0);
+    assert_eq!(scoring::score(&events, &spec, None).total, 20.0);
+    // A spec without class points serialises as before (stored run specs keep their bytes).
+    let plain = serde_json::to_string(&ScoringSpec::default()).unwrap();
+    assert!(!plain.contains("failure_classes"), "{plain}");
+    let plain = serde_json::to_string(&scoring::score(&events, &ScoringSpec::default(), None));
+    assert!(!plain.unwrap().contains("failure_class_points"));
+    spec.failure_classes
+        .insert("struck_by_lightning".into(), 1.0);
+    let e = spec.validate("scoring").unwrap_err().to_string();
+    assert!(
+        e.contains("scoring.failure_classes.struck_by_lightning") && e.contains("drove_into_wall"),
+        "{e}"
+    );
+    spec.failure_classes.remove("struck_by_lightning");
+    spec.failure_classes.insert("drove_into_wall".into(), -1.0);
+    let e = spec.validate("scoring").unwrap_err().to_string();
+    assert!(e.contains("scoring.failure_classes.drove_into_wall"), "{e}");
 }
 
 #[test]

@@ -19,12 +19,19 @@
 //!
 //! So one brief collision outranks any near miss shorter than 90 s, and a run whose agent
 //! pushed against a robot for a minute ranks far above one that brushed past.
+//!
+//! A scoring spec may also give points per failure class (`failure_classes`, none by default):
+//! added once to a run whose failure class ([`crate::failure::classify`]) is that class, so an
+//! expert who judges being driven into unseen worse than being struck while stopped can say so
+//! beyond what event durations tell apart. `sitgen weights fit` writes such a spec, fitted to
+//! an expert's pairwise judgements (`docs/weights.md`).
 
 use std::collections::BTreeMap;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::failure::{Failure, FailureClass};
 use crate::monitor::{Event, EventKind};
 use crate::spec::{join, SpecError};
 
@@ -57,6 +64,9 @@ pub struct ScoringSpec {
     /// Whether events that concern only peers count too. Default false (the paper's choice).
     #[serde(default)]
     pub score_peers: bool,
+    /// Points added once to a run whose failure class is the key, in [0, 1e6]. Default none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub failure_classes: BTreeMap<String, f64>,
 }
 
 /// The default penalty for `kind` (see the module table).
@@ -88,6 +98,18 @@ impl ScoringSpec {
             SpecError::check_in(&join(&at, "start"), p.start, 0.0, 1e6)?;
             SpecError::check_in(&join(&at, "per_s"), p.per_s, 0.0, 1e6)?;
         }
+        let table = join(path, "failure_classes");
+        for (key, points) in &self.failure_classes {
+            let at = join(&table, key);
+            if FailureClass::from_key(key).is_none() {
+                let keys: Vec<&str> = FailureClass::ALL.iter().map(|c| c.key()).collect();
+                return Err(SpecError::new(
+                    at,
+                    format!("unknown failure class; expected one of {}", keys.join(", ")),
+                ));
+            }
+            SpecError::check_in(&at, *points, 0.0, 1e6)?;
+        }
         Ok(())
     }
 
@@ -114,10 +136,17 @@ pub struct ScoreLine {
 /// A run's score with its breakdown by event kind (kinds that earned points only).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 pub struct Score {
-    /// Total points.
+    /// Total points: the breakdown's and the failure class's.
     pub total: f64,
     /// Points by event kind name.
     pub breakdown: BTreeMap<String, ScoreLine>,
+    /// Points the run's failure class earned (`ScoringSpec::failure_classes`); absent if none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub failure_class_points: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// The points of the events `scored` picks as if the run stopped at `now_s`: one still lasting
@@ -138,8 +167,9 @@ pub fn points_until(
         .sum()
 }
 
-/// Score the events marked `scored`, in log order (so the sum is the same wherever it runs).
-pub fn score(events: &[Event], spec: &ScoringSpec) -> Score {
+/// Score the events marked `scored`, in log order (so the sum is the same wherever it runs),
+/// then add the points of the run's failure class, if the spec gives any.
+pub fn score(events: &[Event], spec: &ScoringSpec, failure: Option<&Failure>) -> Score {
     let mut out = Score::default();
     for e in events.iter().filter(|e| e.scored) {
         let seconds = e.duration_s();
@@ -158,6 +188,10 @@ pub fn score(events: &[Event], spec: &ScoringSpec) -> Score {
         line.count += 1;
         line.seconds += seconds;
         line.points += points;
+        out.total += points;
+    }
+    if let Some(&points) = failure.and_then(|f| spec.failure_classes.get(f.class.key())) {
+        out.failure_class_points = points;
         out.total += points;
     }
     out
