@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale profile stage
+.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +47,11 @@ bench-shrink: install-test
 # minutes on 2 cores).
 bench-search: install-test
 	$(BIN)/python benches/search.py
+
+# Learned weights: Kendall tau of weights fitted to 20, 50 and 200 judgements of a synthetic
+# expert, informative pairs against random ones (docs/weights.md).
+bench-weights: install-test
+	$(BIN)/python benches/weights.py
 
 # Coverage-guided search against random generation at budgets 100, 250 and 500 over 5 seeds:
 # cells covered and the seeded faults' kill rate (about 15 minutes on 2 cores).

@@ -91,7 +91,8 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
         out = run_cli("export", str(db), "--format", fmt, "-o", str(tmp_path / fmt))
         assert out.returncode == 0, out.stderr
         assert sorted(p.name for p in (tmp_path / fmt).iterdir()) == sorted(
-            f"{t}.{fmt}" for t in ("campaign", "situations", "runs", "events", "trajectories")
+            f"{t}.{fmt}"
+            for t in ("campaign", "situations", "runs", "events", "trajectories", "judgements")
         )
     import pyarrow.parquet as pq
 

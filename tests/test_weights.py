@@ -310,3 +310,21 @@ def test_a_judgement_without_the_page_token_is_refused(server: Any) -> None:
     assert refused.value.code == 400
     with Store(server.db) as store:
         assert store.judgements() == []
+
+
+def test_search_scores_its_runs_by_the_weights(tmp_path: Path) -> None:
+    from sitgen.weights import weights_toml
+
+    weights = Weights(dict(TRUE.penalties), {"route_not_completed": 5.0})
+    path = tmp_path / "weights.toml"
+    path.write_text(weights_toml(weights))
+    out = tmp_path / "search.db"
+    r = run_cli("search", "--budget", "12", "--seed", "1", "--db", str(out), "--weights", str(path))
+    assert r.returncode == 0, r.stderr
+    with Store(out) as store:
+        scoring = store.campaign()["spec"]["run"]["scoring"]  # type: ignore[index]
+        assert scoring["failure_classes"] == {"route_not_completed": 5.0}
+        runs = store.db.execute("SELECT score, breakdown, failure_class FROM runs").fetchall()
+    assert len(runs) == 12
+    for score, breakdown, failure_class in runs:
+        assert score == pytest.approx(weights.score(json.loads(breakdown), failure_class))

@@ -184,12 +184,12 @@ class JudgingServer:
         self._send(request, HTTPStatus.OK, types[suffix], path.read_bytes())
 
     def _render(self, run_id: int) -> bool:
-        from sitgen.report import _run_page
+        from sitgen.report import run_page
 
         with Store(self.db) as store:
             if not store.has_runs([run_id]):
                 return False
-            made = _run_page(store, run_id, 0, self.pages, self.db.name, blind=True)
+            made = run_page(store, run_id, 0, self.pages, self.db.name, blind=True)
         if made is None:
             return False
         page, script = made

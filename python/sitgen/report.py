@@ -697,7 +697,7 @@ def _timeline_svg(
     return "".join(parts)
 
 
-def _run_page(
+def run_page(
     store: Store,
     run_id: int,
     rank: int,
@@ -988,7 +988,7 @@ def write_report(
             wanted += search.archive.elites()
         pages: set[int] = set()
         for run_id in dict.fromkeys(wanted):
-            made = _run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
+            made = run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
             if made is None:
                 continue
             page, script = made
