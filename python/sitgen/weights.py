@@ -395,16 +395,14 @@ def folds(n: int, k: int = FOLDS) -> list[npt.NDArray[np.int64]]:
     return [order[i::k] for i in range(min(k, n))]
 
 
-def cross_validate(
-    diffs: Array, y: Array, scale: Array, stored_delta: Array
-) -> tuple[Agreement, Agreement]:
-    """Held-out agreement of the fitted weights and of the stored scores, over the folds."""
+def cross_validate(diffs: Array, y: Array, scale: Array) -> Agreement:
+    """Held-out agreement of weights fitted to the other folds, over the folds."""
     z = np.zeros(len(y))
     for held in folds(len(y)):
         train_idx = np.setdiff1d(np.arange(len(y)), held)
         coef = train(diffs[train_idx], y[train_idx], scale)
         z[held] = diffs[held] @ coef
-    return agreement(z, y, _log_loss(z, y)), agreement(stored_delta, y)
+    return agreement(z, y, _log_loss(z, y))
 
 
 @dataclass(frozen=True)
@@ -463,8 +461,8 @@ def fit(store: Store, judgements: Sequence[Judgement]) -> Fit:
     kind_only[n_kind:] = 0.0
     # Failure-class points where they help: kept only if they predict held-out judgements
     # better than the event kinds alone.
-    without, baseline = cross_validate(diffs, y, kind_only, stored_delta)
-    with_classes, _ = cross_validate(diffs, y, scale, stored_delta)
+    without = cross_validate(diffs, y, kind_only)
+    with_classes = cross_validate(diffs, y, scale)
     use_classes = bool(f.classes) and with_classes.log_loss < without.log_loss
     chosen = scale if use_classes else kind_only
     coef = train(diffs, y, chosen)
@@ -477,7 +475,7 @@ def fit(store: Store, judgements: Sequence[Judgement]) -> Fit:
         strict=int(np.sum(y != 0.5)),
         runs=len(ids),
         held_out=with_classes if use_classes else without,
-        stored=baseline,
+        stored=agreement(stored_delta, y),
         with_classes=use_classes,
         points_per_logit=points_per_logit,
         folds=len(folds(len(y))),
