@@ -109,114 +109,203 @@ impl LaserSpec {
     }
 }
 
-/// Distance along the ray from `(ox, oy)` in unit direction `(dx, dy)` to where it enters the
-/// first occupied cell, or `max` if it meets none within `max` or leaves the map first.
+/// The grid as a laser ray sees it: per cell, whether it is occupied and, if not, how far a ray
+/// may leap from anywhere in it. One table serves both questions, so each cell a ray visits
+/// costs one load.
 ///
-/// With `leaps` ([`leap_table`] of each cell centre's distance `d` to the nearest occupied
-/// cell centre) the walk leaps across open ground: from a cell whose clearance is `d`, no
-/// occupied square is nearer than `d − res·√2` to any point of the cell, so the ray jumps that
-/// far and the cell walk starts again there. The result is the same crossing the
-/// plain walk finds (the walk resumes before any occupied cell); open maps with 10 m rays cost
-/// a few leaps instead of a hundred cells.
-pub fn ray_to_grid(
-    map: &Map,
-    leaps: Option<&[f64]>,
-    (ox, oy): (f64, f64),
-    (dx, dy): (f64, f64),
-    max: f64,
-) -> f64 {
-    let g = &map.grid;
-    let res = map.resolution_m;
-    let (cols, rows) = (g.cols as i64, g.rows as i64);
-    // Leaping pays only when it skips a few cells.
-    let leap_min = 3.0 * res;
-    let delta_u = if dx != 0.0 {
-        res / dx.abs()
-    } else {
-        f64::INFINITY
-    };
-    let delta_w = if dy != 0.0 {
-        res / dy.abs()
-    } else {
-        f64::INFINITY
-    };
-    let inv_res = 1.0 / res;
-    // Where the current walk starts along the ray.
-    let mut t0 = 0.0;
-    'walk: loop {
-        let (px, py) = (ox + t0 * dx, oy + t0 * dy);
-        // Column index from x, and row-from-the-bottom index from y; off the map to the left
-        // or below reads `max`, and for the rest truncation is the floor (without a libm call
-        // on baseline x86-64).
+/// A cell's leap comes from its centre's clearance `d` (distance to the nearest occupied cell
+/// centre): no occupied square is nearer than `d − res·√2` to any point of the cell, so a ray
+/// may jump that far (less a micrometre for the f32 rounding of the clearance) and walk on from
+/// where it lands. The walk resumes before any occupied cell, so it finds the crossing the
+/// plain cell walk finds; open maps with 10 m rays cost a few leaps instead of a hundred cells.
+#[derive(Debug, Clone)]
+pub struct RayGrid {
+    /// Row-major like the grid: [`OCCUPIED`], the leap in metres, or 0 for a free cell whose
+    /// leap is shorter than `leap_min` (so never taken).
+    cells: Vec<f64>,
+    cols: i64,
+    rows: i64,
+    res: f64,
+    inv_res: f64,
+    /// Leaping pays only when it skips a few cells: three.
+    leap_min: f64,
+}
+
+/// A [`RayGrid`] cell that stops rays; every other cell holds a leap ≥ 0.
+const OCCUPIED: f64 = -1.0;
+
+/// Where every ray of a scan from one origin stands after the origin's cell: they all start
+/// in it, so its test and its leap are the same for each.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ScanStart {
+    /// Every ray reads this range (the origin is off the map or in an occupied cell, or its
+    /// leap reaches the maximum range).
+    Every(f64),
+    /// Every ray walks on from this distance along it.
+    From(f64),
+}
+
+impl RayGrid {
+    /// The map's grid for rays; with `clearance` (metres per cell centre, row-major) rays leap
+    /// across open ground, without it they walk every cell.
+    pub fn new(map: &Map, clearance: Option<&[f32]>) -> Self {
+        let res = map.resolution_m;
+        let leap_min = 3.0 * res;
+        let cell_reach = res * std::f64::consts::SQRT_2;
+        let cells = map
+            .grid
+            .cells
+            .iter()
+            .enumerate()
+            .map(|(k, &occupied)| {
+                if occupied {
+                    return OCCUPIED;
+                }
+                let leap = clearance.map_or(0.0, |c| f64::from(c[k]) - cell_reach - 1e-6);
+                if leap >= leap_min {
+                    leap
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Self {
+            cells,
+            cols: map.grid.cols as i64,
+            rows: map.grid.rows as i64,
+            res,
+            inv_res: 1.0 / res,
+            leap_min,
+        }
+    }
+
+    /// The row-major index of the cell holding `(px, py)`, or `None` off the map.
+    #[inline]
+    fn cell_at(&self, px: f64, py: f64) -> Option<(usize, i64, i64)> {
+        // Column index from x, and row-from-the-bottom index from y; for coordinates ≥ 0
+        // truncation is the floor (without a libm call on baseline x86-64).
         let (u, w) = (
-            cell_coordinate(px, res, inv_res),
-            cell_coordinate(py, res, inv_res),
+            cell_coordinate(px, self.res, self.inv_res),
+            cell_coordinate(py, self.res, self.inv_res),
         );
         if u < 0.0 || w < 0.0 {
-            return max;
+            return None;
         }
         let (cu, cw) = (u as i64, w as i64);
-        if cu >= cols || cw >= rows {
-            return max;
+        if cu >= self.cols || cw >= self.rows {
+            return None;
         }
-        // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols
-        // (row 0 is the top); the cells left to each edge bound the walk.
-        let mut index = ((rows - 1 - cw) * cols + cu) as usize;
-        if g.cells[index] {
-            return t0;
+        Some((((self.rows - 1 - cw) * self.cols + cu) as usize, cu, cw))
+    }
+
+    /// How every ray from `origin` with range `max` starts (see [`ScanStart`]).
+    pub fn scan_start(&self, origin: (f64, f64), max: f64) -> ScanStart {
+        let Some((index, _, _)) = self.cell_at(origin.0, origin.1) else {
+            return ScanStart::Every(max);
+        };
+        let leap = self.cells[index];
+        if leap == OCCUPIED {
+            ScanStart::Every(0.0)
+        } else if leap >= self.leap_min {
+            if leap >= max {
+                ScanStart::Every(max)
+            } else {
+                ScanStart::From(leap)
+            }
+        } else {
+            ScanStart::From(0.0)
         }
-        // Leap from the start cell before the boundary crossings are computed: a run of
-        // leaps across open ground divides by nothing.
-        if let Some(leaps) = leaps {
-            let leap = leaps[index];
-            if leap >= leap_min {
+    }
+
+    /// Distance along the ray from `origin` in unit direction `dir` to where it enters the
+    /// first occupied cell, or `max` if it meets none within `max` or leaves the map first.
+    pub fn ray(&self, origin: (f64, f64), dir: (f64, f64), max: f64) -> f64 {
+        match self.scan_start(origin, max) {
+            ScanStart::Every(t) => t,
+            ScanStart::From(t0) => self.ray_from(t0, origin, dir, max),
+        }
+    }
+
+    /// [`RayGrid::ray`] for a ray known to be free up to `t0` (its [`ScanStart::From`]): the
+    /// cells are walked (Amanatides & Woo's traversal, so none is skipped) and open ground
+    /// leapt.
+    pub fn ray_from(
+        &self,
+        mut t0: f64,
+        (ox, oy): (f64, f64),
+        (dx, dy): (f64, f64),
+        max: f64,
+    ) -> f64 {
+        let (cols, rows, res) = (self.cols, self.rows, self.res);
+        let delta_u = if dx != 0.0 {
+            res / dx.abs()
+        } else {
+            f64::INFINITY
+        };
+        let delta_w = if dy != 0.0 {
+            res / dy.abs()
+        } else {
+            f64::INFINITY
+        };
+        'walk: loop {
+            let (px, py) = (ox + t0 * dx, oy + t0 * dy);
+            let Some((mut index, cu, cw)) = self.cell_at(px, py) else {
+                return max;
+            };
+            // Leap from the start cell before the boundary crossings are computed: a run of
+            // leaps across open ground divides by nothing.
+            let leap = self.cells[index];
+            if leap == OCCUPIED {
+                return t0;
+            }
+            if leap >= self.leap_min {
                 t0 += leap;
                 if t0 >= max {
                     return max;
                 }
                 continue 'walk;
             }
-        }
-        let (step_u, mut left_u) = if dx > 0.0 {
-            (1isize, cols - 1 - cu)
-        } else {
-            (-1, cu)
-        };
-        let (step_w, mut left_w) = if dy > 0.0 {
-            (-(cols as isize), rows - 1 - cw)
-        } else {
-            (cols as isize, cw)
-        };
-        let mut t_u = t0 + first_crossing(px, cu, dx, res);
-        let mut t_w = t0 + first_crossing(py, cw, dy, res);
-        loop {
-            let t;
-            if t_u < t_w {
-                if left_u == 0 {
-                    return max;
-                }
-                left_u -= 1;
-                index = index.wrapping_add_signed(step_u);
-                t = t_u;
-                t_u += delta_u;
+            // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols
+            // (row 0 is the top); the cells left to each edge bound the walk.
+            let (step_u, mut left_u) = if dx > 0.0 {
+                (1isize, cols - 1 - cu)
             } else {
-                if left_w == 0 {
+                (-1, cu)
+            };
+            let (step_w, mut left_w) = if dy > 0.0 {
+                (-(cols as isize), rows - 1 - cw)
+            } else {
+                (cols as isize, cw)
+            };
+            let mut t_u = t0 + first_crossing(px, cu, dx, res);
+            let mut t_w = t0 + first_crossing(py, cw, dy, res);
+            loop {
+                let t;
+                if t_u < t_w {
+                    if left_u == 0 {
+                        return max;
+                    }
+                    left_u -= 1;
+                    index = index.wrapping_add_signed(step_u);
+                    t = t_u;
+                    t_u += delta_u;
+                } else {
+                    if left_w == 0 {
+                        return max;
+                    }
+                    left_w -= 1;
+                    index = index.wrapping_add_signed(step_w);
+                    t = t_w;
+                    t_w += delta_w;
+                }
+                if t >= max {
                     return max;
                 }
-                left_w -= 1;
-                index = index.wrapping_add_signed(step_w);
-                t = t_w;
-                t_w += delta_w;
-            }
-            if t >= max {
-                return max;
-            }
-            if g.cells[index] {
-                return t;
-            }
-            if let Some(leaps) = leaps {
-                let leap = leaps[index];
-                if leap >= leap_min {
+                let leap = self.cells[index];
+                if leap == OCCUPIED {
+                    return t;
+                }
+                if leap >= self.leap_min {
                     t0 = t + leap;
                     if t0 >= max {
                         return max;
@@ -245,18 +334,6 @@ fn cell_coordinate(p: f64, res: f64, inv_res: f64) -> f64 {
     } else {
         p / res
     }
-}
-
-/// How far a ray may leap from each cell (see [`ray_to_grid`]), from each cell centre's
-/// clearance (metres, row-major like the grid): the clearance less half a cell diagonal on
-/// either side, less a micrometre for the f32 rounding of the clearance. Computed once per
-/// world, since the conversion and the subtractions sat on the chain of every leap.
-pub fn leap_table(map: &Map, clearance: &[f32]) -> Vec<f64> {
-    let cell_reach = map.resolution_m * std::f64::consts::SQRT_2;
-    clearance
-        .iter()
-        .map(|&c| f64::from(c) - cell_reach - 1e-6)
-        .collect()
 }
 
 /// Distance along a ray (coordinate `o`, direction component `d`) from inside cell `cell` to
@@ -376,10 +453,10 @@ mod tests {
             grid: g,
             resolution_m: 0.1,
         };
-        let t = ray_to_grid(&map, None, (0.05, 0.45), (1.0, 0.0), 10.0);
+        let t = RayGrid::new(&map, None).ray((0.05, 0.45), (1.0, 0.0), 10.0);
         assert!((t - 0.65).abs() < 1e-12, "{t}");
         assert_eq!(
-            ray_to_grid(&map, None, (0.05, 0.15), (1.0, 0.0), 10.0),
+            RayGrid::new(&map, None).ray((0.05, 0.15), (1.0, 0.0), 10.0),
             10.0
         );
     }

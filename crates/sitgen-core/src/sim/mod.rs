@@ -35,7 +35,7 @@ use crate::situation::{Pose, Role, Situation};
 use crate::spec::{join, SpecError};
 
 use collision::Rect;
-use laser::{ray_to_grid, ray_to_rect, LaserSpec};
+use laser::{ray_to_rect, LaserSpec, RayGrid, ScanStart};
 
 /// Simulator settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -199,8 +199,8 @@ pub struct World {
     /// whose enclosing circle is nearer than this (less half a cell diagonal) to nothing cannot
     /// touch the grid, which settles most moves without testing cells.
     clearance_m: Vec<f32>,
-    /// How far a laser ray may leap from each cell ([`laser::leap_table`]).
-    leap_m: Vec<f64>,
+    /// The grid as laser rays see it, with how far they may leap from each cell.
+    rays: RayGrid,
     robots: Vec<RobotState>,
     /// Which robots carry the laser: the agent always, a peer when its controller senses.
     lasers: Vec<bool>,
@@ -306,7 +306,7 @@ impl World {
             .into_iter()
             .map(|d2| (d2.sqrt() * map.resolution_m) as f32)
             .collect::<Vec<_>>();
-        let leap_m = laser::leap_table(&map, &clearance_m);
+        let rays = RayGrid::new(&map, Some(&clearance_m));
         let robots = situation
             .robots
             .iter()
@@ -332,7 +332,7 @@ impl World {
             spec,
             map,
             clearance_m,
-            leap_m,
+            rays,
             robots,
             lasers,
             bearings,
@@ -579,7 +579,7 @@ impl World {
             _ => f64::INFINITY,
         };
         let edge = leave(origin.0, dir.0, w).min(leave(origin.1, dir.1, h));
-        ray_to_grid(&self.map, Some(&self.leap_m), origin, dir, max.min(edge))
+        self.rays.ray(origin, dir, max.min(edge))
     }
 
     /// Put the world where another simulator's step `steps` left it (a replay of its log):
@@ -766,14 +766,17 @@ impl World {
             return scan.ranges.clone();
         }
         let range = self.spec.laser.range_m;
-        let ranges: Vec<f64> = self
-            .bearing_dirs
-            .iter()
-            .map(|&(cb, sb)| {
-                let dir = (c * cb - s * sb, s * cb + c * sb);
-                ray_to_grid(&self.map, Some(&self.leap_m), origin, dir, range)
-            })
-            .collect();
+        let ranges: Vec<f64> = match self.rays.scan_start(origin, range) {
+            ScanStart::Every(t) => vec![t; self.bearing_dirs.len()],
+            ScanStart::From(t0) => self
+                .bearing_dirs
+                .iter()
+                .map(|&(cb, sb)| {
+                    let dir = (c * cb - s * sb, s * cb + c * sb);
+                    self.rays.ray_from(t0, origin, dir, range)
+                })
+                .collect(),
+        };
         cache[i] = Some(WallScan {
             pose: key,
             ranges: ranges.clone(),

@@ -296,8 +296,8 @@ proptest! {
             let origin = (choices.uniform(0.0, 15.0), choices.uniform(0.0, 15.0));
             let a = choices.uniform(-3.2, 3.2);
             let dir = (a.cos(), a.sin());
-            let plain = laser::ray_to_grid(w.map(), None, origin, dir, 10.0);
-            let leaping = laser::ray_to_grid(w.map(), Some(&w.leap_m), origin, dir, 10.0);
+            let plain = laser::RayGrid::new(w.map(), None).ray(origin, dir, 10.0);
+            let leaping = w.rays.ray(origin, dir, 10.0);
             prop_assert!((plain - leaping).abs() < 1e-9, "{:?} {}: {} vs {}", origin, a, plain, leaping);
         }
     }
