@@ -182,16 +182,9 @@ impl RayGrid {
     /// The row-major index of the cell holding `(px, py)`, or `None` off the map.
     #[inline]
     fn cell_at(&self, px: f64, py: f64) -> Option<(usize, i64, i64)> {
-        // Column index from x, and row-from-the-bottom index from y; for coordinates ≥ 0
-        // truncation is the floor (without a libm call on baseline x86-64).
-        let (u, w) = (
-            cell_coordinate(px, self.res, self.inv_res),
-            cell_coordinate(py, self.res, self.inv_res),
-        );
-        if u < 0.0 || w < 0.0 {
-            return None;
-        }
-        let (cu, cw) = (u as i64, w as i64);
+        // Column index from x, and row-from-the-bottom index from y.
+        let cu = cell_of(px, self.res, self.inv_res)?;
+        let cw = cell_of(py, self.res, self.inv_res)?;
         if cu >= self.cols || cw >= self.rows {
             return None;
         }
@@ -317,22 +310,26 @@ impl RayGrid {
     }
 }
 
-/// `p / res`, or a number that truncates to the same integer and has the same sign, given
-/// `inv_res = 1 / res`.
+/// The cell holding coordinate `p` along an axis of cells `res` wide from 0, `p / res`
+/// truncated (the floor, for `p ≥ 0`), given `inv_res = 1 / res`; `None` below zero.
 ///
-/// Cell coordinates sit on the chain of every leap (the cell a leap lands in gives the next
-/// leap). A product by the reciprocal is within 3·2⁻⁵³ of the quotient, relative, so away from
-/// a cell boundary it truncates to the same cell; the quotient is computed only near one (or
-/// below zero): the same cell, bit for bit, without a division in the chain.
+/// Cells sit on the chain of every leap (the cell a leap lands in gives the next leap). A
+/// product by the reciprocal is within 3·2⁻⁵³ of the quotient, relative, so away from a cell
+/// boundary it truncates to the same cell; the quotient is computed only near one (or below
+/// zero): the same cell, bit for bit, without a division in the chain, and the truncation
+/// that tests the product is the cell.
 #[inline]
-fn cell_coordinate(p: f64, res: f64, inv_res: f64) -> f64 {
+fn cell_of(p: f64, res: f64, inv_res: f64) -> Option<i64> {
     let fast = p * inv_res;
-    let whole = fast as i64 as f64;
+    let cell = fast as i64;
+    let whole = cell as f64;
     let margin = 4.0 * f64::EPSILON * fast;
     if fast - whole > margin && whole + 1.0 - fast > margin {
-        fast
+        // Only for fast > 0: below zero neither difference exceeds the (negative) margin.
+        Some(cell)
     } else {
-        p / res
+        let exact = p / res;
+        (exact >= 0.0 || exact.is_nan()).then_some(exact as i64)
     }
 }
 
@@ -389,9 +386,9 @@ mod tests {
     use super::*;
     use crate::grid::OccupancyGrid;
 
-    /// What the walk takes from a cell coordinate: its cell and whether it is below zero.
-    fn cell_of(u: f64) -> (i64, bool) {
-        (u as i64, u < 0.0)
+    /// The cell of the exact quotient `u`.
+    fn cell_of_quotient(u: f64) -> Option<i64> {
+        (u >= 0.0).then_some(u as i64)
     }
 
     proptest::proptest! {
@@ -400,15 +397,14 @@ mod tests {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(8192))]
 
         #[test]
-        fn the_cell_coordinate_gives_the_quotient_s_cell(
+        fn the_cell_is_the_quotient_s_cell(
             p in -10.0f64..1.0e7, res in 0.001f64..2.0
         ) {
-            let u = cell_coordinate(p, res, 1.0 / res);
-            proptest::prop_assert_eq!(cell_of(u), cell_of(p / res));
+            proptest::prop_assert_eq!(cell_of(p, res, 1.0 / res), cell_of_quotient(p / res));
         }
 
         #[test]
-        fn the_cell_coordinate_gives_the_quotient_s_cell_on_boundaries(
+        fn the_cell_is_the_quotient_s_cell_on_boundaries(
             k in 0i64..10_000_000, ulps in -4i64..=4, res in proptest::sample::select(
                 vec![0.01, 0.02, 0.05, 0.1, 0.2, 0.25, 0.3, 0.5, 0.7, 1.0]
             )
@@ -416,8 +412,7 @@ mod tests {
             // Points on and a few ulps either side of a cell boundary, where the product and
             // the quotient may truncate differently.
             let p = f64::from_bits(((k as f64) * res).to_bits().wrapping_add_signed(ulps));
-            let u = cell_coordinate(p, res, 1.0 / res);
-            proptest::prop_assert_eq!(cell_of(u), cell_of(p / res));
+            proptest::prop_assert_eq!(cell_of(p, res, 1.0 / res), cell_of_quotient(p / res));
         }
 
     }
