@@ -699,20 +699,42 @@ impl World {
             me.pose.x_m + c * laser.offset_x_m,
             me.pose.y_m + s * laser.offset_x_m,
         );
-        // Other robots with their enclosing circle relative to the sensor, to skip beams that
-        // pass wide of them before the exact slab test.
-        let others: Vec<(u32, Rect, (f64, f64), f64)> = self
-            .robots
+        let dirs: Vec<(f64, f64)> = self
+            .bearing_dirs
             .iter()
-            .enumerate()
-            .filter(|(j, _)| *j != i)
-            .map(|(_, r)| {
-                let rect = r.footprint();
-                let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
-                (r.id, rect, to, rect.half_length.hypot(rect.half_width))
-            })
+            .map(|&(cb, sb)| (c * cb - s * sb, s * cb + c * sb))
             .collect();
+        let mut ranges = self.wall_scan(i, origin, &dirs);
+        // The robot each beam hits first, if one is nearer than the terrain.
+        let mut hits: Vec<Option<u32>> = vec![None; dirs.len()];
+        for (j, other) in self.robots.iter().enumerate() {
+            if j == i {
+                continue;
+            }
+            let rect = other.footprint();
+            // The robot's enclosing circle relative to the sensor settles most beams before
+            // the exact slab test; only beams within its angular window are looked at.
+            let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
+            let radius = rect.half_length.hypot(rect.half_width);
+            for k in self.beams_toward(to, radius, me.pose.heading_rad) {
+                let (dir, t) = (dirs[k], &mut ranges[k]);
+                let along = to.0 * dir.0 + to.1 * dir.1;
+                let across = to.0 * dir.1 - to.1 * dir.0;
+                if across.abs() > radius || along + radius < 0.0 || along - radius > *t {
+                    continue;
+                }
+                if let Some(hit) = ray_to_rect(&rect, origin, dir, *t) {
+                    *t = hit;
+                    hits[k] = Some(other.id);
+                }
+            }
+        }
         let mut seen = Vec::new();
+        for id in hits.into_iter().flatten() {
+            if !seen.contains(&id) {
+                seen.push(id);
+            }
+        }
         // Noise is drawn from a stream keyed by (seed, step, robot), so observing twice gives
         // the same scan and the thread count never matters.
         let mut noise = (laser.noise_sd_m > 0.0).then(|| {
@@ -721,45 +743,92 @@ impl World {
                 stream::SENSOR_NOISE,
             )
         });
-        let walls = self.wall_scan(i, origin, (c, s));
-        let ranges = self
-            .bearing_dirs
-            .iter()
-            .zip(walls.iter())
-            .map(|(&(cb, sb), &wall)| {
-                let dir = (c * cb - s * sb, s * cb + c * sb);
-                let mut t = wall;
-                let mut hit_robot = None;
-                for (id, rect, to, radius) in &others {
-                    let along = to.0 * dir.0 + to.1 * dir.1;
-                    let across = to.0 * dir.1 - to.1 * dir.0;
-                    if across.abs() > *radius || along + radius < 0.0 || along - radius > t {
-                        continue;
-                    }
-                    if let Some(hit) = ray_to_rect(rect, origin, dir, t) {
-                        t = hit;
-                        hit_robot = Some(*id);
-                    }
-                }
-                if let Some(id) = hit_robot {
-                    if !seen.contains(&id) {
-                        seen.push(id);
-                    }
-                }
-                if let (Some(noise), true) = (noise.as_mut(), t < laser.range_m) {
-                    t = (t + laser.noise_sd_m * gaussian(noise)).clamp(0.0, laser.range_m);
-                }
-                laser.quantise(t)
-            })
-            .collect();
+        for t in &mut ranges {
+            if let (Some(noise), true) = (noise.as_mut(), *t < laser.range_m) {
+                *t = (*t + laser.noise_sd_m * gaussian(noise)).clamp(0.0, laser.range_m);
+            }
+            *t = laser.quantise(*t);
+        }
         (ranges, seen)
+    }
+
+    /// The beams (indices) that may pass within `radius` of the point `to` (relative to the
+    /// sensor) ahead of the sensor, for a sensor heading `heading`: a superset, widened by a
+    /// beam either side; every beam when the point is within √2·`radius`, where a beam may
+    /// pass that near while heading away.
+    fn beams_toward(&self, to: (f64, f64), radius: f64, heading: f64) -> BeamWindow {
+        let n = self.bearings.len();
+        let distance = to.0.hypot(to.1);
+        if n < 2 || distance <= std::f64::consts::SQRT_2 * radius * (1.0 + 1e-9) {
+            return BeamWindow::all(n);
+        }
+        // Beam k's bearing is first + k·step (Stage's geometry, see `LaserSpec::bearings`).
+        let first = self.bearings[0];
+        let step = (self.bearings[n - 1] - first) / (n - 1) as f64;
+        let half = (radius / distance).asin() + 1e-6;
+        let centre = wrap_angle(to.1.atan2(to.0) - heading);
+        let mut window = BeamWindow::default();
+        for turn in [-std::f64::consts::TAU, 0.0, std::f64::consts::TAU] {
+            let lo = ((centre + turn - half - first) / step).floor() - 1.0;
+            let hi = ((centre + turn + half - first) / step).ceil() + 1.0;
+            if hi < 0.0 || lo > (n - 1) as f64 {
+                continue;
+            }
+            window.push(lo.max(0.0) as usize, (hi as usize).min(n - 1));
+        }
+        window
+    }
+}
+
+/// Beam indices in up to three inclusive ranges (a window may straddle the wrap of a
+/// 360° laser), in increasing order.
+#[derive(Debug, Default)]
+struct BeamWindow {
+    ranges: [(usize, usize); 3],
+    len: usize,
+}
+
+impl BeamWindow {
+    fn all(n: usize) -> Self {
+        let mut window = Self::default();
+        if n > 0 {
+            window.push(0, n - 1);
+        }
+        window
+    }
+
+    fn push(&mut self, lo: usize, hi: usize) {
+        // Overlapping ranges (a window wider than the field of view's gap) are merged.
+        if self.len > 0 && lo <= self.ranges[self.len - 1].1 + 1 {
+            let last = &mut self.ranges[self.len - 1];
+            last.1 = last.1.max(hi);
+        } else {
+            self.ranges[self.len] = (lo, hi);
+            self.len += 1;
+        }
+    }
+}
+
+impl IntoIterator for BeamWindow {
+    type Item = usize;
+    type IntoIter = std::iter::FlatMap<
+        std::iter::Take<std::array::IntoIter<(usize, usize), 3>>,
+        std::ops::RangeInclusive<usize>,
+        fn((usize, usize)) -> std::ops::RangeInclusive<usize>,
+    >;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.ranges
+            .into_iter()
+            .take(self.len)
+            .flat_map(|(lo, hi)| lo..=hi)
     }
 }
 
 impl World {
-    /// Robot `i`'s beams' ranges to the terrain from `origin` with heading (cos, sin) `(c,
-    /// s)`: the last ones when it has not moved since (the same bits), else traced afresh.
-    fn wall_scan(&self, i: usize, origin: (f64, f64), (c, s): (f64, f64)) -> Vec<f64> {
+    /// Robot `i`'s beams' ranges to the terrain from `origin` in directions `dirs`: the last
+    /// ones when it has not moved since (the same bits), else traced afresh.
+    fn wall_scan(&self, i: usize, origin: (f64, f64), dirs: &[(f64, f64)]) -> Vec<f64> {
         let key = WallScan::key(&self.robots[i].pose);
         let mut cache = self.wall_scans.lock();
         if let Some(scan) = cache[i].as_ref().filter(|scan| scan.pose == key) {
@@ -768,13 +837,9 @@ impl World {
         let range = self.spec.laser.range_m;
         let ranges: Vec<f64> = match self.rays.scan_start(origin, range) {
             ScanStart::Every(t) => vec![t; self.bearing_dirs.len()],
-            ScanStart::From(t0) => self
-                .bearing_dirs
+            ScanStart::From(t0) => dirs
                 .iter()
-                .map(|&(cb, sb)| {
-                    let dir = (c * cb - s * sb, s * cb + c * sb);
-                    self.rays.ray_from(t0, origin, dir, range)
-                })
+                .map(|&dir| self.rays.ray_from(t0, origin, dir, range))
                 .collect(),
         };
         cache[i] = Some(WallScan {
@@ -792,5 +857,6 @@ fn gaussian(choices: &mut ChoiceSource) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
+#[cfg(test)]
 #[cfg(test)]
 mod tests;
