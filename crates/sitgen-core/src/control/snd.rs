@@ -358,6 +358,7 @@ fn c_round(x: f64) -> i64 {
 
 /// Sector `s` taken onto [0, n) (Player's `getIndex`). Arguments are almost always within one
 /// turn of the range, which spares the integer division.
+#[inline]
 fn wrap(s: i64, n: i64) -> i64 {
     if s >= n {
         if s < 2 * n {
@@ -748,7 +749,13 @@ pub fn smooth_deviation(full: &[f64], s_t: i64, ds: f64, r: f64) -> f64 {
     let (mut num, mut den) = (0.0, 0.0);
     for (s, &d) in full.iter().enumerate() {
         let m = if ds > 0.0 {
-            ((ds + r - d) / ds).clamp(0.0, 1.0)
+            // Most sectors are farther than R + Ds: m is 0 there, and the division is spared.
+            let near = ds + r - d;
+            if near > 0.0 {
+                (near / ds).clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
         } else if d <= r {
             1.0
         } else {

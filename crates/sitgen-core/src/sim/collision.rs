@@ -79,16 +79,28 @@ impl Rect {
             return 0.0;
         }
         let (a, b) = (self.corners(), other.corners());
-        let one_way = |p: &[(f64, f64); 4], q: &[(f64, f64); 4]| {
-            let mut best = f64::INFINITY;
+        let mut best = f64::INFINITY;
+        // The smallest of the 32 vertex-to-edge distances. A candidate's squared distance
+        // settles most of them without libm's hypot: one whose square exceeds the best's by
+        // more than the rounding of both cannot be nearer, so the least is the same bits.
+        let mut beaten = f64::INFINITY;
+        for (p, q) in [(&a, &b), (&b, &a)] {
             for &v in p {
                 for k in 0..4 {
-                    best = best.min(point_segment_distance(v, q[k], q[(k + 1) % 4]));
+                    let n = crate::geometry::segment::nearest_point(v, q[k], q[(k + 1) % 4]);
+                    let (dx, dy) = (v.0 - n.0, v.1 - n.1);
+                    if dx * dx + dy * dy >= beaten {
+                        continue;
+                    }
+                    let d = dx.hypot(dy);
+                    if d < best {
+                        best = d;
+                        beaten = best * best * (1.0 + 1e-14);
+                    }
                 }
             }
-            best
-        };
-        one_way(&a, &b).min(one_way(&b, &a))
+        }
+        best
     }
 
     /// Distance from point `p` to the rectangle, metres (0 inside).
@@ -112,11 +124,6 @@ impl Rect {
     }
 }
 
-/// Distance from point `p` to the segment `a`–`b`.
-fn point_segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
-    let q = crate::geometry::segment::nearest_point(p, a, b);
-    (p.0 - q.0).hypot(p.1 - q.1)
-}
 
 #[cfg(test)]
 mod tests {
