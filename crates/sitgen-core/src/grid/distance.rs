@@ -39,24 +39,32 @@ pub fn squared_distance_with_edge(grid: &super::OccupancyGrid) -> Vec<f64> {
 /// Lines are independent within a pass, so each pass runs them in parallel; every line's
 /// result is the same whichever thread computes it.
 pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f64> {
-    // Pass 1, along each column, on the transpose so that a column is a contiguous line.
+    // Pass 1, along each column, on the transpose so that a column is a contiguous line. The
+    // input holds only 0 and ∞, so the lower envelope is the nearest feature cell above or
+    // below: two sweeps give the same squares without the parabolas' divisions.
     let mut by_column = vec![0.0; rows * cols];
     by_column
         .par_chunks_mut(rows.max(1))
         .enumerate()
-        .for_each_init(
-            || Envelope::new(rows),
-            |envelope, (c, line)| {
-                for (r, out) in line.iter_mut().enumerate() {
-                    *out = if feature[r * cols + c] {
-                        0.0
-                    } else {
-                        f64::INFINITY
-                    };
+        .for_each(|(c, line)| {
+            let mut above = None;
+            for (r, out) in line.iter_mut().enumerate() {
+                if feature[r * cols + c] {
+                    above = Some(r);
                 }
-                envelope.transform(line);
-            },
-        );
+                *out = above.map_or(f64::INFINITY, |p| (r - p) as f64);
+            }
+            let mut below = None;
+            for (r, out) in line.iter_mut().enumerate().rev() {
+                if feature[r * cols + c] {
+                    below = Some(r);
+                }
+                if let Some(p) = below {
+                    *out = out.min((p - r) as f64);
+                }
+                *out *= *out;
+            }
+        });
     // Pass 2, along each row, on the column result.
     let mut d = vec![0.0; rows * cols];
     d.par_chunks_mut(cols.max(1)).enumerate().for_each_init(

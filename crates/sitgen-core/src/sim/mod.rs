@@ -205,6 +205,9 @@ pub struct World {
     /// Which robots carry the laser: the agent always, a peer when its controller senses.
     lasers: Vec<bool>,
     bearings: Vec<f64>,
+    /// Half the diagonal of each robot's footprint: the radius of the circle about its centre
+    /// that encloses it.
+    half_diagonals: Vec<f64>,
     /// (cos, sin) of each bearing: a beam's direction is the heading's rotation of these, which
     /// spares a sine and a cosine per beam per scan.
     bearing_dirs: Vec<(f64, f64)>,
@@ -321,6 +324,11 @@ impl World {
                 contacts: Vec::new(),
             })
             .collect();
+        let half_diagonals = situation
+            .robots
+            .iter()
+            .map(|r| (r.body.length_m / 2.0).hypot(r.body.width_m / 2.0))
+            .collect();
         let bearings = spec.laser.bearings();
         let bearing_dirs = bearings.iter().map(|b| (b.cos(), b.sin())).collect();
         let lasers = situation
@@ -336,6 +344,7 @@ impl World {
             robots,
             lasers,
             bearings,
+            half_diagonals,
             bearing_dirs,
             wall_scans: WallScans(Mutex::new(vec![None; situation.robots.len()])),
             time_s: 0.0,
@@ -392,6 +401,9 @@ impl World {
         let dt = self.spec.dt_s;
         let dv = self.spec.max_accel_m_s2.map(|a| a * dt);
         let dw = self.spec.max_turn_accel_deg_s2.map(|a| a.to_radians() * dt);
+        // Every robot's footprint, kept as robots move in turn: each move is tested against
+        // the others where they stand by then.
+        let mut footprints: Vec<Rect> = self.robots.iter().map(RobotState::footprint).collect();
         for i in 0..self.robots.len() {
             let r = &mut self.robots[i];
             r.velocity = (
@@ -402,9 +414,11 @@ impl World {
                 continue;
             }
             let next = integrate(&r.pose, r.velocity.0, r.velocity.1, dt);
-            let contacts = self.contacts_at(i, &next);
+            let rect = r.footprint_at(&next);
+            let contacts = self.contacts_of(i, &rect, &next, &footprints);
             let r = &mut self.robots[i];
             if contacts.is_empty() {
+                footprints[i] = rect;
                 r.pose = next;
                 r.stalled = false;
                 r.contacts.clear();
@@ -453,14 +467,26 @@ impl World {
 
     /// What robot `i` would overlap at `pose`: the grid (or the map's edge) and other robots.
     fn contacts_at(&self, i: usize, pose: &Pose) -> Vec<Contact> {
+        let footprints: Vec<Rect> = self.robots.iter().map(RobotState::footprint).collect();
+        self.contacts_of(i, &self.robots[i].footprint_at(pose), pose, &footprints)
+    }
+
+    /// [`World::contacts_at`] for robot `i`'s footprint `rect` at `pose`, given every robot's
+    /// footprint now.
+    fn contacts_of(&self, i: usize, rect: &Rect, pose: &Pose, footprints: &[Rect]) -> Vec<Contact> {
         let me = &self.robots[i];
-        let rect = me.footprint_at(pose);
         let mut contacts = Vec::new();
-        if self.overlaps_grid(&rect, pose, me.body.enclosing_radius()) {
+        if self.overlaps_grid(rect, pose, me.body.enclosing_radius()) {
             contacts.push(Contact::Wall);
         }
-        for (j, other) in self.robots.iter().enumerate() {
-            if j != i && rect.overlaps(&other.footprint()) {
+        for (j, (other, theirs)) in self.robots.iter().zip(footprints).enumerate() {
+            // Rectangles whose enclosing circles are clearly apart cannot overlap.
+            let apart = (self.half_diagonals[i] + self.half_diagonals[j]) * (1.0 + 1e-9);
+            let (dx, dy) = (
+                theirs.centre.0 - rect.centre.0,
+                theirs.centre.1 - rect.centre.1,
+            );
+            if j != i && dx * dx + dy * dy <= apart * apart && rect.overlaps(theirs) {
                 contacts.push(Contact::Robot(other.id));
             }
         }
@@ -715,7 +741,7 @@ impl World {
             // The robot's enclosing circle relative to the sensor settles most beams before
             // the exact slab test; only beams within its angular window are looked at.
             let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
-            let radius = rect.half_length.hypot(rect.half_width);
+            let radius = self.half_diagonals[j];
             for k in self.beams_toward(to, radius, me.pose.heading_rad) {
                 let (dir, t) = (dirs[k], &mut ranges[k]);
                 let along = to.0 * dir.0 + to.1 * dir.1;
@@ -857,6 +883,7 @@ fn gaussian(choices: &mut ChoiceSource) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
+#[cfg(test)]
 #[cfg(test)]
 #[cfg(test)]
 mod tests;
