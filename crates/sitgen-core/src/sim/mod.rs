@@ -868,10 +868,19 @@ impl World {
                 .map(|&dir| self.rays.ray_from(t0, origin, dir, range))
                 .collect(),
         };
-        cache[i] = Some(WallScan {
-            pose: key,
-            ranges: ranges.clone(),
-        });
+        // The cache's last buffer is reused: a moving robot misses every step.
+        match &mut cache[i] {
+            Some(scan) => {
+                scan.pose = key;
+                scan.ranges.clone_from(&ranges);
+            }
+            slot => {
+                *slot = Some(WallScan {
+                    pose: key,
+                    ranges: ranges.clone(),
+                })
+            }
+        }
         ranges
     }
 }
