@@ -74,16 +74,42 @@ fn floor(x: f64) -> f64 {
     }
 }
 
+/// One coordinate's part of the noise: the lattice cell holding it (wrapped to the 256-periodic
+/// lattice), its offset in that cell and the offset's fade. The cells of a grid row share y and
+/// z, so a caller may compute those parts once per row ([`perlin_at`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Axis {
+    cell: usize,
+    offset: f64,
+    fade: f64,
+}
+
+impl Axis {
+    /// The part of coordinate `v`.
+    #[inline]
+    pub fn new(v: f64) -> Self {
+        let f = floor(v);
+        let offset = v - f;
+        Self {
+            cell: (f as i64 & 255) as usize,
+            offset,
+            fade: fade(offset),
+        }
+    }
+}
+
 /// Improved noise at (x, y, z).
 pub fn perlin(x: f64, y: f64, z: f64) -> f64 {
-    // Unit cube that contains the point, wrapped to the 256-periodic lattice.
-    let (fx, fy, fz) = (floor(x), floor(y), floor(z));
-    let xi = (fx as i64 & 255) as usize;
-    let yi = (fy as i64 & 255) as usize;
-    let zi = (fz as i64 & 255) as usize;
-    // Relative position in the cube, and its fade curves.
-    let (x, y, z) = (x - fx, y - fy, z - fz);
-    let (u, v, w) = (fade(x), fade(y), fade(z));
+    perlin_at(Axis::new(x), Axis::new(y), Axis::new(z))
+}
+
+/// Improved noise at the point whose coordinates' parts are `x`, `y`, `z`.
+#[inline]
+pub fn perlin_at(x: Axis, y: Axis, z: Axis) -> f64 {
+    // Unit cube that contains the point, the relative position in it, and its fade curves.
+    let (xi, yi, zi) = (x.cell, y.cell, z.cell);
+    let (u, v, w) = (x.fade, y.fade, z.fade);
+    let (x, y, z) = (x.offset, y.offset, z.offset);
     // Hash the eight corners.
     let a = P[xi] + yi;
     let aa = P[a] + zi;

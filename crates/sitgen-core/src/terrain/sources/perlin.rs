@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::grid::ScalarField;
 use crate::rng::ChoiceSource;
 use crate::spec::{join, SpecError};
-use crate::terrain::noise::perlin;
+use crate::terrain::noise::{perlin_at, Axis};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// Parameters of the `perlin` source.
@@ -108,16 +108,17 @@ impl Source for Perlin {
             .enumerate()
             .for_each(|(r, row)| {
                 let y = (rows as f64 - r as f64 - 0.5) * res / self.scale_m;
+                // A row shares y and z: their parts of the noise are computed once per octave.
+                let z = Axis::new(offset[2]);
+                let ys: Vec<Axis> = octaves
+                    .iter()
+                    .map(|&(frequency, _)| Axis::new(y * frequency + offset[1]))
+                    .collect();
                 for (c, out) in row.iter_mut().enumerate() {
                     let x = (c as f64 + 0.5) * res / self.scale_m;
                     let mut sum = 0.0;
-                    for &(frequency, amplitude) in &octaves {
-                        sum += amplitude
-                            * perlin(
-                                x * frequency + offset[0],
-                                y * frequency + offset[1],
-                                offset[2],
-                            );
+                    for (&(frequency, amplitude), &y) in octaves.iter().zip(&ys) {
+                        sum += amplitude * perlin_at(Axis::new(x * frequency + offset[0]), y, z);
                     }
                     *out = if amplitude_sum > 0.0 {
                         (0.5 * (sum / amplitude_sum + 1.0)).clamp(0.0, 1.0)
