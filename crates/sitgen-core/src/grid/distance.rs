@@ -39,110 +39,120 @@ pub fn squared_distance_with_edge(grid: &super::OccupancyGrid) -> Vec<f64> {
 /// Lines are independent within a pass, so each pass runs them in parallel; every line's
 /// result is the same whichever thread computes it.
 pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f64> {
-    // Pass 1, along each column, on the transpose so that a column is a contiguous line. The
-    // input holds only 0 and ∞, so the lower envelope is the nearest feature cell above or
-    // below: two sweeps give the same squares without the parabolas' divisions.
-    let mut by_column = vec![0.0; rows * cols];
-    by_column
-        .par_chunks_mut(rows.max(1))
-        .enumerate()
-        .for_each(|(c, line)| {
-            let mut above = None;
-            for (r, out) in line.iter_mut().enumerate() {
-                if feature[r * cols + c] {
-                    above = Some(r);
-                }
-                *out = above.map_or(f64::INFINITY, |p| (r - p) as f64);
-            }
-            let mut below = None;
-            for (r, out) in line.iter_mut().enumerate().rev() {
-                if feature[r * cols + c] {
-                    below = Some(r);
-                }
-                if let Some(p) = below {
-                    *out = out.min((p - r) as f64);
-                }
-                *out *= *out;
-            }
-        });
-    // Pass 2, along each row, on the column result.
+    // Pass 1, along each column. The input holds only 0 and ∞, so the lower envelope is the
+    // nearest feature cell above or below: a sweep down and a sweep up the rows give the same
+    // squares without the parabolas, and both read and write whole rows (no transpose, no
+    // strided reads).
+    const NONE: u32 = u32::MAX;
+    let mut above = vec![NONE; rows * cols];
+    for r in 0..rows {
+        let (done, rest) = above.split_at_mut(r * cols);
+        let row = &mut rest[..cols];
+        let prev = (r > 0).then(|| &done[(r - 1) * cols..]);
+        for (c, out) in row.iter_mut().enumerate() {
+            *out = if feature[r * cols + c] {
+                0
+            } else {
+                prev.map_or(NONE, |p| p[c].saturating_add(1))
+            };
+        }
+    }
     let mut d = vec![0.0; rows * cols];
-    d.par_chunks_mut(cols.max(1)).enumerate().for_each_init(
+    let mut below = vec![NONE; cols];
+    for r in (0..rows).rev() {
+        for (c, below) in below.iter_mut().enumerate() {
+            let k = r * cols + c;
+            *below = if feature[k] {
+                0
+            } else {
+                below.saturating_add(1)
+            };
+            let nearest = above[k].min(*below);
+            d[k] = if nearest == NONE {
+                f64::INFINITY
+            } else {
+                f64::from(nearest) * f64::from(nearest)
+            };
+        }
+    }
+    // Pass 2, along each row, on the column result.
+    d.par_chunks_mut(cols.max(1)).for_each_init(
         || Envelope::new(cols),
-        |envelope, (r, line)| {
-            for (c, out) in line.iter_mut().enumerate() {
-                *out = by_column[c * rows + r];
-            }
-            envelope.transform(line);
-        },
+        |envelope, line| envelope.transform(line),
     );
     d
 }
 
 /// Work buffers of the 1-D transform, reused across lines.
+///
+/// Its input is the first pass's squared distances: whole numbers of cells² (or ∞). So the
+/// parabolas' intersections are fractions of whole numbers, kept as (numerator, denominator)
+/// and compared by cross-multiplication: exact, and without a division on the chain of each
+/// cell (a float division per intersection was most of the transform's time).
 struct Envelope {
     /// Positions of the parabolas in the lower envelope.
     v: Vec<usize>,
-    /// Boundaries between consecutive parabolas.
-    z: Vec<f64>,
-    /// Copy of the input line.
-    f: Vec<f64>,
+    /// Boundaries between consecutive parabolas: z[k] = num / den with den > 0, for k ≥ 1
+    /// (z[0] is −∞ and the boundary after the last parabola +∞).
+    z: Vec<(i64, i64)>,
+    /// The input line, whole cells² (entries where it is ∞ are skipped).
+    f: Vec<i64>,
 }
 
 impl Envelope {
     fn new(n: usize) -> Self {
         Self {
             v: vec![0; n],
-            z: vec![0.0; n + 1],
-            f: vec![0.0; n],
+            z: vec![(0, 1); n + 1],
+            f: vec![0; n],
         }
     }
 
-    /// In place: `line[q] = min_p (q − p)² + line[p]`.
+    /// In place: `line[q] = min_p (q − p)² + line[p]`, for a line of whole numbers and ∞.
     fn transform(&mut self, line: &mut [f64]) {
-        let n = line.len();
-        self.f[..n].copy_from_slice(line);
-        let f = &self.f;
-        // Skip the envelope while the line has no finite value: INF − INF would be NaN.
-        let Some(first) = f[..n].iter().position(|x| x.is_finite()) else {
+        // A line with no finite value stays ∞.
+        let Some(first) = line.iter().position(|x| x.is_finite()) else {
             return;
         };
-        let (v, z) = (&mut self.v, &mut self.z);
+        let (v, z, f) = (&mut self.v, &mut self.z, &mut self.f);
+        for (slot, &x) in f.iter_mut().zip(line.iter()) {
+            // Cells² on any grid that fits in memory are far below 2⁵³: exact either way.
+            *slot = if x.is_finite() { x as i64 } else { 0 };
+        }
         let mut k = 0usize;
         v[0] = first;
-        z[0] = f64::NEG_INFINITY;
-        z[1] = f64::INFINITY;
-        for q in first + 1..n {
-            if !f[q].is_finite() {
+        for (q, x) in line.iter().enumerate().skip(first + 1) {
+            if !x.is_finite() {
                 continue;
             }
+            // Pop the parabolas the new one hides: while the intersection s ≤ z[k] (k ≥ 1).
             let mut s = intersection(f, q, v[k]);
-            while s <= z[k] {
+            while k > 0 && s.0 * z[k].1 <= z[k].0 * s.1 {
                 k -= 1;
                 s = intersection(f, q, v[k]);
             }
             k += 1;
             v[k] = q;
             z[k] = s;
-            z[k + 1] = f64::INFINITY;
         }
+        let last = k;
         k = 0;
         for (q, out) in line.iter_mut().enumerate() {
-            let qf = q as f64;
-            while z[k + 1] < qf {
+            // Move on while z[k + 1] < q.
+            while k < last && z[k + 1].0 < q as i64 * z[k + 1].1 {
                 k += 1;
             }
-            let p = v[k] as f64;
-            *out = (qf - p) * (qf - p) + f[v[k]];
+            let d = q as i64 - v[k] as i64;
+            *out = (d * d + f[v[k]]) as f64;
         }
     }
 }
 
-/// Where the parabolas rooted at `q` and `p` intersect.
+/// Where the parabolas rooted at `q` and `p < q` intersect, as (numerator, denominator > 0).
 #[inline]
-fn intersection(f: &[f64], q: usize, p: usize) -> f64 {
-    let (qf, pf) = (q as f64, p as f64);
-    ((f[q] + qf * qf) - (f[p] + pf * pf)) / (2.0 * qf - 2.0 * pf)
+fn intersection(f: &[i64], q: usize, p: usize) -> (i64, i64) {
+    let (qi, pi) = (q as i64, p as i64);
+    ((f[q] + qi * qi) - (f[p] + pi * pi), 2 * (qi - pi))
 }
 
 #[cfg(test)]
