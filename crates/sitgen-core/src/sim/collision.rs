@@ -105,10 +105,17 @@ impl Rect {
 
     /// Distance from point `p` to the rectangle, metres (0 inside).
     pub fn point_distance(&self, p: (f64, f64)) -> f64 {
+        let (along, across) = self.point_offsets(p);
+        along.hypot(across)
+    }
+
+    /// How far point `p` lies beyond the rectangle's edges along and across it, metres (0
+    /// where it lies between them): [`Rect::point_distance`] is their `hypot`.
+    pub fn point_offsets(&self, p: (f64, f64)) -> (f64, f64) {
         let d = (p.0 - self.centre.0, p.1 - self.centre.1);
         let along = (d.0 * self.u.0 + d.1 * self.u.1).abs() - self.half_length;
         let across = (d.1 * self.u.0 - d.0 * self.u.1).abs() - self.half_width;
-        along.max(0.0).hypot(across.max(0.0))
+        (along.max(0.0), across.max(0.0))
     }
 
     /// Whether the interior of the rectangle intersects the axis-aligned square with lower-left
@@ -123,7 +130,6 @@ impl Rect {
             .all(|a| (d.0 * a.0 + d.1 * a.1).abs() < self.radius_on(a) + square_radius(a))
     }
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -574,8 +574,23 @@ impl World {
                 }
                 let centre = ((col as f64 + 0.5) * res, (wr as f64 + 0.5) * res);
                 // The cell's centre is at most half a diagonal from its nearest point: skip
-                // cells that cannot beat the best without the exact test.
-                if rect.point_distance(centre) - res * std::f64::consts::FRAC_1_SQRT_2 >= best {
+                // cells that cannot beat the best without the exact test. The squared distance
+                // decides all but the cells within rounding of the bound (libm's hypot is
+                // several times slower), which get the same test as ever.
+                let half_diagonal = res * std::f64::consts::FRAC_1_SQRT_2;
+                let (along, across) = rect.point_offsets(centre);
+                let (d2, reach2) = (
+                    along * along + across * across,
+                    (best + half_diagonal).powi(2),
+                );
+                let cannot_beat = if d2 > reach2 * (1.0 + 1e-12) {
+                    true
+                } else if d2 < reach2 * (1.0 - 1e-12) {
+                    false
+                } else {
+                    rect.point_distance(centre) - half_diagonal >= best
+                };
+                if cannot_beat {
                     continue;
                 }
                 let cell = Rect {
@@ -892,6 +907,7 @@ fn gaussian(choices: &mut ChoiceSource) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
+#[cfg(test)]
 #[cfg(test)]
 #[cfg(test)]
 #[cfg(test)]
