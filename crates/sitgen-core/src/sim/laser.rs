@@ -185,6 +185,26 @@ impl RayGrid {
         // Column index from x, and row-from-the-bottom index from y.
         let cu = cell_of(px, self.res, self.inv_res)?;
         let cw = cell_of(py, self.res, self.inv_res)?;
+        self.index_of(cu, cw)
+    }
+
+    /// [`RayGrid::cell_at`] for the point `t` along a ray (`origin`, `dir`) whose origin and
+    /// direction in cells are `scaled` ([`cell_along`]).
+    #[inline]
+    fn cell_along_ray(
+        &self,
+        t: f64,
+        origin: (f64, f64),
+        dir: (f64, f64),
+        scaled: &[(f64, f64); 2],
+    ) -> Option<(usize, i64, i64)> {
+        let cu = cell_along(t, origin.0, dir.0, scaled[0], self.res)?;
+        let cw = cell_along(t, origin.1, dir.1, scaled[1], self.res)?;
+        self.index_of(cu, cw)
+    }
+
+    #[inline]
+    fn index_of(&self, cu: i64, cw: i64) -> Option<(usize, i64, i64)> {
         if cu >= self.cols || cw >= self.rows {
             return None;
         }
@@ -240,11 +260,17 @@ impl RayGrid {
         } else {
             f64::INFINITY
         };
+        // The ray in cells, so that a leap's cell is one multiply-add from its distance.
+        let scaled = [
+            (ox * self.inv_res, dx * self.inv_res),
+            (oy * self.inv_res, dy * self.inv_res),
+        ];
         'walk: loop {
-            let (px, py) = (ox + t0 * dx, oy + t0 * dy);
-            let Some((mut index, cu, cw)) = self.cell_at(px, py) else {
+            let Some((mut index, cu, cw)) = self.cell_along_ray(t0, (ox, oy), (dx, dy), &scaled)
+            else {
                 return max;
             };
+            let (px, py) = (ox + t0 * dx, oy + t0 * dy);
             // Leap from the start cell before the boundary crossings are computed: a run of
             // leaps across open ground divides by nothing.
             let leap = self.cells[index];
@@ -333,6 +359,31 @@ fn cell_of(p: f64, res: f64, inv_res: f64) -> Option<i64> {
     }
 }
 
+/// The cell holding coordinate `o + t·d` (`o + t*d` rounded as written, then truncated as
+/// [`cell_of`] truncates it), given `(o, d)` in cells, `scaled` = (o / res, d / res) as
+/// products by the reciprocal: the same cell, bit for bit, with one multiplication less on the
+/// chain of leaps (a leap's cell is a multiply-add from its distance).
+///
+/// `o/res + t·d/res` from the scaled terms is within 4·ε·(|o/res| + |t·d/res|) of the exact
+/// quotient of the rounded coordinate (ε = `f64::EPSILON`), whatever the cancellation; away
+/// from a cell boundary by four times that, it truncates to the same cell. Nearer one (or below
+/// zero) the coordinate and its quotient are computed as `cell_of` computes them.
+#[inline]
+fn cell_along(t: f64, o: f64, d: f64, (os, ds): (f64, f64), res: f64) -> Option<i64> {
+    let along = t * ds;
+    let fast = os + along;
+    let cell = fast as i64;
+    let whole = cell as f64;
+    let margin = 16.0 * f64::EPSILON * (os.abs() + along.abs());
+    if fast - whole > margin && whole + 1.0 - fast > margin {
+        // Only for fast > 0: below zero neither difference exceeds the margin (≥ 0).
+        Some(cell)
+    } else {
+        let exact = (o + t * d) / res;
+        (exact >= 0.0 || exact.is_nan()).then_some(exact as i64)
+    }
+}
+
 /// Distance along a ray (coordinate `o`, direction component `d`) from inside cell `cell` to
 /// the first cell boundary it crosses on that axis; infinite when it never does.
 #[inline]
@@ -415,6 +466,39 @@ mod tests {
             proptest::prop_assert_eq!(cell_of(p, res, 1.0 / res), cell_of_quotient(p / res));
         }
 
+
+        #[test]
+        fn the_cell_along_a_ray_is_the_quotient_s_cell(
+            o in -5.0f64..1.0e4, angle in -3.2f64..3.2, t in 0.0f64..1000.0,
+            res in proptest::sample::select(vec![0.01, 0.05, 0.1, 0.25, 0.7, 1.0])
+        ) {
+            let d = angle.cos();
+            let inv = 1.0 / res;
+            let p = o + t * d;
+            proptest::prop_assert_eq!(
+                cell_along(t, o, d, (o * inv, d * inv), res),
+                cell_of_quotient(p / res)
+            );
+        }
+
+        #[test]
+        fn the_cell_along_a_ray_is_the_quotient_s_cell_on_boundaries(
+            o in 0.0f64..100.0, angle in -3.2f64..3.2, k in 0i64..2000, ulps in -6i64..=6,
+            res in proptest::sample::select(vec![0.01, 0.05, 0.1, 0.25, 0.7, 1.0])
+        ) {
+            // Distances that put the point on, or a few ulps either side of, a cell boundary,
+            // including rays heading back toward the origin's side (cancellation).
+            let d = angle.cos();
+            proptest::prop_assume!(d.abs() > 1e-3);
+            let t = ((k as f64 * res - o) / d).abs();
+            let t = f64::from_bits(t.to_bits().wrapping_add_signed(ulps));
+            let inv = 1.0 / res;
+            let p = o + t * d;
+            proptest::prop_assert_eq!(
+                cell_along(t, o, d, (o * inv, d * inv), res),
+                cell_of_quotient(p / res)
+            );
+        }
     }
 
     #[test]
