@@ -359,9 +359,9 @@ fn cell_of(p: f64, res: f64, inv_res: f64) -> Option<i64> {
     }
 }
 
-/// The cell holding coordinate `o + t·d` (`o + t*d` rounded as written, then truncated as
-/// [`cell_of`] truncates it), given `(o, d)` in cells, `scaled` = (o / res, d / res) as
-/// products by the reciprocal: the same cell, bit for bit, with one multiplication less on the
+/// The cell holding coordinate `o + t·d` (metres, `o + t*d` rounded as written, its quotient
+/// by `res` truncated as [`cell_of`] truncates it), given the same in cells, `(os, ds)` =
+/// (o·(1/res), d·(1/res)): the same cell, bit for bit, with one multiplication less on the
 /// chain of leaps (a leap's cell is a multiply-add from its distance).
 ///
 /// `o/res + t·d/res` from the scaled terms is within 4·ε·(|o/res| + |t·d/res|) of the exact
