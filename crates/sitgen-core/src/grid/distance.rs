@@ -2,8 +2,10 @@
 //!
 //! Felzenszwalb & Huttenlocher, "Distance Transforms of Sampled Functions", Theory of
 //! Computing 8 (2012): the squared distance to the nearest feature cell is computed by two
-//! passes of the 1-D lower-envelope-of-parabolas algorithm, columns then rows, in O(cells).
-//! Distances are between cell centres, in cells; multiply by the resolution for metres.
+//! passes, columns then rows, in O(cells). On a binary grid the column pass's lower envelope
+//! of parabolas is the nearest feature above or below, found by two sweeps; the row pass is
+//! the envelope, in whole numbers. Distances are between cell centres, in cells; multiply by
+//! the resolution for metres.
 //!
 //! Written here rather than taken from an image library because it runs on the grid type
 //! itself (no conversion of million-cell maps to image buffers and back), returns exact
@@ -36,8 +38,8 @@ pub fn squared_distance_with_edge(grid: &super::OccupancyGrid) -> Vec<f64> {
 /// Squared distance, in cells², from every cell to the nearest cell where `feature` is true;
 /// `f64::INFINITY` everywhere when there is no feature cell.
 ///
-/// Lines are independent within a pass, so each pass runs them in parallel; every line's
-/// result is the same whichever thread computes it.
+/// Rows are independent in the row pass, so it runs them in parallel; every row's result is
+/// the same whichever thread computes it.
 pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f64> {
     // Pass 1, along each column. The input holds only 0 and ∞, so the lower envelope is the
     // nearest feature cell above or below: a sweep down and a sweep up the rows give the same

@@ -135,6 +135,39 @@ impl Rect {
 mod tests {
     use super::*;
 
+    /// The least of the 32 vertex-to-edge distances, every one by `hypot`.
+    fn every_vertex_to_every_edge(a: &Rect, b: &Rect) -> f64 {
+        if a.overlaps(b) {
+            return 0.0;
+        }
+        let mut best = f64::INFINITY;
+        for (p, q) in [(a.corners(), b.corners()), (b.corners(), a.corners())] {
+            for v in p {
+                for k in 0..4 {
+                    let n = crate::geometry::segment::nearest_point(v, q[k], q[(k + 1) % 4]);
+                    best = best.min((v.0 - n.0).hypot(v.1 - n.1));
+                }
+            }
+        }
+        best
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(4096))]
+        #[test]
+        fn clearance_is_the_least_vertex_to_edge_hypot(
+            ha in -3.2f64..3.2, hb in -3.2f64..3.2, right_angle in proptest::bool::ANY,
+            x in -2.5f64..2.5, y in -2.5f64..2.5,
+            la in 0.05f64..0.6, wa in 0.05f64..0.4, lb in 0.05f64..0.6, wb in 0.05f64..0.4
+        ) {
+            // Parallel edges (equal distances from several pairs) as well as any angle.
+            let hb = if right_angle { ha + std::f64::consts::FRAC_PI_2 } else { hb };
+            let a = Rect { centre: (0.0, 0.0), u: (ha.cos(), ha.sin()), half_length: la, half_width: wa };
+            let b = Rect { centre: (x, y), u: (hb.cos(), hb.sin()), half_length: lb, half_width: wb };
+            proptest::prop_assert_eq!(a.distance(&b).to_bits(), every_vertex_to_every_edge(&a, &b).to_bits());
+        }
+    }
+
     fn rect(x: f64, y: f64, heading: f64) -> Rect {
         Rect {
             centre: (x, y),

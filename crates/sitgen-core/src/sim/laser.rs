@@ -183,9 +183,8 @@ impl RayGrid {
     #[inline]
     fn cell_at(&self, px: f64, py: f64) -> Option<(usize, i64, i64)> {
         // Column index from x, and row-from-the-bottom index from y.
-        let cu = cell_of(px, self.res, self.inv_res)?;
-        let cw = cell_of(py, self.res, self.inv_res)?;
-        self.index_of(cu, cw)
+        let scaled = [(px * self.inv_res, 0.0), (py * self.inv_res, 0.0)];
+        self.cell_along_ray(0.0, (px, py), (0.0, 0.0), &scaled)
     }
 
     /// [`RayGrid::cell_at`] for the point `t` along a ray (`origin`, `dir`) whose origin and
@@ -336,38 +335,17 @@ impl RayGrid {
     }
 }
 
-/// The cell holding coordinate `p` along an axis of cells `res` wide from 0, `p / res`
-/// truncated (the floor, for `p ≥ 0`), given `inv_res = 1 / res`; `None` below zero.
+/// The cell holding coordinate `o + t·d` along an axis of cells `res` wide from 0 (metres,
+/// `o + t*d` rounded as written): its quotient by `res` truncated (the floor, for a coordinate
+/// ≥ 0), `None` below zero, given the same in cells, `(os, ds)` = (o·(1/res), d·(1/res)). A
+/// point is `t = 0, d = 0`.
 ///
-/// Cells sit on the chain of every leap (the cell a leap lands in gives the next leap). A
-/// product by the reciprocal is within 3·2⁻⁵³ of the quotient, relative, so away from a cell
-/// boundary it truncates to the same cell; the quotient is computed only near one (or below
-/// zero): the same cell, bit for bit, without a division in the chain, and the truncation
-/// that tests the product is the cell.
-#[inline]
-fn cell_of(p: f64, res: f64, inv_res: f64) -> Option<i64> {
-    let fast = p * inv_res;
-    let cell = fast as i64;
-    let whole = cell as f64;
-    let margin = 4.0 * f64::EPSILON * fast;
-    if fast - whole > margin && whole + 1.0 - fast > margin {
-        // Only for fast > 0: below zero neither difference exceeds the (negative) margin.
-        Some(cell)
-    } else {
-        let exact = p / res;
-        (exact >= 0.0 || exact.is_nan()).then_some(exact as i64)
-    }
-}
-
-/// The cell holding coordinate `o + t·d` (metres, `o + t*d` rounded as written, its quotient
-/// by `res` truncated as [`cell_of`] truncates it), given the same in cells, `(os, ds)` =
-/// (o·(1/res), d·(1/res)): the same cell, bit for bit, with one multiplication less on the
-/// chain of leaps (a leap's cell is a multiply-add from its distance).
-///
-/// `o/res + t·d/res` from the scaled terms is within 4·ε·(|o/res| + |t·d/res|) of the exact
-/// quotient of the rounded coordinate (ε = `f64::EPSILON`), whatever the cancellation; away
-/// from a cell boundary by four times that, it truncates to the same cell. Nearer one (or below
-/// zero) the coordinate and its quotient are computed as `cell_of` computes them.
+/// Cells sit on the chain of every leap (the cell a leap lands in gives the next leap), so the
+/// cell comes from the scaled terms: one multiply-add from the leap's distance, no division.
+/// `os + t·ds` is within 4·ε·(|os| + |t·ds|) of the exact quotient of the rounded coordinate
+/// (ε = `f64::EPSILON`), whatever the cancellation; away from a cell boundary by four times
+/// that it truncates to the same cell, and that truncation is the cell. Nearer one (or below
+/// zero) the coordinate and its quotient are computed: the same cell, bit for bit.
 #[inline]
 fn cell_along(t: f64, o: f64, d: f64, (os, ds): (f64, f64), res: f64) -> Option<i64> {
     let along = t * ds;
@@ -436,22 +414,29 @@ pub fn ray_to_rect(
 mod tests {
     use super::*;
     use crate::grid::OccupancyGrid;
+    use proptest::test_runner::TestCaseError;
 
-    /// The cell of the exact quotient `u`.
-    fn cell_of_quotient(u: f64) -> Option<i64> {
-        (u >= 0.0).then_some(u as i64)
+    /// Whether [`cell_along`] gives the cell of the exact quotient of `o + t*d` by `res`.
+    fn is_the_quotient_s_cell(t: f64, o: f64, d: f64, res: f64) -> Result<(), TestCaseError> {
+        let inv = 1.0 / res;
+        let quotient = (o + t * d) / res;
+        proptest::prop_assert_eq!(
+            cell_along(t, o, d, (o * inv, d * inv), res),
+            (quotient >= 0.0).then_some(quotient as i64)
+        );
+        Ok(())
     }
 
     proptest::proptest! {
-        // Near a boundary the product and the quotient straddle it in a few cases in a hundred
-        // at some resolutions (0.7 m), none at others.
+        // Near a boundary the scaled terms and the quotient straddle it in a few cases in a
+        // hundred at some resolutions (0.7 m), none at others.
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(8192))]
 
         #[test]
         fn the_cell_is_the_quotient_s_cell(
             p in -10.0f64..1.0e7, res in 0.001f64..2.0
         ) {
-            proptest::prop_assert_eq!(cell_of(p, res, 1.0 / res), cell_of_quotient(p / res));
+            is_the_quotient_s_cell(0.0, p, 0.0, res)?;
         }
 
         #[test]
@@ -463,22 +448,15 @@ mod tests {
             // Points on and a few ulps either side of a cell boundary, where the product and
             // the quotient may truncate differently.
             let p = f64::from_bits(((k as f64) * res).to_bits().wrapping_add_signed(ulps));
-            proptest::prop_assert_eq!(cell_of(p, res, 1.0 / res), cell_of_quotient(p / res));
+            is_the_quotient_s_cell(0.0, p, 0.0, res)?;
         }
-
 
         #[test]
         fn the_cell_along_a_ray_is_the_quotient_s_cell(
             o in -5.0f64..1.0e4, angle in -3.2f64..3.2, t in 0.0f64..1000.0,
             res in proptest::sample::select(vec![0.01, 0.05, 0.1, 0.25, 0.7, 1.0])
         ) {
-            let d = angle.cos();
-            let inv = 1.0 / res;
-            let p = o + t * d;
-            proptest::prop_assert_eq!(
-                cell_along(t, o, d, (o * inv, d * inv), res),
-                cell_of_quotient(p / res)
-            );
+            is_the_quotient_s_cell(t, o, angle.cos(), res)?;
         }
 
         #[test]
@@ -492,12 +470,7 @@ mod tests {
             proptest::prop_assume!(d.abs() > 1e-3);
             let t = ((k as f64 * res - o) / d).abs();
             let t = f64::from_bits(t.to_bits().wrapping_add_signed(ulps));
-            let inv = 1.0 / res;
-            let p = o + t * d;
-            proptest::prop_assert_eq!(
-                cell_along(t, o, d, (o * inv, d * inv), res),
-                cell_of_quotient(p / res)
-            );
+            is_the_quotient_s_cell(t, o, d, res)?;
         }
     }
 

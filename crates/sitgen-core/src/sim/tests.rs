@@ -292,11 +292,12 @@ proptest! {
         let occupied: Vec<(usize, usize)> =
             (0..walls).map(|_| (choices.index(150), choices.index(150))).collect();
         let w = world(150, &occupied, vec![robot(0, 7.5, 7.5, 0.0)]);
+        let walking = laser::RayGrid::new(w.map(), None);
         for _ in 0..200 {
             let origin = (choices.uniform(0.0, 15.0), choices.uniform(0.0, 15.0));
             let a = choices.uniform(-3.2, 3.2);
             let dir = (a.cos(), a.sin());
-            let plain = laser::RayGrid::new(w.map(), None).ray(origin, dir, 10.0);
+            let plain = walking.ray(origin, dir, 10.0);
             let leaping = w.rays.ray(origin, dir, 10.0);
             prop_assert!((plain - leaping).abs() < 1e-9, "{:?} {}: {} vs {}", origin, a, plain, leaping);
         }
@@ -506,4 +507,95 @@ proptest! {
             }
         }
     }
+}
+
+/// Robot `i`'s scan as every beam against every other robot would give it: the per-beam
+/// enclosing-circle test and the slab test in robot order, without angular windows.
+fn scan_against_every_robot(w: &World, i: usize) -> (Vec<f64>, Vec<u32>) {
+    let laser = &w.spec.laser;
+    let me = &w.robots[i];
+    let (s, c) = me.pose.heading_rad.sin_cos();
+    let origin = (
+        me.pose.x_m + c * laser.offset_x_m,
+        me.pose.y_m + s * laser.offset_x_m,
+    );
+    let mut seen = Vec::new();
+    let ranges = w
+        .bearing_dirs
+        .iter()
+        .map(|&(cb, sb)| {
+            let dir = (c * cb - s * sb, s * cb + c * sb);
+            let mut t = w.rays.ray(origin, dir, laser.range_m);
+            let mut hit = None;
+            for (j, other) in w.robots.iter().enumerate().filter(|(j, _)| *j != i) {
+                let rect = other.footprint();
+                let to = (rect.centre.0 - origin.0, rect.centre.1 - origin.1);
+                let radius = w.half_diagonals[j];
+                let along = to.0 * dir.0 + to.1 * dir.1;
+                let across = to.0 * dir.1 - to.1 * dir.0;
+                if across.abs() > radius || along + radius < 0.0 || along - radius > t {
+                    continue;
+                }
+                if let Some(at) = laser::ray_to_rect(&rect, origin, dir, t) {
+                    t = at;
+                    hit = Some(other.id);
+                }
+            }
+            if let Some(id) = hit.filter(|id| !seen.contains(id)) {
+                seen.push(id);
+            }
+            laser.quantise(t)
+        })
+        .collect();
+    (ranges, seen)
+}
+
+#[test]
+fn beams_tested_only_within_each_robot_s_window_see_what_every_beam_would() {
+    // Crowds of six robots, some within √2 of each other's radius, under lasers whose beams
+    // wrap around (360°, 361 beams) or are few.
+    let spec = crate::spec::from_toml_str(
+        "[terrain]\npreset = \"open_field\"\n[mission]\npeers_min = 5\npeers_max = 5\n",
+    )
+    .unwrap();
+    let (s, _) = crate::situation::generate(&spec, 3).unwrap();
+    let mut choices = ChoiceSource::stream(9, "windows");
+    let mut sightings = 0;
+    for (fov_deg, beams, offset_x_m) in [
+        (180.0, 181, 0.0),
+        (360.0, 361, 0.0),
+        (360.0, 360, 0.1),
+        (240.0, 7, -0.2),
+        (90.0, 2, 0.0),
+        (180.0, 1, 0.0),
+    ] {
+        let sim = SimSpec {
+            laser: LaserSpec {
+                fov_deg,
+                beams,
+                offset_x_m,
+                ..LaserSpec::default()
+            },
+            ..SimSpec::default()
+        };
+        let mut w = World::new(&s, sim, 0).unwrap();
+        for _ in 0..300 {
+            let centre = (choices.uniform(2.0, 38.0), choices.uniform(2.0, 38.0));
+            let spread = choices.uniform(0.3, 4.0);
+            for r in &mut w.robots {
+                r.pose.x_m = centre.0 + choices.uniform(-spread, spread);
+                r.pose.y_m = centre.1 + choices.uniform(-spread, spread);
+                r.pose.heading_rad = choices.uniform(-3.2, 3.2);
+            }
+            w.forget_scans();
+            let (ranges, seen) = w.scan_seeing(0);
+            let (expected, expected_seen) = scan_against_every_robot(&w, 0);
+            assert_eq!(seen, expected_seen, "{fov_deg}° {beams} beams");
+            let bits = |v: &[f64]| v.iter().map(|r| r.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&ranges), bits(&expected), "{fov_deg}° {beams} beams");
+            sightings += seen.len();
+        }
+    }
+    // The scenes are crowded enough that windows matter.
+    assert!(sightings > 1000, "{sightings}");
 }
