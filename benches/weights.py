@@ -11,7 +11,6 @@ every run that scores anything is printed for 20, 50 and 200 judgements, with pa
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
 import sys
 import tempfile
@@ -19,10 +18,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import kendalltau
 
 from sitgen.store import Store
-from sitgen.weights import Judgement, Weights, fit, next_pair
+from sitgen.weights import Judgement, SimulatedJudge, Weights, fit, next_pair
 
 EXPERT = Weights(
     {
@@ -51,28 +49,19 @@ def main() -> None:
             check=True, capture_output=True,
         )  # fmt: skip
     with Store(db) as store:
-        rows = {
-            r[0]: (json.loads(r[1]), r[2], r[3])
-            for r in store.db.execute("SELECT id, breakdown, failure_class, score FROM runs")
-        }
-        truth = {i: EXPERT.score(b, c) for i, (b, c, _) in rows.items()}
-        spread = float(np.std(list(truth.values())))
-        scored = [i for i in truth if truth[i] > 0 or rows[i][2] > 0]
+        expert = SimulatedJudge(store, EXPERT, 0)
+        rows = expert.rows
+        scored = [i for i in rows if expert.truth[i] > 0 or rows[i][2] > 0]
 
         def judge(a: int, b: int, rng: np.random.Generator) -> Judgement:
-            d = truth[a] - truth[b]
-            if abs(d) < 0.02 * spread:
-                return Judgement(a, b, "equal")
-            return Judgement(
-                a, b, "a" if rng.random() < 1 / (1 + np.exp(-d / (0.1 * spread))) else "b"
-            )
+            expert.rng = rng
+            return expert(a, b)
 
         def tau(score: dict[int, float]) -> float:
-            return float(kendalltau([score[i] for i in scored], [truth[i] for i in scored])[0])
+            return expert.tau(scored, score.__getitem__)
 
         def fitted_tau(judged: list[Judgement]) -> float:
-            w = fit(store, judged).weights
-            return tau({i: w.score(rows[i][0], rows[i][1]) for i in scored})
+            return expert.tau(scored, expert.weighted(fit(store, judged).weights))
 
         print(f"{db}: {len(rows)} runs, {len(scored)} that score anything")
         print(f"stored scores: tau {tau({i: rows[i][2] for i in scored}):.3f}")

@@ -15,12 +15,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from scipy.stats import kendalltau
 
 from sitgen import _core
 from sitgen.recall import resimulate
 from sitgen.store import Store
-from sitgen.weights import Judgement, Weights, fit, load_weights, next_pair
+from sitgen.weights import Judgement, SimulatedJudge, Weights, fit, load_weights, next_pair
 
 from .conftest import run_cli
 
@@ -48,39 +47,14 @@ def db(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-class Judge:
-    """A synthetic expert: the more dangerous run under TRUE, with logistic noise of a tenth
-    of the scores' spread; "equal" when within 2 % of it."""
-
-    def __init__(self, db: Path, seed: int) -> None:
-        with Store(db) as store:
-            self.rows = {
-                r[0]: (json.loads(r[1]), r[2], r[3])
-                for r in store.db.execute("SELECT id, breakdown, failure_class, score FROM runs")
-            }
-        self.truth = {i: TRUE.score(b, c) for i, (b, c, _) in self.rows.items()}
-        self.spread = float(np.std(list(self.truth.values())))
-        self.rng = np.random.default_rng(seed)
-
-    def __call__(self, a: int, b: int) -> Judgement:
-        d = self.truth[a] - self.truth[b]
-        if abs(d) < 0.02 * self.spread:
-            return Judgement(a, b, "equal")
-        p = 1.0 / (1.0 + np.exp(-d / (0.1 * self.spread)))
-        return Judgement(a, b, "a" if self.rng.random() < p else "b")
-
-    def tau(self, ids: list[int], score: Any) -> float:
-        """Kendall's τ between ``score(id)`` and the judge's order, over ``ids`` that score
-        anything (runs where nothing happened tie everywhere)."""
-        ids = [i for i in ids if self.truth[i] > 0 or self.rows[i][2] > 0]
-        return float(kendalltau([score(i) for i in ids], [self.truth[i] for i in ids])[0])
-
-    def weighted(self, w: Weights) -> Any:
-        return lambda i: w.score(self.rows[i][0], self.rows[i][1])
+def judge_of(db: Path, seed: int) -> SimulatedJudge:
+    """The synthetic judge of TRUE over the campaign in ``db``."""
+    with Store(db) as store:
+        return SimulatedJudge(store, TRUE, seed)
 
 
 def test_200_judgements_recover_the_order_of_held_out_runs(db: Path, tmp_path: Path) -> None:
-    judge = Judge(db, seed=5)
+    judge = judge_of(db, seed=5)
     ids = sorted(judge.truth)
     order = np.random.default_rng(5).permutation(ids)
     train, held = [int(i) for i in order[:140]], [int(i) for i in order[140:]]
@@ -103,7 +77,7 @@ def test_200_judgements_recover_the_order_of_held_out_runs(db: Path, tmp_path: P
 
 
 def test_informative_pairs_give_useful_weights_in_50_judgements(db: Path) -> None:
-    judge = Judge(db, seed=2)
+    judge = judge_of(db, seed=2)
     judged: list[Judgement] = []
     with Store(db) as store:
         for _ in range(50):
@@ -149,7 +123,7 @@ def test_weights_rescore_as_the_core_scores_and_rank_uses_them(db: Path, tmp_pat
     r = run_cli("rank", str(db), "--weights", str(path), "--top", "200", "--format", "json")
     assert r.returncode == 0, r.stderr
     ranked = json.loads(r.stdout)
-    judge = Judge(db, seed=0)
+    judge = judge_of(db, seed=0)
     expected = sorted(
         judge.rows, key=lambda i: (-weights.score(judge.rows[i][0], judge.rows[i][1]), i)
     )

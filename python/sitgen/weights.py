@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import math
 import random
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -576,3 +576,39 @@ def next_pair(
         return None
     a, b = best
     return (b, a) if random.Random(len(judged)).random() < 0.5 else (a, b)
+
+
+class SimulatedJudge:
+    """A judge whose weights are known, to measure how fast judgements teach a fit (``make
+    bench-weights`` and the tests): of two runs it calls worse the one that scores more under
+    ``weights``, with logistic noise of a tenth of the scores' spread, and "equal" within 2 %
+    of that spread."""
+
+    def __init__(self, store: Store, weights: Weights, seed: int) -> None:
+        self.rows: dict[int, tuple[dict[str, Any], str | None, float]] = {
+            r[0]: (json.loads(r[1]), r[2], r[3])
+            for r in store.db.execute("SELECT id, breakdown, failure_class, score FROM runs")
+        }
+        """Run id -> (stored breakdown, failure class, stored score)."""
+        self.truth = {i: weights.score(b, c) for i, (b, c, _) in self.rows.items()}
+        self.spread = float(np.std(list(self.truth.values())))
+        self.rng = np.random.default_rng(seed)
+
+    def __call__(self, a: int, b: int) -> Judgement:
+        d = self.truth[a] - self.truth[b]
+        if abs(d) < 0.02 * self.spread:
+            return Judgement(a, b, "equal")
+        p = float(1.0 / (1.0 + np.exp(-d / (0.1 * self.spread))))
+        return Judgement(a, b, "a" if self.rng.random() < p else "b")
+
+    def tau(self, ids: Iterable[int], score: Callable[[int], float]) -> float:
+        """Kendall's τ-b between ``score(id)`` and the judge's order, over ``ids`` that score
+        anything (runs where nothing happened tie everywhere)."""
+        from scipy.stats import kendalltau
+
+        kept = [i for i in ids if self.truth[i] > 0 or self.rows[i][2] > 0]
+        return float(kendalltau([score(i) for i in kept], [self.truth[i] for i in kept])[0])
+
+    def weighted(self, w: Weights) -> Callable[[int], float]:
+        """A run's score under ``w``."""
+        return lambda i: w.score(self.rows[i][0], self.rows[i][1])
