@@ -11,11 +11,14 @@ import sqlite3
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from sitgen.failures import BROAD_RUNS, classes, distinct_failures, split
+from sitgen.failures import BROAD_RUNS, classes, distinct_failures, silhouette, split
 from sitgen.store import SCHEMA_VERSION, Store
 
 from .conftest import run_cli
@@ -196,6 +199,44 @@ def test_a_small_or_uniform_class_stays_whole() -> None:
     assert len(split(small)) == 1
     uniform = _runs("left", 10.0, 40, 0)
     assert len(split(uniform)) == 1
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    n=st.integers(3, 60),
+    dims=st.integers(1, 5),
+    k=st.integers(2, 4),
+    ties=st.booleans(),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_silhouette_is_scikit_learn_s(n: int, dims: int, k: int, ties: bool, seed: int) -> None:
+    """The split's silhouette, written out to spare a second's import, is scikit-learn's,
+    also where points coincide (0/0 counts as 0 in both)."""
+    from sklearn.metrics import silhouette_score
+
+    rng = np.random.default_rng(seed)
+    x = rng.integers(0, 3, (n, dims)).astype(float) if ties else rng.normal(size=(n, dims))
+    labels = np.unique(rng.integers(0, k, n), return_inverse=True)[1]
+    if not 2 <= labels.max() + 1 < n:
+        return
+    assert silhouette(x, labels) == pytest.approx(silhouette_score(x, labels), abs=1e-12)
+
+
+@settings(max_examples=100, deadline=None)
+@given(n=st.integers(5, 80), dims=st.integers(1, 6), seed=st.integers(0, 2**32 - 1))
+def test_the_ward_cut_is_scikit_learn_s_where_no_merges_tie(n: int, dims: int, seed: int) -> None:
+    """SciPy's Ward tree cut into k parts is the partition scikit-learn's
+    AgglomerativeClustering gives (points in general position: no two merges cost the same)."""
+    from scipy.cluster.hierarchy import cut_tree, linkage
+    from sklearn.cluster import AgglomerativeClustering
+
+    x = np.random.default_rng(seed).normal(size=(n, dims))
+    tree = linkage(x, method="ward")
+    for k in (2, 3, 4):
+        ours = cut_tree(tree, n_clusters=[k]).ravel()
+        theirs = AgglomerativeClustering(n_clusters=k, linkage="ward").fit_predict(x)
+        pairs = set(zip(ours.tolist(), theirs.tolist(), strict=True))
+        assert len(pairs) == k, "the same parts, numbered either way"
 
 
 def test_the_class_of_a_run_reaches_python_runs() -> None:

@@ -3,8 +3,8 @@ representative run (the highest-scoring), most dangerous first.
 
 A run's failure class is computed in the core from its scored events (``docs/failures.md``).
 Where one class is broad (at least ``BROAD_RUNS`` runs), it is split by behaviour features of
-its deciding events with agglomerative clustering (scikit-learn, Ward linkage: deterministic,
-no random start), and each part is named in words by what sets it apart: the side the other
+its deciding events with agglomerative clustering (SciPy's Ward linkage: deterministic, no
+random start), and each part is named in words by what sets it apart: the side the other
 party came from, the terrain, and whether its failures lasted long or short, were fast or slow
 — so a split always reads as a sentence, never as "cluster 3".
 """
@@ -161,24 +161,26 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
     and its runs fall into clearly separated groups that words can tell apart."""
     if len(runs) < BROAD_RUNS:
         return [([], runs)]
-    from sklearn.cluster import AgglomerativeClustering
-    from sklearn.metrics import silhouette_score
+    # SciPy's hierarchy, not scikit-learn's AgglomerativeClustering (the same Ward tree):
+    # importing scikit-learn took about a second at the end of every campaign.
+    from scipy.cluster.hierarchy import cut_tree, linkage
 
     x, names = _features(runs)
     step = max(1, math.ceil(len(runs) / MAX_CLUSTERED))
     sample = x[::step]
     if len(np.unique(sample, axis=0)) < 2:
         return [([], runs)]
+    tree = linkage(sample, method="ward")
     best: tuple[float, np.ndarray] | None = None
     for k in (2, 3, 4):
         if len(sample) <= k:
             break
-        labels = AgglomerativeClustering(n_clusters=k, linkage="ward").fit_predict(sample)
+        labels = cut_tree(tree, n_clusters=[k]).ravel()
         centres = np.array([sample[labels == c].mean(axis=0) for c in range(k)])
         gaps = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
         if gaps[np.triu_indices(k, 1)].min() < MIN_SEPARATION:
             continue
-        quality = float(silhouette_score(sample, labels))
+        quality = silhouette(sample, labels)
         if best is None or quality > best[0] + 1e-12:
             best = (quality, labels)
     if best is None or best[0] < MIN_SILHOUETTE:
@@ -200,6 +202,29 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
         ((list(w), sorted(p, key=lambda r: r["id"])) for w, p in parts.items()),
         key=lambda wp: wp[1][0]["id"],
     )
+
+
+def silhouette(x: np.ndarray, labels: np.ndarray) -> float:
+    """Mean silhouette of a clustering of ``x`` (rows are points, Euclidean distance; labels
+    0 … k−1, k ≥ 2): for each point, (b − a) / max(a, b), where a is its mean distance to the
+    rest of its cluster and b its least mean distance to another cluster; 0 for a point alone
+    in its cluster (Rousseeuw 1987). Written out (a dozen lines) because scikit-learn's
+    ``silhouette_score`` costs a second to import; a test checks the two agree."""
+    from scipy.spatial.distance import cdist
+
+    distance = cdist(x, x)
+    k = int(labels.max()) + 1
+    size = np.bincount(labels, minlength=k).astype(float)
+    sums = np.stack([distance[:, labels == c].sum(axis=1) for c in range(k)], axis=1)
+    points = np.arange(len(x))
+    own = size[labels]
+    a = sums[points, labels] / np.maximum(own - 1.0, 1.0)
+    mean_to = sums / size
+    mean_to[points, labels] = np.inf
+    b = mean_to.min(axis=1)
+    spread = np.maximum(a, b)
+    s = np.divide(b - a, spread, out=np.zeros(len(x)), where=(own > 1) & (spread > 0))
+    return float(s.mean())
 
 
 def describe(
