@@ -447,7 +447,8 @@ def run_user_job(job: Job) -> dict[str, Any]:
         "failure": rec.failure,
         "coverage": rec.coverage,
     }
-    packed = zlib.compress(rec.trajectory.astype("<f4").tobytes(), 6)
+    # Deflate's fastest level, as the core packs built-in runs (sitgen_core::run::pack_trajectory).
+    packed = zlib.compress(rec.trajectory.astype("<f4").tobytes(), 1)
     return {
         "ok": True,
         "situation": situation.to_json(),
