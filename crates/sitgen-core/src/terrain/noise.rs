@@ -46,20 +46,56 @@ fn lerp(t: f64, a: f64, b: f64) -> f64 {
     a + t * (b - a)
 }
 
-/// Dot product of (x, y, z) with the gradient the hash's low four bits select.
+/// Dot product of (x, y, z) with the gradient the hash's low four bits select: ±u ± v with u
+/// and v picked from x, y, z as the reference's branches pick them ([`GRADIENTS`]). The picks
+/// and signs come from a table and the signs are applied to the sign bit (exactly what
+/// negation does), so the eight gradients of a point cost no unpredictable branches.
 #[inline]
 fn grad(hash: usize, x: f64, y: f64, z: f64) -> f64 {
-    let h = hash & 15;
-    let u = if h < 8 { x } else { y };
-    let v = if h < 4 {
-        y
-    } else if h == 12 || h == 14 {
-        x
-    } else {
-        z
-    };
-    (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+    let g = GRADIENTS[hash & 15];
+    let p = [x, y, z];
+    let u = f64::from_bits(p[g.u as usize].to_bits() ^ g.u_sign);
+    let v = f64::from_bits(p[g.v as usize].to_bits() ^ g.v_sign);
+    u + v
 }
+
+/// One gradient of [`grad`]: which coordinates (0 = x, 1 = y, 2 = z) it adds, and the sign
+/// bit each is flipped by.
+#[derive(Clone, Copy)]
+struct Gradient {
+    u: u8,
+    v: u8,
+    u_sign: u64,
+    v_sign: u64,
+}
+
+/// The reference's `grad` as a table: u is x for h < 8, else y; v is y for h < 4, x for h =
+/// 12 or 14, else z; u is negated when bit 0 is set, v when bit 1 is.
+const GRADIENTS: [Gradient; 16] = {
+    let mut table = [Gradient {
+        u: 0,
+        v: 0,
+        u_sign: 0,
+        v_sign: 0,
+    }; 16];
+    let mut h = 0;
+    while h < 16 {
+        table[h] = Gradient {
+            u: if h < 8 { 0 } else { 1 },
+            v: if h < 4 {
+                1
+            } else if h == 12 || h == 14 {
+                0
+            } else {
+                2
+            },
+            u_sign: if h & 1 == 0 { 0 } else { 1 << 63 },
+            v_sign: if h & 2 == 0 { 0 } else { 1 << 63 },
+        };
+        h += 1;
+    }
+    table
+};
 
 /// `x.floor()` for finite |x| < 2⁶³, without the libm call that baseline x86-64 (no SSE4.1
 /// `roundsd`) makes for `floor`: the same bits, signed zero included, so results stay
@@ -106,40 +142,92 @@ pub fn perlin(x: f64, y: f64, z: f64) -> f64 {
 /// Improved noise at the point whose coordinates' parts are `x`, `y`, `z`.
 #[inline]
 pub fn perlin_at(x: Axis, y: Axis, z: Axis) -> f64 {
-    // Unit cube that contains the point, the relative position in it, and its fade curves.
-    let (xi, yi, zi) = (x.cell, y.cell, z.cell);
+    perlin_in(&Corners::hash(x, y, z), x, y, z)
+}
+
+/// The hashes of the eight corners of one unit cube of the lattice: every point in the cube
+/// shares them, so a row of cells that stays in one cube hashes once ([`perlin_in`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Corners {
+    /// The cube's cells on the x axis, and on y, z: which cube this is.
+    cube: (usize, usize, usize),
+    /// The gradient hashes of corners (x, y, z) … (x+1, y+1, z+1), in the reference's order.
+    aa: usize,
+    ba: usize,
+    ab: usize,
+    bb: usize,
+    aa1: usize,
+    ba1: usize,
+    ab1: usize,
+    bb1: usize,
+}
+
+impl Corners {
+    /// Hash the eight corners of the cube holding the point whose parts are `x`, `y`, `z`.
+    #[inline]
+    pub fn hash(x: Axis, y: Axis, z: Axis) -> Self {
+        let (xi, yi, zi) = (x.cell, y.cell, z.cell);
+        let a = P[xi] + yi;
+        let aa = P[a] + zi;
+        let ab = P[a + 1] + zi;
+        let b = P[xi + 1] + yi;
+        let ba = P[b] + zi;
+        let bb = P[b + 1] + zi;
+        Self {
+            cube: (xi, yi, zi),
+            aa: P[aa],
+            ba: P[ba],
+            ab: P[ab],
+            bb: P[bb],
+            aa1: P[aa + 1],
+            ba1: P[ba + 1],
+            ab1: P[ab + 1],
+            bb1: P[bb + 1],
+        }
+    }
+
+    /// These corners if the point whose parts are `x`, `y`, `z` is in their cube, else its
+    /// cube's.
+    #[inline]
+    pub fn for_point(self, x: Axis, y: Axis, z: Axis) -> Self {
+        if self.cube == (x.cell, y.cell, z.cell) {
+            self
+        } else {
+            Self::hash(x, y, z)
+        }
+    }
+}
+
+/// Improved noise at the point whose coordinates' parts are `x`, `y`, `z`, in the cube whose
+/// corners are `corners`: the eight gradients' contributions blended by the fades.
+#[inline]
+pub fn perlin_in(corners: &Corners, x: Axis, y: Axis, z: Axis) -> f64 {
+    debug_assert_eq!(corners.cube, (x.cell, y.cell, z.cell));
     let (u, v, w) = (x.fade, y.fade, z.fade);
     let (x, y, z) = (x.offset, y.offset, z.offset);
-    // Hash the eight corners.
-    let a = P[xi] + yi;
-    let aa = P[a] + zi;
-    let ab = P[a + 1] + zi;
-    let b = P[xi + 1] + yi;
-    let ba = P[b] + zi;
-    let bb = P[b + 1] + zi;
-    // Blend the eight corner contributions.
+    let k = corners;
     lerp(
         w,
         lerp(
             v,
-            lerp(u, grad(P[aa], x, y, z), grad(P[ba], x - 1.0, y, z)),
+            lerp(u, grad(k.aa, x, y, z), grad(k.ba, x - 1.0, y, z)),
             lerp(
                 u,
-                grad(P[ab], x, y - 1.0, z),
-                grad(P[bb], x - 1.0, y - 1.0, z),
+                grad(k.ab, x, y - 1.0, z),
+                grad(k.bb, x - 1.0, y - 1.0, z),
             ),
         ),
         lerp(
             v,
             lerp(
                 u,
-                grad(P[aa + 1], x, y, z - 1.0),
-                grad(P[ba + 1], x - 1.0, y, z - 1.0),
+                grad(k.aa1, x, y, z - 1.0),
+                grad(k.ba1, x - 1.0, y, z - 1.0),
             ),
             lerp(
                 u,
-                grad(P[ab + 1], x, y - 1.0, z - 1.0),
-                grad(P[bb + 1], x - 1.0, y - 1.0, z - 1.0),
+                grad(k.ab1, x, y - 1.0, z - 1.0),
+                grad(k.bb1, x - 1.0, y - 1.0, z - 1.0),
             ),
         ),
     )
@@ -161,6 +249,38 @@ mod tests {
         assert_eq!(fade(0.75), 0.896484375);
         for i in -3..3 {
             assert_eq!(perlin(f64::from(i), 7.0, f64::from(-i)), 0.0);
+        }
+    }
+
+    /// The reference's `grad`, branch by branch.
+    fn reference_grad(hash: usize, x: f64, y: f64, z: f64) -> f64 {
+        let h = hash & 15;
+        let u = if h < 8 { x } else { y };
+        let v = if h < 4 {
+            y
+        } else if h == 12 || h == 14 {
+            x
+        } else {
+            z
+        };
+        (if h & 1 == 0 { u } else { -u }) + (if h & 2 == 0 { v } else { -v })
+    }
+
+    #[test]
+    fn the_gradient_table_is_the_reference_s_branches_bit_for_bit() {
+        let values = [0.0, -0.0, 0.25, -0.75, 1.0, 0.1, -0.3, 0.999];
+        for hash in 0..512 {
+            for &x in &values {
+                for &y in &values {
+                    for &z in &values {
+                        assert_eq!(
+                            grad(hash, x, y, z).to_bits(),
+                            reference_grad(hash, x, y, z).to_bits(),
+                            "hash {hash}, ({x}, {y}, {z})"
+                        );
+                    }
+                }
+            }
         }
     }
 

@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::grid::ScalarField;
 use crate::rng::ChoiceSource;
 use crate::spec::{join, SpecError};
-use crate::terrain::noise::{perlin_at, Axis};
+use crate::terrain::noise::{perlin_in, Axis, Corners};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// Parameters of the `perlin` source.
@@ -102,24 +102,40 @@ impl Source for Perlin {
             cols,
             resolution_m: res,
         } = extent;
+        // A column's x, and so its part of each octave's noise, is the same in every row.
+        let x_parts: Vec<Vec<Axis>> = octaves
+            .iter()
+            .map(|&(frequency, _)| {
+                (0..cols)
+                    .map(|c| {
+                        let x = (c as f64 + 0.5) * res / self.scale_m;
+                        Axis::new(x * frequency + offset[0])
+                    })
+                    .collect()
+            })
+            .collect();
+        let z = Axis::new(offset[2]);
         let mut values = vec![0.0; rows * cols];
         values
             .par_chunks_mut(cols)
             .enumerate()
             .for_each(|(r, row)| {
                 let y = (rows as f64 - r as f64 - 0.5) * res / self.scale_m;
-                // A row shares y and z: their parts of the noise are computed once per octave.
-                let z = Axis::new(offset[2]);
-                let ys: Vec<Axis> = octaves
-                    .iter()
-                    .map(|&(frequency, _)| Axis::new(y * frequency + offset[1]))
-                    .collect();
-                for (c, out) in row.iter_mut().enumerate() {
-                    let x = (c as f64 + 0.5) * res / self.scale_m;
-                    let mut sum = 0.0;
-                    for (&(frequency, amplitude), &y) in octaves.iter().zip(&ys) {
-                        sum += amplitude * perlin_at(Axis::new(x * frequency + offset[0]), y, z);
+                // Octave by octave along the row, each cell's sum in the same order as cell by
+                // cell: the row shares y and z, and neighbouring cells share a lattice cube,
+                // whose corners are hashed once.
+                row.fill(0.0);
+                for (&(frequency, amplitude), xs) in octaves.iter().zip(&x_parts) {
+                    let y = Axis::new(y * frequency + offset[1]);
+                    let Some(&first) = xs.first() else { break };
+                    let mut corners = Corners::hash(first, y, z);
+                    for (sum, &x) in row.iter_mut().zip(xs) {
+                        corners = corners.for_point(x, y, z);
+                        *sum += amplitude * perlin_in(&corners, x, y, z);
                     }
+                }
+                for out in row.iter_mut() {
+                    let sum = *out;
                     *out = if amplitude_sum > 0.0 {
                         (0.5 * (sum / amplitude_sum + 1.0)).clamp(0.0, 1.0)
                     } else {
