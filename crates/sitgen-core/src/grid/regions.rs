@@ -77,12 +77,15 @@ pub fn label_regions(
                 continue;
             }
             let mut own = Regions::NONE;
+            // Neighbours inside one region mostly carry the same provisional label already:
+            // those join nothing new, and skip the union's two finds.
             let join = |j: usize, own: &mut u32, sets: &mut Sets| {
                 if member[j] {
-                    *own = if *own == Regions::NONE {
-                        label[j]
+                    let theirs = label[j];
+                    *own = if *own == Regions::NONE || *own == theirs {
+                        theirs
                     } else {
-                        sets.union(*own, label[j])
+                        sets.union(*own, theirs)
                     };
                 }
             };
