@@ -908,7 +908,4 @@ fn gaussian(choices: &mut ChoiceSource) -> f64 {
 }
 
 #[cfg(test)]
-#[cfg(test)]
-#[cfg(test)]
-#[cfg(test)]
 mod tests;
