@@ -260,23 +260,15 @@ fn place_robots(
         let here = plan.centre(plan.cell_of(cell));
         starts.push(here);
         let placeable = std::mem::take(&mut plan.placeable);
-        // `hypot(dx, dy) > apart` for every candidate cell; the squared distance settles all
-        // but the cells within rounding of the circle (libm's hypot is several times slower,
-        // and there are 10^5 candidates per robot), which get the same test as ever.
-        let (near, far) = (apart * apart * (1.0 - 1e-12), apart * apart * (1.0 + 1e-12));
+        // `hypot(dx, dy) > apart` for each of the 10^5 candidate cells, by squares.
         plan.placeable = placeable
             .into_iter()
             .filter(|&i| {
                 let (x, y) = plan.centre(plan.cell_of(i));
                 let (dx, dy) = (x - here.0, y - here.1);
-                let d2 = dx * dx + dy * dy;
-                if d2 > far {
-                    true
-                } else if d2 < near {
-                    false
-                } else {
+                crate::geometry::beyond_by_squares(dx * dx + dy * dy, apart * apart, || {
                     dx.hypot(dy) > apart
-                }
+                })
             })
             .collect();
     }

@@ -574,22 +574,14 @@ impl World {
                 }
                 let centre = ((col as f64 + 0.5) * res, (wr as f64 + 0.5) * res);
                 // The cell's centre is at most half a diagonal from its nearest point: skip
-                // cells that cannot beat the best without the exact test. The squared distance
-                // decides all but the cells within rounding of the bound (libm's hypot is
-                // several times slower), which get the same test as ever.
+                // cells that cannot beat the best without the exact test.
                 let half_diagonal = res * std::f64::consts::FRAC_1_SQRT_2;
                 let (along, across) = rect.point_offsets(centre);
-                let (d2, reach2) = (
+                let cannot_beat = crate::geometry::beyond_by_squares(
                     along * along + across * across,
                     (best + half_diagonal).powi(2),
+                    || rect.point_distance(centre) - half_diagonal >= best,
                 );
-                let cannot_beat = if d2 > reach2 * (1.0 + 1e-12) {
-                    true
-                } else if d2 < reach2 * (1.0 - 1e-12) {
-                    false
-                } else {
-                    rect.point_distance(centre) - half_diagonal >= best
-                };
                 if cannot_beat {
                     continue;
                 }
@@ -731,20 +723,26 @@ impl World {
         self.wall_scans.lock().fill(None);
     }
 
-    /// One laser scan, and the ids of the robots that some beam hits first.
-    pub fn scan_seeing(&self, i: usize) -> (Vec<f64>, Vec<u32>) {
-        let laser = &self.spec.laser;
-        let me = &self.robots[i];
-        let (s, c) = me.pose.heading_rad.sin_cos();
-        let origin = (
-            me.pose.x_m + c * laser.offset_x_m,
-            me.pose.y_m + s * laser.offset_x_m,
-        );
-        let dirs: Vec<(f64, f64)> = self
+    /// Robot `i`'s laser where it stands: the sensor's position and each beam's unit
+    /// direction (the heading's rotation of [`World::bearing_dirs`]).
+    fn beams_of(&self, i: usize) -> ((f64, f64), Vec<(f64, f64)>) {
+        let offset = self.spec.laser.offset_x_m;
+        let pose = &self.robots[i].pose;
+        let (s, c) = pose.heading_rad.sin_cos();
+        let origin = (pose.x_m + c * offset, pose.y_m + s * offset);
+        let dirs = self
             .bearing_dirs
             .iter()
             .map(|&(cb, sb)| (c * cb - s * sb, s * cb + c * sb))
             .collect();
+        (origin, dirs)
+    }
+
+    /// One laser scan, and the ids of the robots that some beam hits first.
+    pub fn scan_seeing(&self, i: usize) -> (Vec<f64>, Vec<u32>) {
+        let laser = &self.spec.laser;
+        let me = &self.robots[i];
+        let (origin, dirs) = self.beams_of(i);
         let mut ranges = self.wall_scan(i, origin, &dirs);
         // The robot each beam hits first, if one is nearer than the terrain.
         let mut hits: Vec<Option<u32>> = vec![None; dirs.len()];

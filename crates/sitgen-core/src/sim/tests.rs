@@ -513,18 +513,11 @@ proptest! {
 /// enclosing-circle test and the slab test in robot order, without angular windows.
 fn scan_against_every_robot(w: &World, i: usize) -> (Vec<f64>, Vec<u32>) {
     let laser = &w.spec.laser;
-    let me = &w.robots[i];
-    let (s, c) = me.pose.heading_rad.sin_cos();
-    let origin = (
-        me.pose.x_m + c * laser.offset_x_m,
-        me.pose.y_m + s * laser.offset_x_m,
-    );
+    let (origin, dirs) = w.beams_of(i);
     let mut seen = Vec::new();
-    let ranges = w
-        .bearing_dirs
-        .iter()
-        .map(|&(cb, sb)| {
-            let dir = (c * cb - s * sb, s * cb + c * sb);
+    let ranges = dirs
+        .into_iter()
+        .map(|dir| {
             let mut t = w.rays.ray(origin, dir, laser.range_m);
             let mut hit = None;
             for (j, other) in w.robots.iter().enumerate().filter(|(j, _)| *j != i) {
