@@ -602,9 +602,10 @@ pub fn par_map<T: Sync, R: Send>(
 /// tenth of a millimetre is far below anything a figure or a replay shows, and 600 s of six
 /// robots packs into a few hundred kilobytes.
 ///
-/// Deflate's fastest level: raw f32 coordinates hardly compress past half (level 6 made blobs
-/// 2–16 % smaller than level 1 on three caves runs, at five to eight times the time, and a
-/// campaign packs every run that may reach its top K). Any level reads back the same way.
+/// Deflate's fastest level: raw f32 coordinates hardly compress past half (when the level was
+/// chosen, level 6 made blobs 2–16 % smaller than level 1 on three caves runs, at five to eight
+/// times the time; docs/scale.md), and a campaign packs every run that may reach its top K.
+/// Any level reads back the same way.
 pub fn pack_trajectory(trajectory: &[f64]) -> Vec<u8> {
     use std::io::Write;
     // One buffer, compressed in one call: the encoder clears its output buffer on every
