@@ -109,7 +109,7 @@ impl LaserSpec {
     }
 }
 
-/// The grid as a laser ray sees it: per cell, whether it is occupied and, if not, how far a ray
+/// The grid as a laser ray sees it: per cell, whether it stops rays and, if not, how far a ray
 /// may leap from anywhere in it. One table serves both questions, so each cell a ray visits
 /// costs one load.
 ///
@@ -118,10 +118,14 @@ impl LaserSpec {
 /// may jump that far (less a micrometre for the f32 rounding of the clearance) and walk on from
 /// where it lands. The walk resumes before any occupied cell, so it finds the crossing the
 /// plain cell walk finds; open maps with 10 m rays cost a few leaps instead of a hundred cells.
+///
+/// The map is surrounded by a ring of [`OFF_MAP`] cells, so a walk needs no count of the cells
+/// left to each edge: the cell past the edge ends it.
 #[derive(Debug, Clone)]
 pub struct RayGrid {
-    /// Row-major like the grid: [`OCCUPIED`], the leap in metres, or 0 for a free cell whose
-    /// leap is shorter than `leap_min` (so never taken).
+    /// Rows from the bottom (row `w` of the map is row `w + 1`), `cols + 2` cells each:
+    /// [`OCCUPIED`] or [`OFF_MAP`], the leap in metres, or 0 for a free cell whose leap is
+    /// shorter than `leap_min` (so never taken).
     cells: Vec<f64>,
     cols: i64,
     rows: i64,
@@ -131,8 +135,11 @@ pub struct RayGrid {
     leap_min: f64,
 }
 
-/// A [`RayGrid`] cell that stops rays; every other cell holds a leap ≥ 0.
+/// A [`RayGrid`] cell that stops rays: the ray's range is where it enters the cell.
 const OCCUPIED: f64 = -1.0;
+/// A [`RayGrid`] cell of the ring about the map: a ray that reaches it reads its maximum range.
+/// The only other value below zero, so `cell < 0.0` asks whether a walk ends.
+const OFF_MAP: f64 = -2.0;
 
 /// Where every ray of a scan from one origin stands after the origin's cell: they all start
 /// in it, so its test and its leap are the same for each.
@@ -152,34 +159,40 @@ impl RayGrid {
         let res = map.resolution_m;
         let leap_min = 3.0 * res;
         let cell_reach = res * std::f64::consts::SQRT_2;
-        let cells = map
-            .grid
-            .cells
-            .iter()
-            .enumerate()
-            .map(|(k, &occupied)| {
-                if occupied {
-                    return OCCUPIED;
-                }
-                let leap = clearance.map_or(0.0, |c| f64::from(c[k]) - cell_reach - 1e-6);
-                if leap >= leap_min {
-                    leap
+        let (cols, rows) = (map.grid.cols, map.grid.rows);
+        let mut cells = vec![OFF_MAP; (cols + 2) * (rows + 2)];
+        // The map's rows run from the top; the table's from the bottom.
+        for (r, map_row) in map.grid.cells.chunks_exact(cols.max(1)).enumerate() {
+            let start = (rows - r) * (cols + 2) + 1;
+            for (c, (cell, &occupied)) in cells[start..start + cols]
+                .iter_mut()
+                .zip(map_row)
+                .enumerate()
+            {
+                *cell = if occupied {
+                    OCCUPIED
                 } else {
-                    0.0
-                }
-            })
-            .collect();
+                    let leap =
+                        clearance.map_or(0.0, |m| f64::from(m[r * cols + c]) - cell_reach - 1e-6);
+                    if leap >= leap_min {
+                        leap
+                    } else {
+                        0.0
+                    }
+                };
+            }
+        }
         Self {
             cells,
-            cols: map.grid.cols as i64,
-            rows: map.grid.rows as i64,
+            cols: cols as i64,
+            rows: rows as i64,
             res,
             inv_res: 1.0 / res,
             leap_min,
         }
     }
 
-    /// The row-major index of the cell holding `(px, py)`, or `None` off the map.
+    /// The table's index of the cell holding `(px, py)`, or `None` off the map.
     #[inline]
     fn cell_at(&self, px: f64, py: f64) -> Option<(usize, i64, i64)> {
         // Column index from x, and row-from-the-bottom index from y.
@@ -202,12 +215,14 @@ impl RayGrid {
         self.index_of(cu, cw)
     }
 
+    /// The table's index of the map's cell in column `cu`, row `cw` from the bottom (both
+    /// ≥ 0), or `None` off the map.
     #[inline]
     fn index_of(&self, cu: i64, cw: i64) -> Option<(usize, i64, i64)> {
         if cu >= self.cols || cw >= self.rows {
             return None;
         }
-        Some((((self.rows - 1 - cw) * self.cols + cu) as usize, cu, cw))
+        Some((((cw + 1) * (self.cols + 2) + cu + 1) as usize, cu, cw))
     }
 
     /// How every ray from `origin` with range `max` starts (see [`ScanStart`]).
@@ -216,7 +231,7 @@ impl RayGrid {
             return ScanStart::Every(max);
         };
         let leap = self.cells[index];
-        if leap == OCCUPIED {
+        if leap < 0.0 {
             ScanStart::Every(0.0)
         } else if leap >= self.leap_min {
             if leap >= max {
@@ -248,7 +263,7 @@ impl RayGrid {
         (dx, dy): (f64, f64),
         max: f64,
     ) -> f64 {
-        let (cols, rows, res) = (self.cols, self.rows, self.res);
+        let (res, stride) = (self.res, self.cols as isize + 2);
         let delta_u = if dx != 0.0 {
             res / dx.abs()
         } else {
@@ -271,47 +286,31 @@ impl RayGrid {
             };
             let (px, py) = (ox + t0 * dx, oy + t0 * dy);
             // Leap from the start cell before the boundary crossings are computed: a run of
-            // leaps across open ground divides by nothing.
+            // leaps across open ground divides by nothing. A free cell holds 0 or a leap
+            // ≥ `leap_min`, so one test passes every cell a walk goes on through.
             let leap = self.cells[index];
-            if leap == OCCUPIED {
-                return t0;
-            }
-            if leap >= self.leap_min {
+            if leap != 0.0 {
+                if leap < 0.0 {
+                    return t0;
+                }
                 t0 += leap;
                 if t0 >= max {
                     return max;
                 }
                 continue 'walk;
             }
-            // Walk the row-major cell index directly: a step in x is ±1, a step in y is ∓cols
-            // (row 0 is the top); the cells left to each edge bound the walk.
-            let (step_u, mut left_u) = if dx > 0.0 {
-                (1isize, cols - 1 - cu)
-            } else {
-                (-1, cu)
-            };
-            let (step_w, mut left_w) = if dy > 0.0 {
-                (-(cols as isize), rows - 1 - cw)
-            } else {
-                (cols as isize, cw)
-            };
+            // Walk the table's index directly: a step in x is ±1, a step in y is ±(cols + 2).
+            let step_u: isize = if dx > 0.0 { 1 } else { -1 };
+            let step_w = if dy > 0.0 { stride } else { -stride };
             let mut t_u = t0 + first_crossing(px, cu, dx, res);
             let mut t_w = t0 + first_crossing(py, cw, dy, res);
             loop {
                 let t;
                 if t_u < t_w {
-                    if left_u == 0 {
-                        return max;
-                    }
-                    left_u -= 1;
                     index = index.wrapping_add_signed(step_u);
                     t = t_u;
                     t_u += delta_u;
                 } else {
-                    if left_w == 0 {
-                        return max;
-                    }
-                    left_w -= 1;
                     index = index.wrapping_add_signed(step_w);
                     t = t_w;
                     t_w += delta_w;
@@ -320,10 +319,10 @@ impl RayGrid {
                     return max;
                 }
                 let leap = self.cells[index];
-                if leap == OCCUPIED {
-                    return t;
-                }
-                if leap >= self.leap_min {
+                if leap != 0.0 {
+                    if leap < 0.0 {
+                        return if leap == OFF_MAP { max } else { t };
+                    }
                     t0 = t + leap;
                     if t0 >= max {
                         return max;
@@ -511,5 +510,50 @@ mod tests {
             RayGrid::new(&map, None).ray((0.05, 0.15), (1.0, 0.0), 10.0),
             10.0
         );
+    }
+
+    #[test]
+    fn a_ray_that_walks_off_any_edge_reads_its_maximum_range() {
+        // 12 × 9 cells at 0.1 m, one occupied cell (x ∈ [0.4, 0.5], y ∈ [0.5, 0.6]); a 3 m
+        // ray from inside either enters that cell or walks off an edge of the map (through
+        // the ring of cells the table puts about it). Real clearances make the leaping table.
+        let mut g = OccupancyGrid::filled(9, 12, false);
+        g.set(3, 4, true);
+        let clearance: Vec<f32> =
+            crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols)
+                .iter()
+                .map(|d2| (d2.sqrt() * 0.1) as f32)
+                .collect();
+        let map = Map {
+            grid: g,
+            resolution_m: 0.1,
+        };
+        let cell = Rect {
+            centre: (0.45, 0.55),
+            u: (1.0, 0.0),
+            half_length: 0.05,
+            half_width: 0.05,
+        };
+        let grids = [
+            ("walking", RayGrid::new(&map, None)),
+            ("leaping", RayGrid::new(&map, Some(&clearance))),
+        ];
+        let mut edges = 0;
+        for origin in [(0.25, 0.15), (1.05, 0.75), (0.15, 0.85)] {
+            for k in 0..64 {
+                let a = k as f64 * std::f64::consts::PI / 32.0 + 0.01;
+                let dir = (a.cos(), a.sin());
+                let expected = ray_to_rect(&cell, origin, dir, 3.0).unwrap_or(3.0);
+                edges += usize::from(expected == 3.0);
+                for (name, grid) in &grids {
+                    let t = grid.ray(origin, dir, 3.0);
+                    assert!(
+                        (t - expected).abs() < 1e-12,
+                        "{name} ray from {origin:?} at {a}: {t}, expected {expected}"
+                    );
+                }
+            }
+        }
+        assert!(edges > 150, "most rays leave the map: {edges}");
     }
 }
