@@ -59,7 +59,9 @@ pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f6
             };
         }
     }
-    let mut d = vec![0.0; rows * cols];
+    // The column pass's squares stay whole numbers for the row pass ([`FAR`] where a column
+    // has no feature), so the row pass converts nothing on the way in.
+    let mut column = vec![FAR; rows * cols];
     let mut below = vec![NONE; cols];
     for r in (0..rows).rev() {
         for (c, below) in below.iter_mut().enumerate() {
@@ -70,35 +72,37 @@ pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f6
                 below.saturating_add(1)
             };
             let nearest = above[k].min(*below);
-            d[k] = if nearest == NONE {
-                f64::INFINITY
-            } else {
-                f64::from(nearest) * f64::from(nearest)
-            };
+            if nearest != NONE {
+                column[k] = i64::from(nearest) * i64::from(nearest);
+            }
         }
     }
     // Pass 2, along each row, on the column result.
-    d.par_chunks_mut(cols.max(1)).for_each_init(
-        || Envelope::new(cols),
-        |envelope, line| envelope.transform(line),
-    );
+    let mut d = vec![0.0; rows * cols];
+    d.par_chunks_mut(cols.max(1))
+        .zip(column.par_chunks(cols.max(1)))
+        .for_each_init(
+            || Envelope::new(cols),
+            |envelope, (out, line)| envelope.transform(line, out),
+        );
     d
 }
 
+/// A column pass's result where the column has no feature cell.
+const FAR: i64 = i64::MAX;
+
 /// Work buffers of the 1-D transform, reused across lines.
 ///
-/// Its input is the first pass's squared distances: whole numbers of cells² (or ∞). So the
-/// parabolas' intersections are fractions of whole numbers, kept as (numerator, denominator)
-/// and compared by cross-multiplication: exact, and without a division on the chain of each
-/// cell (a float division per intersection was most of the transform's time).
+/// Its input is the first pass's squared distances: whole numbers of cells² (or [`FAR`]). So
+/// the parabolas' intersections are fractions of whole numbers, kept as (numerator,
+/// denominator) and compared by cross-multiplication: exact, and without a division on the
+/// chain of each cell (a float division per intersection was most of the transform's time).
 struct Envelope {
     /// Positions of the parabolas in the lower envelope.
     v: Vec<usize>,
     /// Boundaries between consecutive parabolas: z[k] = num / den with den > 0, for k ≥ 1
     /// (z[0] is −∞ and the boundary after the last parabola +∞).
     z: Vec<(i64, i64)>,
-    /// The input line, whole cells² (entries where it is ∞ are skipped).
-    f: Vec<i64>,
 }
 
 impl Envelope {
@@ -106,25 +110,21 @@ impl Envelope {
         Self {
             v: vec![0; n],
             z: vec![(0, 1); n + 1],
-            f: vec![0; n],
         }
     }
 
-    /// In place: `line[q] = min_p (q − p)² + line[p]`, for a line of whole numbers and ∞.
-    fn transform(&mut self, line: &mut [f64]) {
-        // A line with no finite value stays ∞.
-        let Some(first) = line.iter().position(|x| x.is_finite()) else {
+    /// `out[q] = min_p (q − p)² + f[p]`, for a line `f` of whole numbers and [`FAR`]; ∞ where
+    /// every entry is [`FAR`].
+    fn transform(&mut self, f: &[i64], out: &mut [f64]) {
+        let Some(first) = f.iter().position(|&x| x != FAR) else {
+            out.fill(f64::INFINITY);
             return;
         };
-        let (v, z, f) = (&mut self.v, &mut self.z, &mut self.f);
-        for (slot, &x) in f.iter_mut().zip(line.iter()) {
-            // Cells² on any grid that fits in memory are far below 2⁵³: exact either way.
-            *slot = if x.is_finite() { x as i64 } else { 0 };
-        }
+        let (v, z) = (&mut self.v, &mut self.z);
         let mut k = 0usize;
         v[0] = first;
-        for (q, x) in line.iter().enumerate().skip(first + 1) {
-            if !x.is_finite() {
+        for (q, &x) in f.iter().enumerate().skip(first + 1) {
+            if x == FAR {
                 continue;
             }
             // Pop the parabolas the new one hides: while the intersection s ≤ z[k] (k ≥ 1).
@@ -139,12 +139,13 @@ impl Envelope {
         }
         let last = k;
         k = 0;
-        for (q, out) in line.iter_mut().enumerate() {
+        for (q, out) in out.iter_mut().enumerate() {
             // Move on while z[k + 1] < q.
             while k < last && z[k + 1].0 < q as i64 * z[k + 1].1 {
                 k += 1;
             }
             let d = q as i64 - v[k] as i64;
+            // Cells² on any grid that fits in memory are far below 2⁵³: exact.
             *out = (d * d + f[v[k]]) as f64;
         }
     }
