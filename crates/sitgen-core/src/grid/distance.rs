@@ -18,19 +18,31 @@ use rayon::prelude::*;
 /// simulator, so placement and planning treat it as one too. Maps with a border wall get the
 /// same distances as from [`squared_distance_to`].
 pub fn squared_distance_with_edge(grid: &super::OccupancyGrid) -> Vec<f64> {
-    let (rows, cols) = (grid.rows + 2, grid.cols + 2);
-    let mut padded = vec![true; rows * cols];
-    for r in 0..grid.rows {
-        let from = r * grid.cols;
-        padded[(r + 1) * cols + 1..(r + 1) * cols + 1 + grid.cols]
-            .copy_from_slice(&grid.cells[from..from + grid.cols]);
-    }
-    let d2 = squared_distance_to(&padded, rows, cols);
-    (0..grid.rows)
-        .flat_map(|r| {
-            d2[(r + 1) * cols + 1..(r + 1) * cols + 1 + grid.cols]
-                .iter()
-                .copied()
+    with_edge(
+        &squared_distance_to(&grid.cells, grid.rows, grid.cols),
+        grid.rows,
+        grid.cols,
+    )
+}
+
+/// [`squared_distance_with_edge`] from [`squared_distance_to`]'s result for the occupied cells
+/// of the same `rows` × `cols` grid: the ring's nearest cell to a cell lies straight out across
+/// the nearest edge, so each square is the least of the distance to the nearest occupied cell
+/// and four whole numbers. Generation has the occupied cells' squares anyway (the run needs
+/// them), so the ring costs no second transform.
+pub fn with_edge(to_occupied: &[f64], rows: usize, cols: usize) -> Vec<f64> {
+    let square = |k: usize| (k * k) as f64;
+    let across: Vec<f64> = (0..cols)
+        .map(|c| square(c + 1).min(square(cols - c)))
+        .collect();
+    to_occupied
+        .chunks_exact(cols.max(1))
+        .enumerate()
+        .flat_map(|(r, line)| {
+            let up_down = square(r + 1).min(square(rows - r));
+            line.iter()
+                .zip(&across)
+                .map(move |(&d2, &side)| d2.min(up_down).min(side))
         })
         .collect()
 }
@@ -180,7 +192,29 @@ mod tests {
             .collect()
     }
 
+    /// The ring as feature cells of a grid two cells larger: what `squared_distance_with_edge`
+    /// computed before [`with_edge`].
+    fn padded_with_edge(cells: &[bool], rows: usize, cols: usize) -> Vec<f64> {
+        let (prows, pcols) = (rows + 2, cols + 2);
+        let mut padded = vec![true; prows * pcols];
+        for r in 0..rows {
+            padded[(r + 1) * pcols + 1..(r + 1) * pcols + 1 + cols]
+                .copy_from_slice(&cells[r * cols..(r + 1) * cols]);
+        }
+        let d2 = squared_distance_to(&padded, prows, pcols);
+        (0..rows)
+            .flat_map(|r| d2[(r + 1) * pcols + 1..(r + 1) * pcols + 1 + cols].to_vec())
+            .collect()
+    }
+
     proptest! {
+        #[test]
+        fn the_edge_is_the_ring_of_cells_about_the_map(rows in 1usize..14, cols in 1usize..14, bits in prop::collection::vec(prop::bool::weighted(0.08), 196)) {
+            let cells = bits[..rows * cols].to_vec();
+            let grid = crate::grid::OccupancyGrid { rows, cols, cells: cells.clone() };
+            prop_assert_eq!(squared_distance_with_edge(&grid), padded_with_edge(&cells, rows, cols));
+        }
+
         #[test]
         fn matches_brute_force(rows in 1usize..12, cols in 1usize..12, bits in prop::collection::vec(prop::bool::weighted(0.15), 144)) {
             let feature = &bits[..rows * cols];

@@ -1,7 +1,7 @@
 //! Placement and routes: the steps listed in the module doc of [`crate::mission`].
 
 use crate::geometry::segment::for_each_cell;
-use crate::grid::distance::squared_distance_with_edge;
+use crate::grid::distance::{squared_distance_with_edge, with_edge};
 use crate::grid::regions::{label_regions, Connectivity};
 use crate::grid::Map;
 use crate::rng::ChoiceSource;
@@ -47,10 +47,11 @@ struct Plan<'a> {
 }
 
 impl<'a> Plan<'a> {
-    fn new(map: &'a Map, spec: &MissionSpec) -> Self {
+    /// `to_occupied`: the map's squared distances to its occupied cells.
+    fn new(map: &'a Map, to_occupied: &[f64], spec: &MissionSpec) -> Self {
         let g = &map.grid;
         let res = map.resolution_m;
-        let d2 = squared_distance_with_edge(g);
+        let d2 = with_edge(to_occupied, g.rows, g.cols);
         let place_beyond =
             spec.body.enclosing_radius() + spec.clearance_m + res * std::f64::consts::FRAC_1_SQRT_2;
         let placeable: Vec<u32> = (0..d2.len() as u32)
@@ -171,15 +172,17 @@ pub fn check_peer_legs(map: &Map, margin_m: f64, robots: &[Robot]) -> Result<(),
     Ok(())
 }
 
-/// Place the robots and plan their routes on `map`. The agent (placement and route) draws
-/// from `mission`; the peers' routes draw from `peers`.
+/// Place the robots and plan their routes on `map`, whose squared distances to its occupied
+/// cells are `to_occupied` ([`crate::grid::distance::squared_distance_to`]). The agent
+/// (placement and route) draws from `mission`; the peers' routes draw from `peers`.
 pub fn generate(
     map: &Map,
+    to_occupied: &[f64],
     spec: &MissionSpec,
     mission: &mut ChoiceSource,
     peers: &mut ChoiceSource,
 ) -> Result<Vec<Robot>, GenerationFailed> {
-    let mut plan = Plan::new(map, spec);
+    let mut plan = Plan::new(map, to_occupied, spec);
     let peer_count = mission.int_in(i64::from(spec.peers_min), i64::from(spec.peers_max)) as usize;
     let starts = place_robots(&mut plan, spec, 1 + peer_count, mission)?;
     let agent_route = plan_agent_route(&plan, spec, starts[0], mission)?;

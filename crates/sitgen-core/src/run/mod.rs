@@ -209,7 +209,31 @@ impl Run {
     /// its command from [`Run::step`].
     pub fn new(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<Self, SpecError> {
         spec.validate("run")?;
-        let mut world = World::new(situation, spec.sim.clone(), seed)?;
+        let world = World::new(situation, spec.sim.clone(), seed)?;
+        Self::in_world(situation, spec, world)
+    }
+
+    /// [`Run::new`] for a situation whose map is given decoded, with its squared distances to
+    /// its occupied cells ([`crate::situation::generate_with_distances`] returns both): the
+    /// same run, less a decode and a distance transform ([`World::with_distances`]).
+    pub fn with_distances(
+        situation: &Situation,
+        spec: &RunSpec,
+        seed: u64,
+        map: crate::grid::Map,
+        to_occupied: &[f64],
+    ) -> Result<Self, SpecError> {
+        spec.validate("run")?;
+        let world = World::with_distances(situation, map, to_occupied, spec.sim.clone(), seed)?;
+        Self::in_world(situation, spec, world)
+    }
+
+    /// The run of `situation` in `world`, its start (`spec` checked).
+    fn in_world(
+        situation: &Situation,
+        spec: &RunSpec,
+        mut world: World,
+    ) -> Result<Self, SpecError> {
         world.check_start()?;
         let monitor = Monitor::new(situation, &world, &spec.monitor);
         let agent = monitor.agent();
@@ -523,7 +547,11 @@ impl Run {
 
 /// Run `situation` with built-in controllers to its end.
 pub fn run(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<RunRecord, SpecError> {
-    let mut r = Run::new(situation, spec, seed)?;
+    run_to_end(Run::new(situation, spec, seed)?)
+}
+
+/// Run `r` with built-in controllers to its end.
+fn run_to_end(mut r: Run) -> Result<RunRecord, SpecError> {
     if r.agent_is_external() {
         return Err(SpecError::new(
             "run.controller.name",
@@ -564,17 +592,30 @@ pub type JobResult = Result<(Situation, RunRecord), String>;
 
 /// Generate and run one job.
 pub fn run_job(job: &Job) -> JobResult {
-    // `run` checks where the robots start (Run::new), as it does for every situation.
-    let situation = match &job.situation {
+    // A run checks where the robots start (Run::new), as it does for every situation.
+    match &job.situation {
         JobSituation::Spec(spec) => {
-            crate::situation::generate(spec, job.situation_seed)
-                .map_err(|e| format!("generation failed: {e}"))?
-                .0
+            // Generation has the map decoded and its distances to obstacles: the run's world
+            // takes them rather than computing them again.
+            let (situation, terrain, to_occupied) =
+                crate::situation::generate_with_distances(spec, job.situation_seed)
+                    .map_err(|e| format!("generation failed: {e}"))?;
+            let record = Run::with_distances(
+                &situation,
+                &job.run,
+                job.run_seed,
+                terrain.map,
+                &to_occupied,
+            )
+            .and_then(run_to_end)
+            .map_err(|e| e.to_string())?;
+            Ok((situation, record))
         }
-        JobSituation::Given(situation) => (**situation).clone(),
-    };
-    let record = run(&situation, &job.run, job.run_seed).map_err(|e| e.to_string())?;
-    Ok((situation, record))
+        JobSituation::Given(situation) => {
+            let record = run(situation, &job.run, job.run_seed).map_err(|e| e.to_string())?;
+            Ok(((**situation).clone(), record))
+        }
+    }
 }
 
 /// Run `jobs` on `threads` threads; results in job order, each independent of the others and

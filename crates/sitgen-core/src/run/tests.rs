@@ -614,3 +614,46 @@ fn peers_whose_controllers_sense_carry_the_laser() {
     // The peer behind the agent sees it ahead.
     assert_eq!(seen.tracks.iter().map(|t| t.id).collect::<Vec<_>>(), [0]);
 }
+
+#[test]
+fn a_job_runs_its_generated_situation_as_a_run_of_it_would() {
+    // The job hands generation's decoded map and distances to the run's world; the run must be
+    // the one `run` gives the situation alone (which decodes and measures the map itself).
+    for (preset, seed) in [("caves", 3), ("urban", 5), ("open_field", 7), ("rocky_desert", 2)] {
+        let spec = crate::spec::from_json_str(&format!(
+            r#"{{"terrain": {{"preset": "{preset}", "width_m": 24.0, "height_m": 18.0}},
+               "mission": {{"peers_min": 2, "peers_max": 2}}}}"#
+        ))
+        .unwrap();
+        let job = Job {
+            situation: JobSituation::Spec(Box::new(spec.clone())),
+            situation_seed: seed,
+            run: RunSpec::from_json(
+                r#"{"controller": {"name": "snd_follow"}, "time_limit_s": 60.0}"#,
+                "run",
+            )
+            .unwrap(),
+            run_seed: 11,
+        };
+        let (situation, record) = run_job(&job).unwrap();
+        let (alone, _) = crate::situation::generate(&spec, seed).unwrap();
+        assert_eq!(situation, alone, "{preset}");
+        let expected = run(&alone, &job.run, job.run_seed).unwrap();
+        assert_eq!(record, expected, "{preset}");
+        assert!(record.steps > 0);
+    }
+}
+
+#[test]
+fn a_world_given_another_map_s_distances_is_refused() {
+    let spec =
+        crate::spec::from_json_str(r#"{"terrain": {"preset": "caves", "width_m": 12.0}}"#).unwrap();
+    let (s, terrain, to_occupied) = crate::situation::generate_with_distances(&spec, 1).unwrap();
+    let e = Run::with_distances(&s, &RunSpec::default(), 0, terrain.map, &to_occupied[1..])
+        .err()
+        .expect("distances of the wrong size");
+    assert_eq!(
+        e.to_string(),
+        "map: the decoded map and its distances are not the situation's map"
+    );
+}

@@ -305,8 +305,43 @@ impl World {
         spec.validate("sim")?;
         let map = situation.map.decode()?;
         let g = &map.grid;
-        let clearance_m = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols)
-            .into_iter()
+        let to_occupied = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols);
+        Ok(Self::assemble(situation, map, &to_occupied, spec, seed))
+    }
+
+    /// [`World::new`] for a situation whose map is given decoded, with its squared distances
+    /// to its occupied cells ([`crate::situation::generate_with_distances`] returns both):
+    /// the same world, less a decode and a distance transform.
+    pub fn with_distances(
+        situation: &Situation,
+        map: Map,
+        to_occupied: &[f64],
+        spec: SimSpec,
+        seed: u64,
+    ) -> Result<Self, SpecError> {
+        spec.validate("sim")?;
+        let m = &situation.map;
+        if (map.grid.rows, map.grid.cols, map.resolution_m) != (m.rows, m.cols, m.resolution_m)
+            || to_occupied.len() != m.rows * m.cols
+        {
+            return Err(SpecError::new(
+                "map",
+                "the decoded map and its distances are not the situation's map",
+            ));
+        }
+        Ok(Self::assemble(situation, map, to_occupied, spec, seed))
+    }
+
+    /// The world at the start of `situation` on its decoded `map`; `spec` is checked.
+    fn assemble(
+        situation: &Situation,
+        map: Map,
+        to_occupied: &[f64],
+        spec: SimSpec,
+        seed: u64,
+    ) -> Self {
+        let clearance_m = to_occupied
+            .iter()
             .map(|d2| (d2.sqrt() * map.resolution_m) as f32)
             .collect::<Vec<_>>();
         let rays = RayGrid::new(&map, Some(&clearance_m));
@@ -336,7 +371,7 @@ impl World {
             .iter()
             .map(|r| r.role == Role::Agent)
             .collect();
-        Ok(Self {
+        Self {
             spec,
             map,
             clearance_m,
@@ -350,7 +385,7 @@ impl World {
             time_s: 0.0,
             steps: 0,
             seed,
-        })
+        }
     }
 
     /// Simulated time, seconds.

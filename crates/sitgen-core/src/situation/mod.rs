@@ -384,14 +384,28 @@ pub fn generate(
     spec: &SituationSpec,
     seed: u64,
 ) -> Result<(Situation, terrain::Terrain), GenerationFailed> {
+    generate_with_distances(spec, seed).map(|(situation, terrain, _)| (situation, terrain))
+}
+
+/// [`generate`], and the finished map's squared distance from each cell to its nearest
+/// occupied cell ([`crate::grid::distance::squared_distance_to`], cells²): the routes are
+/// planned on it and a run's world needs it again ([`crate::run::Run::with_distances`]), so a
+/// campaign's job computes it once.
+pub fn generate_with_distances(
+    spec: &SituationSpec,
+    seed: u64,
+) -> Result<(Situation, terrain::Terrain, Vec<f64>), GenerationFailed> {
     let terrain_seed = spec.terrain.seed.unwrap_or(seed);
     let mission_seed = spec.mission.seed.unwrap_or(seed);
     let terrain = terrain::generate(
         &spec.terrain,
         &mut ChoiceSource::stream(terrain_seed, stream::TERRAIN),
     )?;
+    let g = &terrain.map.grid;
+    let to_occupied = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols);
     let robots = mission::generate(
         &terrain.map,
+        &to_occupied,
         &spec.mission,
         &mut ChoiceSource::stream(mission_seed, stream::MISSION),
         &mut ChoiceSource::stream(mission_seed, stream::PEERS),
@@ -399,6 +413,7 @@ pub fn generate(
     Ok((
         Situation::new(&terrain.map, robots, spec.clone(), seed),
         terrain,
+        to_occupied,
     ))
 }
 
