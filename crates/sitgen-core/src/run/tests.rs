@@ -619,7 +619,12 @@ fn peers_whose_controllers_sense_carry_the_laser() {
 fn a_job_runs_its_generated_situation_as_a_run_of_it_would() {
     // The job hands generation's decoded map and distances to the run's world; the run must be
     // the one `run` gives the situation alone (which decodes and measures the map itself).
-    for (preset, seed) in [("caves", 3), ("urban", 5), ("open_field", 7), ("rocky_desert", 2)] {
+    for (preset, seed) in [
+        ("caves", 3),
+        ("urban", 5),
+        ("open_field", 7),
+        ("rocky_desert", 2),
+    ] {
         let spec = crate::spec::from_json_str(&format!(
             r#"{{"terrain": {{"preset": "{preset}", "width_m": 24.0, "height_m": 18.0}},
                "mission": {{"peers_min": 2, "peers_max": 2}}}}"#

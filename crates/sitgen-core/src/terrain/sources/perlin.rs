@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use crate::grid::ScalarField;
 use crate::rng::ChoiceSource;
 use crate::spec::{join, SpecError};
-use crate::terrain::noise::{perlin_in, Axis, Corners};
+use crate::terrain::noise::{add_perlin_in_cube, Axis, Corners};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// Parameters of the `perlin` source.
@@ -102,16 +102,15 @@ impl Source for Perlin {
             cols,
             resolution_m: res,
         } = extent;
-        // A column's x, and so its part of each octave's noise, is the same in every row.
-        let x_parts: Vec<Vec<Axis>> = octaves
+        // A column's x, and so its part of each octave's noise, is the same in every row; so
+        // are the runs of columns in one lattice cell.
+        let x_parts: Vec<XParts> = octaves
             .iter()
             .map(|&(frequency, _)| {
-                (0..cols)
-                    .map(|c| {
-                        let x = (c as f64 + 0.5) * res / self.scale_m;
-                        Axis::new(x * frequency + offset[0])
-                    })
-                    .collect()
+                XParts::new((0..cols).map(|c| {
+                    let x = (c as f64 + 0.5) * res / self.scale_m;
+                    Axis::new(x * frequency + offset[0])
+                }))
             })
             .collect();
         let z = Axis::new(offset[2]);
@@ -122,16 +121,22 @@ impl Source for Perlin {
             .for_each(|(r, row)| {
                 let y = (rows as f64 - r as f64 - 0.5) * res / self.scale_m;
                 // Octave by octave along the row, each cell's sum in the same order as cell by
-                // cell: the row shares y and z, and neighbouring cells share a lattice cube,
-                // whose corners are hashed once.
+                // cell: the row shares y and z, and a run of cells shares a lattice cube,
+                // whose corners are hashed once and whose gradients pick the same terms.
                 row.fill(0.0);
                 for (&(frequency, amplitude), xs) in octaves.iter().zip(&x_parts) {
                     let y = Axis::new(y * frequency + offset[1]);
-                    let Some(&first) = xs.first() else { break };
-                    let mut corners = Corners::hash(first, y, z);
-                    for (sum, &x) in row.iter_mut().zip(xs) {
-                        corners = corners.for_point(x, y, z);
-                        *sum += amplitude * perlin_in(&corners, x, y, z);
+                    for &(start, end) in &xs.runs {
+                        let corners = Corners::hash(xs.axes[start], y, z);
+                        add_perlin_in_cube(
+                            &corners,
+                            &xs.offsets[start..end],
+                            &xs.fades[start..end],
+                            y,
+                            z,
+                            amplitude,
+                            &mut row[start..end],
+                        );
                     }
                 }
                 for out in row.iter_mut() {
@@ -144,6 +149,35 @@ impl Source for Perlin {
                 }
             });
         Ok(Layer::Field(ScalarField { cols, rows, values }))
+    }
+}
+
+/// One octave's x parts of a map's columns, with the runs of columns that share a lattice
+/// cell.
+struct XParts {
+    axes: Vec<Axis>,
+    offsets: Vec<f64>,
+    fades: Vec<f64>,
+    /// `[start, end)` of each run of columns in the same lattice cell, in order.
+    runs: Vec<(usize, usize)>,
+}
+
+impl XParts {
+    fn new(axes: impl Iterator<Item = Axis>) -> Self {
+        let axes: Vec<Axis> = axes.collect();
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        for (c, a) in axes.iter().enumerate() {
+            match runs.last_mut() {
+                Some(run) if axes[run.0].cell() == a.cell() => run.1 = c + 1,
+                _ => runs.push((c, c + 1)),
+            }
+        }
+        Self {
+            offsets: axes.iter().map(|a| a.offset()).collect(),
+            fades: axes.iter().map(|a| a.fade()).collect(),
+            axes,
+            runs,
+        }
     }
 }
 
