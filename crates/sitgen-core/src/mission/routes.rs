@@ -262,10 +262,25 @@ fn place_robots(
         let cell = candidates[choices.index(candidates.len())];
         let here = plan.centre(plan.cell_of(cell));
         starts.push(here);
-        let placeable = std::mem::take(&mut plan.placeable);
-        // `hypot(dx, dy) > apart` for each of the 10^5 candidate cells, by squares.
-        plan.placeable = placeable
-            .into_iter()
+        if k + 1 == count {
+            break;
+        }
+        // The next robots keep `hypot(dx, dy) > apart` from this one. Only rows within
+        // `apart` of it (and a row's slack) hold a cell that fails it, and the candidates are
+        // in row-major order, so those rows are one slice of the 10^5; the cells in it are
+        // tested by squares.
+        let cols = plan.map.grid.cols;
+        let row = plan.cell_of(cell).1;
+        let reach = (apart / plan.map.resolution_m).ceil() as usize + 1;
+        let first = plan
+            .placeable
+            .partition_point(|&i| i as usize / cols + reach < row);
+        let end = plan
+            .placeable
+            .partition_point(|&i| i as usize / cols <= row + reach);
+        let kept: Vec<u32> = plan.placeable[first..end]
+            .iter()
+            .copied()
             .filter(|&i| {
                 let (x, y) = plan.centre(plan.cell_of(i));
                 let (dx, dy) = (x - here.0, y - here.1);
@@ -274,6 +289,7 @@ fn place_robots(
                 })
             })
             .collect();
+        plan.placeable.splice(first..end, kept);
     }
     Ok(starts)
 }
