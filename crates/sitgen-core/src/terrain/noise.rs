@@ -161,7 +161,7 @@ pub fn perlin_at(x: Axis, y: Axis, z: Axis) -> f64 {
 }
 
 /// The hashes of the eight corners of one unit cube of the lattice: every point in the cube
-/// shares them, so a row of cells that stays in one cube hashes once ([`perlin_in`]).
+/// shares them, so a row of cells that stays in one cube hashes once ([`add_perlin_in_cube`]).
 #[derive(Debug, Clone, Copy)]
 pub struct Corners {
     /// The cube's cells on the x axis, and on y, z: which cube this is.
@@ -198,17 +198,6 @@ impl Corners {
             ba1: P[ba + 1],
             ab1: P[ab + 1],
             bb1: P[bb + 1],
-        }
-    }
-
-    /// These corners if the point whose parts are `x`, `y`, `z` is in their cube, else its
-    /// cube's.
-    #[inline]
-    pub fn for_point(self, x: Axis, y: Axis, z: Axis) -> Self {
-        if self.cube == (x.cell, y.cell, z.cell) {
-            self
-        } else {
-            Self::hash(x, y, z)
         }
     }
 }

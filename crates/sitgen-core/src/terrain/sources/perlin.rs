@@ -126,8 +126,8 @@ impl Source for Perlin {
                 row.fill(0.0);
                 for (&(frequency, amplitude), xs) in octaves.iter().zip(&x_parts) {
                     let y = Axis::new(y * frequency + offset[1]);
-                    for &(start, end) in &xs.runs {
-                        let corners = Corners::hash(xs.axes[start], y, z);
+                    for &(start, end, first) in &xs.runs {
+                        let corners = Corners::hash(first, y, z);
                         add_perlin_in_cube(
                             &corners,
                             &xs.offsets[start..end],
@@ -155,27 +155,28 @@ impl Source for Perlin {
 /// One octave's x parts of a map's columns, with the runs of columns that share a lattice
 /// cell.
 struct XParts {
-    axes: Vec<Axis>,
     offsets: Vec<f64>,
     fades: Vec<f64>,
-    /// `[start, end)` of each run of columns in the same lattice cell, in order.
-    runs: Vec<(usize, usize)>,
+    /// `[start, end)` of each run of columns in the same lattice cell, in order, with the x
+    /// part of its first column (whose cell names the run's cubes).
+    runs: Vec<(usize, usize, Axis)>,
 }
 
 impl XParts {
     fn new(axes: impl Iterator<Item = Axis>) -> Self {
-        let axes: Vec<Axis> = axes.collect();
-        let mut runs: Vec<(usize, usize)> = Vec::new();
-        for (c, a) in axes.iter().enumerate() {
+        let (mut offsets, mut fades) = (Vec::new(), Vec::new());
+        let mut runs: Vec<(usize, usize, Axis)> = Vec::new();
+        for (c, a) in axes.enumerate() {
+            offsets.push(a.offset());
+            fades.push(a.fade());
             match runs.last_mut() {
-                Some(run) if axes[run.0].cell() == a.cell() => run.1 = c + 1,
-                _ => runs.push((c, c + 1)),
+                Some(run) if run.2.cell() == a.cell() => run.1 = c + 1,
+                _ => runs.push((c, c + 1, a)),
             }
         }
         Self {
-            offsets: axes.iter().map(|a| a.offset()).collect(),
-            fades: axes.iter().map(|a| a.fade()).collect(),
-            axes,
+            offsets,
+            fades,
             runs,
         }
     }
