@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from sitgen.failures import BROAD_RUNS, classes, distinct_failures, silhouette, split
+from sitgen.failures import BROAD_RUNS, classes, distinct_failures, silhouette, split, ward_parts
 from sitgen.store import SCHEMA_VERSION, Store
 
 from .conftest import run_cli
@@ -219,21 +219,22 @@ def test_silhouette_is_scikit_learn_s(n: int, dims: int, k: int, ties: bool, see
     labels = np.unique(rng.integers(0, k, n), return_inverse=True)[1]
     if not 2 <= labels.max() + 1 < n:
         return
-    assert silhouette(x, labels) == pytest.approx(silhouette_score(x, labels), abs=1e-12)
+    from scipy.spatial.distance import cdist
+
+    assert silhouette(cdist(x, x), labels) == pytest.approx(silhouette_score(x, labels), abs=1e-12)
 
 
 @settings(max_examples=100, deadline=None)
 @given(n=st.integers(5, 80), dims=st.integers(1, 6), seed=st.integers(0, 2**32 - 1))
 def test_the_ward_cut_is_scikit_learn_s_where_no_merges_tie(n: int, dims: int, seed: int) -> None:
-    """SciPy's Ward tree cut into k parts is the partition scikit-learn's
+    """The split's Ward parts (SciPy's tree, cut) are the partition scikit-learn's
     AgglomerativeClustering gives (points in general position: no two merges cost the same)."""
-    from scipy.cluster.hierarchy import cut_tree, linkage
     from sklearn.cluster import AgglomerativeClustering
 
     x = np.random.default_rng(seed).normal(size=(n, dims))
-    tree = linkage(x, method="ward")
-    for k in (2, 3, 4):
-        ours = cut_tree(tree, n_clusters=[k]).ravel()
+    parts = ward_parts(x, (2, 3, 4))
+    assert sorted(parts) == [2, 3, 4]
+    for k, ours in parts.items():
         theirs = AgglomerativeClustering(n_clusters=k, linkage="ward").fit_predict(x)
         pairs = set(zip(ours.tolist(), theirs.tolist(), strict=True))
         assert len(pairs) == k, "the same parts, numbered either way"

@@ -161,26 +161,21 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
     and its runs fall into clearly separated groups that words can tell apart."""
     if len(runs) < BROAD_RUNS:
         return [([], runs)]
-    # SciPy's hierarchy, not scikit-learn's AgglomerativeClustering (the same Ward tree):
-    # importing scikit-learn took about a second at the end of every campaign.
-    from scipy.cluster.hierarchy import cut_tree, linkage
+    from scipy.spatial.distance import cdist
 
     x, names = _features(runs)
     step = max(1, math.ceil(len(runs) / MAX_CLUSTERED))
     sample = x[::step]
     if len(np.unique(sample, axis=0)) < 2:
         return [([], runs)]
-    tree = linkage(sample, method="ward")
+    distance = cdist(sample, sample)
     best: tuple[float, np.ndarray] | None = None
-    for k in (2, 3, 4):
-        if len(sample) <= k:
-            break
-        labels = cut_tree(tree, n_clusters=[k]).ravel()
+    for k, labels in ward_parts(sample, (2, 3, 4)).items():
         centres = np.array([sample[labels == c].mean(axis=0) for c in range(k)])
         gaps = np.linalg.norm(centres[:, None, :] - centres[None, :, :], axis=2)
         if gaps[np.triu_indices(k, 1)].min() < MIN_SEPARATION:
             continue
-        quality = silhouette(sample, labels)
+        quality = silhouette(distance, labels)
         if best is None or quality > best[0] + 1e-12:
             best = (quality, labels)
     if best is None or best[0] < MIN_SILHOUETTE:
@@ -204,26 +199,35 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
     )
 
 
-def silhouette(x: np.ndarray, labels: np.ndarray) -> float:
-    """Mean silhouette of a clustering of ``x`` (rows are points, Euclidean distance; labels
-    0 … k−1, k ≥ 2): for each point, (b − a) / max(a, b), where a is its mean distance to the
-    rest of its cluster and b its least mean distance to another cluster; 0 for a point alone
-    in its cluster (Rousseeuw 1987). Written out (a dozen lines) because scikit-learn's
-    ``silhouette_score`` costs a second to import; a test checks the two agree."""
-    from scipy.spatial.distance import cdist
+def ward_parts(x: np.ndarray, ks: Sequence[int]) -> dict[int, np.ndarray]:
+    """The points ``x`` (rows) cut into k parts by one Ward tree, for each k in ``ks`` below
+    the number of points: labels 0 … k−1 per point. SciPy's hierarchy, not scikit-learn's
+    AgglomerativeClustering (the same Ward tree; a test checks the parts agree): importing
+    scikit-learn took about a second at the end of every campaign."""
+    from scipy.cluster.hierarchy import cut_tree, linkage
 
-    distance = cdist(x, x)
+    tree = linkage(x, method="ward")
+    return {k: cut_tree(tree, n_clusters=[k]).ravel() for k in ks if k < len(x)}
+
+
+def silhouette(distance: np.ndarray, labels: np.ndarray) -> float:
+    """Mean silhouette of a clustering of points whose pairwise distances are ``distance``
+    (labels 0 … k−1, k ≥ 2): for each point, (b − a) / max(a, b), where a is its mean distance
+    to the rest of its cluster and b its least mean distance to another cluster; 0 for a point
+    alone in its cluster (Rousseeuw 1987). Written out (a dozen lines) because scikit-learn's
+    ``silhouette_score`` costs a second to import; a test checks the two agree. The split
+    computes the distances once for every k it tries."""
+    points = np.arange(len(distance))
     k = int(labels.max()) + 1
     size = np.bincount(labels, minlength=k).astype(float)
     sums = np.stack([distance[:, labels == c].sum(axis=1) for c in range(k)], axis=1)
-    points = np.arange(len(x))
     own = size[labels]
     a = sums[points, labels] / np.maximum(own - 1.0, 1.0)
     mean_to = sums / size
     mean_to[points, labels] = np.inf
     b = mean_to.min(axis=1)
     spread = np.maximum(a, b)
-    s = np.divide(b - a, spread, out=np.zeros(len(x)), where=(own > 1) & (spread > 0))
+    s = np.divide(b - a, spread, out=np.zeros(len(distance)), where=(own > 1) & (spread > 0))
     return float(s.mean())
 
 
