@@ -33,8 +33,11 @@ use crate::situation::Situation;
 use crate::spec::{join, SpecError};
 
 pub mod episodes;
+pub mod perturb;
 pub mod profile;
 pub mod serve;
+
+pub use perturb::Perturbation;
 
 /// How to run a situation.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -63,6 +66,10 @@ pub struct RunSpec {
     /// Penalties.
     #[serde(default)]
     pub scoring: ScoringSpec,
+    /// Run a perturbed copy of the situation instead of the situation itself: sensor noise
+    /// and start offsets a real robot would not notice ([`perturb`]). Default none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perturbation: Option<Perturbation>,
 }
 
 fn default_time_limit_s() -> f64 {
@@ -78,6 +85,7 @@ impl Default for RunSpec {
             sim: SimSpec::default(),
             monitor: MonitorSpec::default(),
             scoring: ScoringSpec::default(),
+            perturbation: None,
         }
     }
 }
@@ -102,8 +110,20 @@ impl RunSpec {
             control::check(c, &path)?;
             control::period_steps(c, self.sim.dt_s, &path)?;
         }
+        if let Some(p) = &self.perturbation {
+            p.validate(&join(path, "perturbation"))?;
+        }
         self.monitor.validate(&join(path, "monitor"))?;
         self.scoring.validate(&join(path, "scoring"))
+    }
+
+    /// The simulator settings and sensor-noise seed of a run with seed `seed`: the spec's own,
+    /// or its perturbed copy's.
+    fn world_settings(&self, seed: u64) -> (SimSpec, u64) {
+        match &self.perturbation {
+            Some(p) => (p.sim(&self.sim), p.seed(seed)),
+            None => (self.sim.clone(), seed),
+        }
     }
 
     /// Parse and validate a run spec from JSON, its profile (if it names one) laid under its
@@ -209,7 +229,8 @@ impl Run {
     /// its command from [`Run::step`].
     pub fn new(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<Self, SpecError> {
         spec.validate("run")?;
-        let world = World::new(situation, spec.sim.clone(), seed)?;
+        let (sim, world_seed) = spec.world_settings(seed);
+        let world = World::new(situation, sim, world_seed)?;
         Self::in_world(situation, spec, world)
     }
 
@@ -224,17 +245,25 @@ impl Run {
         to_occupied: &[f64],
     ) -> Result<Self, SpecError> {
         spec.validate("run")?;
-        let world = World::with_distances(situation, map, to_occupied, spec.sim.clone(), seed)?;
+        let (sim, world_seed) = spec.world_settings(seed);
+        let world = World::with_distances(situation, map, to_occupied, sim, world_seed)?;
         Self::in_world(situation, spec, world)
     }
 
-    /// The run of `situation` in `world`, its start (`spec` checked).
+    /// The run of `situation` in `world`, its start (`spec` checked); a perturbed copy's
+    /// robots start jittered, drawn from the world's seed (the copy's).
     fn in_world(
         situation: &Situation,
         spec: &RunSpec,
         mut world: World,
     ) -> Result<Self, SpecError> {
         world.check_start()?;
+        let copy_seed = world.seed();
+        let jittered = spec
+            .perturbation
+            .as_ref()
+            .map(|p| p.jitter_starts(situation, &mut world, copy_seed));
+        let situation = jittered.as_ref().unwrap_or(situation);
         let monitor = Monitor::new(situation, &world, &spec.monitor);
         let agent = monitor.agent();
         let coverage = Observer::new(&world, agent, spec.monitor.attribution_window_s);

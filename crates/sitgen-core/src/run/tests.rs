@@ -662,3 +662,117 @@ fn a_world_given_another_map_s_distances_is_refused() {
         "map: the decoded map and its distances are not the situation's map"
     );
 }
+
+/// Rerun `k` of `s` (spec `controller`, 20 s), perturbed at the default sizes.
+fn perturbed_copy(s: &Situation, k: u32) -> RunRecord {
+    let spec = RunSpec {
+        perturbation: Some(Perturbation::copy(k)),
+        ..spec(Some("snd_follow"), 20.0)
+    };
+    run(s, &spec, 5).unwrap()
+}
+
+#[test]
+fn perturbed_copies_start_within_a_centimetre_and_half_a_degree_and_are_reproducible() {
+    let s = rear_approach();
+    let plain = run(&s, &spec(Some("snd_follow"), 20.0), 5).unwrap();
+    let mut firsts = Vec::new();
+    for k in 1..=8 {
+        let copy = perturbed_copy(&s, k);
+        assert_eq!(
+            copy,
+            perturbed_copy(&s, k),
+            "copy {k} is the same copy every time"
+        );
+        for r in &s.robots {
+            let t = &copy.trajectory[3 * r.id as usize..3 * r.id as usize + 3];
+            let offset = (t[0] - r.start.x_m).hypot(t[1] - r.start.y_m);
+            let turn = crate::sim::wrap_angle(t[2] - r.start.heading_rad).abs();
+            assert!(
+                offset <= perturb::START_POSITION_M + 1e-12,
+                "copy {k}: {offset} m"
+            );
+            assert!(turn <= perturb::START_HEADING_DEG.to_radians() + 1e-12);
+            assert!(offset > 0.0 || turn > 0.0, "copy {k} moved robot {}", r.id);
+        }
+        firsts.push(copy.trajectory[..6].to_vec());
+        assert_ne!(copy.trajectory, plain.trajectory);
+    }
+    firsts.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    firsts.dedup();
+    assert_eq!(firsts.len(), 8, "every copy starts elsewhere");
+}
+
+#[test]
+fn a_perturbed_copy_reads_the_laser_with_noise() {
+    let s = situation(
+        100,
+        &crate::test_data::block(100, (6.0, 7.0), (3.0, 7.0)),
+        vec![robot(0, (3.0, 5.0, 0.0), &[[4.0, 5.0]], "snd_follow")],
+    );
+    let spec = RunSpec {
+        perturbation: Some(Perturbation {
+            start_position_m: 0.0,
+            start_heading_deg: 0.0,
+            ..Perturbation::copy(1)
+        }),
+        ..RunSpec::default()
+    };
+    let mut plain = Run::new(&s, &RunSpec::default(), 5).unwrap();
+    let mut noisy = Run::new(&s, &spec, 5).unwrap();
+    let (a, b) = (plain.agent_observation(), noisy.agent_observation());
+    assert_eq!(a.pose, b.pose, "no start jitter asked for");
+    let differ = a
+        .ranges
+        .iter()
+        .zip(&b.ranges)
+        .filter(|(x, y)| x != y)
+        .count();
+    // 5 mm of noise on 1 cm steps moves about a third of the wall's readings a step.
+    assert!(differ > 10, "{differ} beams differ");
+    let worst = a
+        .ranges
+        .iter()
+        .zip(&b.ranges)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    assert!(worst <= 0.03 + 1e-9, "{worst} m");
+}
+
+#[test]
+fn a_robot_is_not_placed_where_it_cannot_stand() {
+    let s = situation(
+        100,
+        &crate::test_data::block(100, (5.0, 6.0), (0.0, 10.0)),
+        vec![robot(0, (4.0, 5.0, 0.0), &[[3.0, 5.0]], "snd_follow")],
+    );
+    let mut world = World::new(&s, Default::default(), 0).unwrap();
+    let into_wall = crate::situation::Pose {
+        x_m: 4.9,
+        ..s.robots[0].start
+    };
+    assert!(!world.place_at_start(0, into_wall));
+    assert_eq!(world.robots()[0].pose, s.robots[0].start);
+    let clear = crate::situation::Pose {
+        x_m: 4.01,
+        ..s.robots[0].start
+    };
+    assert!(world.place_at_start(0, clear));
+    assert_eq!(world.robots()[0].pose, clear);
+}
+
+#[test]
+fn a_perturbation_out_of_range_is_refused_with_its_field() {
+    let e = RunSpec::from_json(
+        r#"{"perturbation": {"rerun": 1, "start_position_m": 2}}"#,
+        "run",
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("run.perturbation.start_position_m"),
+        "{e}"
+    );
+    let e = RunSpec::from_json(r#"{"perturbation": {}}"#, "run").unwrap_err();
+    assert!(e.to_string().contains("rerun"), "{e}");
+}

@@ -393,6 +393,11 @@ impl World {
         self.time_s
     }
 
+    /// The seed sensor noise is drawn from.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
     /// Steps taken.
     pub fn steps(&self) -> u64 {
         self.steps
@@ -498,6 +503,19 @@ impl World {
             ));
         }
         Ok(())
+    }
+
+    /// Put robot `i` at `pose` before the first step, if it can stand there (inside the map,
+    /// clear of obstacles and of every other robot where it stands now); whether it moved.
+    /// Perturbed copies of a run ([`crate::run::perturb`]) start this way.
+    pub fn place_at_start(&mut self, i: usize, pose: Pose) -> bool {
+        assert_eq!(self.steps, 0, "a robot is placed before the first step");
+        let finite = pose.x_m.is_finite() && pose.y_m.is_finite() && pose.heading_rad.is_finite();
+        if !finite || !self.contacts_at(i, &pose).is_empty() {
+            return false;
+        }
+        self.robots[i].pose = pose;
+        true
     }
 
     /// What robot `i` would overlap at `pose`: the grid (or the map's edge) and other robots.
