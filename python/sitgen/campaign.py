@@ -202,6 +202,14 @@ class Job:
     """The run spec."""
     error: str | None = None
     """Why the job could not be built (its draws made a bad spec); it is stored, not run."""
+    run_seed: int | None = None
+    """The run's sensor-noise seed, where it is not the situation's seed (a stored run's
+    perturbed copies, :mod:`sitgen.robustness`)."""
+
+    @property
+    def noise_seed(self) -> int:
+        """The seed the run draws its sensor noise from."""
+        return self.seed if self.run_seed is None else self.run_seed
 
     @property
     def controller(self) -> str:
@@ -413,7 +421,7 @@ def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
         situation_spec=job.situation,
         situation_json=result.get("situation"),
         run_spec=job.run,
-        run_seed=job.seed,
+        run_seed=job.noise_seed,
         controller=job.controller,
         record=record,
         error=None if result["ok"] else result["error"],
@@ -424,19 +432,23 @@ def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
 
 
 def _core_args(job: Job) -> tuple[str, int, str, int]:
-    return (json.dumps(job.situation), job.seed, json.dumps(job.run), job.seed)
+    return (json.dumps(job.situation), job.seed, json.dumps(job.run), job.noise_seed)
 
 
 def run_user_job(job: Job) -> dict[str, Any]:
     """One job with a Python or external controller (in a worker process)."""
     from sitgen.run import run
-    from sitgen.situation import generate_situation
+    from sitgen.situation import Situation, generate_situation
 
     try:
-        situation = generate_situation(job.situation, seed=job.seed)
+        situation = (
+            Situation(json.dumps(job.situation), check_start=False)
+            if "format" in job.situation
+            else generate_situation(job.situation, seed=job.seed)
+        )
     except (_core.GenerationFailed, _core.SpecError) as e:
         return {"ok": False, "error": f"generation failed: {e}"}
-    rec = run(situation, controller=job.controller, seed=job.seed, spec=job.run)
+    rec = run(situation, controller=job.controller, seed=job.noise_seed, spec=job.run)
     record = {
         "outcome": rec.outcome,
         "reason": rec.reason,

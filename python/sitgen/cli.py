@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import sqlite3
 import sys
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -50,6 +52,16 @@ WorkersOption = Annotated[
     int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
 ]
 BackendOption = Annotated[str, typer.Option("--backend", help="local or ray.")]
+RerunsOption = Annotated[
+    int,
+    typer.Option(
+        "--reruns",
+        min=0,
+        max=1000,
+        help="Perturbed copies of each distinct failure's representative run at the end, to "
+        "tell robust failures from knife-edge ones (docs/failures.md); 0: none.",
+    ),
+]
 AddressOption = Annotated[
     str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
 ]
@@ -608,9 +620,11 @@ def campaign(
             "Default top:50, the runs the report shows.",
         ),
     ] = None,
+    reruns: RerunsOption = 8,
 ) -> None:
-    """Generate N randomised situations, run them all, store them, rank the runs.
-    Ctrl-C stops after the runs in flight; the same command again resumes."""
+    """Generate N randomised situations, run them all, store them, rank the runs, and measure
+    the robustness of each distinct failure. Ctrl-C stops after the runs in flight; the same
+    command again resumes."""
     from sitgen.campaign import DEFAULT_KEEP, run_campaign
 
     parsed = _campaign_spec(spec)
@@ -632,6 +646,8 @@ def campaign(
             keep_trajectories=keep_trajectories or DEFAULT_KEEP,
         ),
     )
+    if not result.interrupted:
+        _measure_robustness(db, reruns, workers)
     _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
     if shrink_top:
         _shrink_top(db, shrink_top, workers)
@@ -673,10 +689,28 @@ def _echo_stored(
     for f in s["distinct"][:top]:
         typer.echo(
             f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
-            f"{f['description']}"
+            f"{f['robustness']:<17}  {f['description']}"
         )
     if interrupted:
         raise typer.Exit(130)
+
+
+def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
+    """Measure the robustness of the store's distinct failures with ``reruns`` copies each
+    (none if 0) and say what it cost."""
+    from sitgen.failures import measure_robustness
+    from sitgen.store import Store
+
+    if reruns == 0:
+        return
+    started = time.perf_counter()
+    with Store(db) as store:
+        ran = measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+    if ran:
+        typer.echo(
+            f"robustness: {ran} perturbed copies of distinct failures' runs in "
+            f"{time.perf_counter() - started:.1f} s"
+        )
 
 
 def _shrink_top(db: Path, k: int, workers: int | None) -> None:
@@ -842,6 +876,7 @@ def search(
     address: AddressOption = None,
     top: Annotated[int, typer.Option("--top", help="Distinct failures in the summary.")] = 5,
     weights: WeightsOption = None,
+    reruns: RerunsOption = 8,
 ) -> None:
     """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
     situation seed, each cell of the archive (failure class × terrain by default) holding its
@@ -885,6 +920,8 @@ def search(
         )
 
     result = _stored("search", budget, "runs", work)
+    if not result.interrupted:
+        _measure_robustness(db, reruns, workers)
     _echo_stored(
         db,
         result.ran,
@@ -1052,7 +1089,10 @@ def rank(
         raise UsageError(str(e)) from None
     if format == "table":
         table = Table(title=f"{db}: top {len(rows)} runs")
-        columns = ("rank", "run", "score", "outcome", "failure class", "main events", "terrain")
+        columns = (
+            "rank", "run", "score", "outcome", "failure class", "main events", "terrain",
+            "robustness",
+        )  # fmt: skip
         for column in columns:
             table.add_column(
                 column, justify="right" if column in ("rank", "run", "score") else "left"
@@ -1061,7 +1101,7 @@ def rank(
             table.add_row(
                 str(r["rank"]), str(r["run"]), f"{r['score']:.1f}", r["outcome"],
                 r.get("distinct") or r["failure_class"] or "", r["main_events"],
-                str(r["terrain"]),
+                str(r["terrain"]), r["robustness"],
             )  # fmt: skip
         Console(width=160).print(table)
     else:
@@ -1091,12 +1131,15 @@ def failures(
         write_failures(found, format, sys.stdout)
         return
     table = Table(title=f"{db}: {len(found)} distinct failures")
-    for column in ("class", "failure", "runs", "share", "best score", "run", "median s"):
-        table.add_column(column, justify="left" if column in ("class", "failure") else "right")
+    columns = ("class", "failure", "runs", "share", "best score", "run", "median s", "robustness")
+    for column in columns:
+        table.add_column(
+            column, justify="left" if column in ("class", "failure", "robustness") else "right"
+        )
     for f in found:
         table.add_row(
             f.key, f.description, str(f.runs), f"{100 * f.share:.1f}%", f"{f.best_score:.1f}",
-            str(f.representative), f"{f.median_duration_s:.1f}",
+            str(f.representative), f"{f.median_duration_s:.1f}", f.robustness,
         )  # fmt: skip
     Console(width=200).print(table)
 
@@ -1177,6 +1220,62 @@ def rerun(
 
 
 @app.command()
+def robustness(
+    db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],
+    run_ids: Annotated[
+        list[int] | None,
+        typer.Argument(help="Failing runs to measure (default: every distinct failure's)."),
+    ] = None,
+    reruns: Annotated[
+        int, typer.Option("--reruns", min=1, max=1000, help="Perturbed copies of each run.")
+    ] = 8,
+    workers: WorkersOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Rerun failing runs under perturbations a real robot would not notice (laser noise at
+    the LMS200's level, starts jittered by a centimetre and half a degree) and say in how
+    many copies each one's failure class recurs: robust or knife-edge (docs/failures.md).
+    Stored; `failures`, `rank` and `report` show it."""
+    from sitgen.failures import distinct_failures, measure_robustness
+    from sitgen.robustness import measure_runs, tally, verdict
+    from sitgen.store import Store
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    require_store(db)
+    for run_id in run_ids or []:
+        if not 0 <= run_id < 2**63:
+            raise UsageError(f"RUN_IDS: {run_id} is not a run id (0 to 2^63 - 1)")
+    with Store(db) as store:
+        if run_ids:
+            for run_id in run_ids:
+                if store.run_row(run_id)["failure"] is None:
+                    raise UsageError(f"run {run_id}: it did not fail; robustness is a failure's")
+            measure_runs(store, run_ids, reruns, workers or os.cpu_count() or 1)
+            wanted = list(run_ids)
+        else:
+            measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+            wanted = [f.representative for f in distinct_failures(store)]
+        measured = store.robustness(wanted)
+    rows = [measured[r] for r in wanted if r in measured]
+    if format == "json":
+        for r in rows:
+            r["robust"] = verdict(r["recurs"], r["reruns"]) == "robust"
+        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
+    table = Table(title=f"{db}: robustness of {len(rows)} failing runs")
+    for column in ("run", "class", "recurs", "verdict", "copies' classes"):
+        table.add_column(column, justify="right" if column == "run" else "left")
+    for r in rows:
+        table.add_row(
+            str(r["run_id"]), r["failure_class"], f"{r['recurs']}/{r['reruns']}",
+            verdict(r["recurs"], r["reruns"]), tally(r["classes"]),
+        )  # fmt: skip
+    Console(width=200).print(table)
+
+
+@app.command()
 def demo(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for everything.")] = Path(
         "demo"
@@ -1224,6 +1323,7 @@ def demo(
         typer.echo("stopped early: run the same command again to finish")
         raise typer.Exit(130)
     typer.echo(f"{result.total} runs stored ({result.ran} run now in {result.wall_s:.1f} s)")
+    _measure_robustness(db, 8, None)
     report_dir = output / "report"
     write_report(db, report_dir, 50)
     failures(db, "table")

@@ -22,6 +22,7 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.rank import write_rows
+from sitgen.robustness import CANDIDATES, RERUNS, check_reruns, is_robust, measure_runs
 from sitgen.store import Store
 
 BROAD_RUNS = 20
@@ -68,14 +69,38 @@ class DistinctFailure:
     """Of all runs of the campaign."""
     best_score: float
     representative: int
-    """The highest-scoring run (lowest id on ties)."""
+    """Its highest-scoring robust run where one was measured robust, else its highest-scoring
+    run (lowest id on ties)."""
     median_duration_s: float
     """Median over its runs of how long the deciding events lasted."""
     run_ids: list[int] = field(default_factory=list)
+    recurs: int | None = None
+    """In how many perturbed copies of the representative its class recurred (None: not
+    measured; ``sitgen robustness``)."""
+    reruns: int | None = None
+    """How many copies of the representative were run."""
+    rerun_classes: list[str | None] = field(default_factory=list)
+    """Each copy's failure class (None: no failure)."""
+
+    @property
+    def robust(self) -> bool | None:
+        """Whether the representative's failure is robust (None: not measured)."""
+        if self.recurs is None or self.reruns is None:
+            return None
+        return is_robust(self.recurs, self.reruns)
+
+    @property
+    def robustness(self) -> str:
+        """``robust 7/8``, ``knife-edge 3/8``, or ``unmeasured``."""
+        if self.recurs is None or self.reruns is None:
+            return "unmeasured"
+        return f"{'robust' if self.robust else 'knife-edge'} {self.recurs}/{self.reruns}"
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["class"] = d.pop("failure_class")
+        d["robust"] = self.robust
+        d["robustness"] = self.robustness
         return d
 
 
@@ -94,21 +119,36 @@ def distinct_failures(store: Store) -> list[DistinctFailure]:
             {"id": run_id, "score": score, "terrain": terrain, **f["features"]}
         )
     sentences = dict(classes())
+    measured = store.robustness()
     out = []
     for key, runs in by_class.items():
         for marks, part in split(runs):
             words = [w for w, _ in marks]
             description = sentences.get(key, key) + (f", {', '.join(words)}" if words else "")
             sub_key = "/".join([key, *[t for _, t in marks]])
-            out.append(_group(sub_key, key, description, part, total))
+            out.append(_group(sub_key, key, description, part, total, measured))
     out.sort(key=lambda d: (-d.best_score, d.key))
     return out
 
 
 def _group(
-    key: str, failure_class: str, description: str, runs: list[dict[str, Any]], total: int
+    key: str,
+    failure_class: str,
+    description: str,
+    runs: list[dict[str, Any]],
+    total: int,
+    measured: dict[int, dict[str, Any]],
 ) -> DistinctFailure:
-    best = min(runs, key=lambda r: (-r["score"], r["id"]))
+    by_score = sorted(runs, key=lambda r: (-r["score"], r["id"]))
+    best = by_score[0]
+    robust = [
+        r
+        for r in by_score
+        if r["id"] in measured
+        and is_robust(measured[r["id"]]["recurs"], measured[r["id"]]["reruns"])
+    ]
+    representative = robust[0] if robust else best
+    own = measured.get(representative["id"])
     return DistinctFailure(
         key=key,
         failure_class=failure_class,
@@ -116,10 +156,46 @@ def _group(
         runs=len(runs),
         share=len(runs) / total if total else 0.0,
         best_score=best["score"],
-        representative=best["id"],
+        representative=representative["id"],
         median_duration_s=statistics.median(float(r.get("seconds", 0.0)) for r in runs),
         run_ids=sorted(r["id"] for r in runs),
+        recurs=None if own is None else own["recurs"],
+        reruns=None if own is None else own["reruns"],
+        rerun_classes=[] if own is None else list(own["classes"]),
     )
+
+
+def candidates(failure: DistinctFailure, scores: dict[int, float], most: int) -> list[int]:
+    """A distinct failure's ``most`` highest-scoring runs, best first (lowest id on ties):
+    the runs its representative is chosen among."""
+    return sorted(failure.run_ids, key=lambda i: (-scores[i], i))[:most]
+
+
+def measure_robustness(store: Store, reruns: int = RERUNS, workers: int = 1) -> int:
+    """Measure the robustness of every distinct failure's candidates for representative: its
+    highest-scoring runs, best first, until one is robust (at most ``CANDIDATES``), each
+    round of candidates run as one batch. A run measured before with as many copies is not
+    run again, so a resumed or repeated call costs nothing more. Returns the copies run."""
+    reruns = check_reruns(reruns)
+    scores = dict(store.db.execute("SELECT id, score FROM runs WHERE failure_class IS NOT NULL"))
+    groups = [candidates(f, scores, CANDIDATES) for f in distinct_failures(store)]
+    ran = 0
+    for depth in range(CANDIDATES):
+        stored = store.robustness()
+        wanted: list[int] = []
+        for runs in groups:
+            if depth >= len(runs):
+                continue
+            earlier = [stored.get(r) for r in runs[:depth]]
+            if any(d is None or is_robust(d["recurs"], d["reruns"]) for d in earlier):
+                continue
+            run_id = runs[depth]
+            if run_id not in stored or stored[run_id]["reruns"] != reruns:
+                wanted.append(run_id)
+        if wanted:
+            measure_runs(store, wanted, reruns, workers)
+            ran += len(wanted) * reruns
+    return ran
 
 
 SPEED_SCALE_M_S = 0.2
@@ -297,6 +373,10 @@ FAILURE_COLUMNS = (
     "best_score",
     "representative",
     "median_duration_s",
+    "robustness",
+    "robust",
+    "recurs",
+    "reruns",
 )
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from sitgen import _core
+from sitgen.robustness import verdict
 from sitgen.store import Store, events_digest
 
 if TYPE_CHECKING:
@@ -34,6 +35,7 @@ RANK_COLUMNS = (
     "controller",
     "situation_seed",
     "reason",
+    "robustness",
 )
 
 TABLES = ("campaign", "situations", "runs", "events", "trajectories", "judgements")
@@ -69,7 +71,19 @@ def ranked_rows(
             chosen = {f.representative for f in failures}
             rows = first + [r for r in rows if r["run"] not in chosen]
             rows = rows[:top] if top is not None else rows
-    return [{"rank": i + 1, **r} for i, r in enumerate(rows)]
+        measured = store.robustness(r["run"] for r in rows)
+    return [
+        {"rank": i + 1, **r, "robustness": robustness_of(measured.get(r["run"]))}
+        for i, r in enumerate(rows)
+    ]
+
+
+def robustness_of(measured: dict[str, Any] | None) -> str:
+    """A run's stored robustness as ``robust 7/8`` or ``knife-edge 3/8``; '' if unmeasured."""
+    if measured is None:
+        return ""
+    recurs, reruns = measured["recurs"], measured["reruns"]
+    return f"{verdict(recurs, reruns)} {recurs}/{reruns}"
 
 
 def write_ranking(rows: list[dict[str, Any]], format: str, out: TextIO) -> None:

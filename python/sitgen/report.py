@@ -30,6 +30,7 @@ from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
 from sitgen.recall import whole_run
+from sitgen.robustness import tally, verdict
 from sitgen.search import SearchReplay, elite_grid, replay
 from sitgen.situation import Situation
 from sitgen.store import KINDS, Store, main_events
@@ -51,6 +52,8 @@ canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
 .card img { width: 100%; height: 250px; object-fit: contain; background: #fff;
   border: 1px solid #ccc; display: block; } .muted { color: #666; }
 td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
+.robustness.robust b, #robustness.robust b { color: #1e7b34; }
+.robustness.knife-edge b, #robustness.knife-edge b { color: #a15c00; }
 mark { background: #fde2b8; } #archive td { min-width: 4em; font-size: 12px; }
 #archive td.empty { background: #fafafa; }
 #coverage-grid td { width: 1.4em; height: 1.1em; font-size: 10px; text-align: center;
@@ -169,7 +172,8 @@ def _distinct_section(
     body.append(
         f"<p class='muted'>{failing} of {total} runs fall into {len(failures)} distinct "
         "failures (a failure class, a broad one split by behaviour), most dangerous first; "
-        "each shows its representative, its highest-scoring run.</p><div class='cards'>"
+        "each shows its representative: its highest-scoring run that recurs robustly under "
+        "perturbation where one does, else its highest-scoring run.</p><div class='cards'>"
     )
     for f in failures:
         run_id = f.representative
@@ -198,8 +202,8 @@ def _distinct_section(
             f"<h3 title='{html.escape(f.key)}'>{html.escape(f.description)}</h3>"
             f"<p>{f.runs} run{'s' if f.runs != 1 else ''} ({f.share:.1%} of all), "
             f"best score <b>{f.best_score:.1f}</b>, median duration "
-            f"{f.median_duration_s:.1f} s</p>{figure}<p>representative: {link}</p>"
-            "</div>"
+            f"{f.median_duration_s:.1f} s</p>{_robustness_line(f)}{figure}"
+            f"<p>representative: {link}</p></div>"
         )
     body.append("</div></section>")
     return "".join(body)
@@ -759,6 +763,8 @@ def run_page(
         i for i in (failure or {}).get("events", []) if isinstance(i, int) and 0 <= i < len(events)
     )
     body.append(_failure_section(failure, events, distinct, run_id))
+    if failure is not None and not blind:
+        body.append(_run_robustness(store.robustness([run_id]).get(run_id)))
     if not blind:
         body.append(_why_this_rank(breakdown, row["score"]))
     body.append("<h2>Replay</h2><p class='controls'><button id='play'>play</button>")
@@ -870,6 +876,46 @@ def _minimal_section(store: Store, run_id: int, out: Path) -> str:
         f"<img class='figure' src='{name}.png' alt='minimal situation of run {run_id}'>"
         f"<p><a href='{name}.json'>{name}.json</a>, <a href='{name}.run.json'>{name}.run.json"
         f"</a>; in this folder: <code>{html.escape(command)}</code></p></section>"
+    )
+
+
+def _robustness_line(f: DistinctFailure) -> str:
+    """A distinct failure's robustness as a card shows it: robust or knife-edge, how often
+    its representative's class recurred, and what the copies did instead."""
+    if f.recurs is None or f.reruns is None:
+        return (
+            "<p class='robustness' data-robust=''>robustness: not measured "
+            "(<code>sitgen robustness</code>)</p>"
+        )
+    word = "robust" if f.robust else "knife-edge"
+    return (
+        f"<p class='robustness {word}' data-robust='{str(f.robust).lower()}' "
+        f"data-recurs='{f.recurs}' data-reruns='{f.reruns}'><b>{word}</b>: recurs in "
+        f"{f.recurs} of {f.reruns} perturbed reruns "
+        f"<span class='muted'>({html.escape(tally(f.rerun_classes))})</span></p>"
+    )
+
+
+def _run_robustness(measured: dict[str, Any] | None) -> str:
+    """A run page's robustness paragraph: robust or knife-edge, with every copy's class."""
+    if measured is None:
+        return (
+            "<p id='robustness' data-robust=''>Robustness: not measured "
+            "(<code>sitgen robustness DB RUN</code> reruns it under perturbation).</p>"
+        )
+    recurs, reruns = measured["recurs"], measured["reruns"]
+    word = verdict(recurs, reruns)
+    copies = "".join(
+        f"<li>copy {k}: <code>{html.escape(c or 'no failure')}</code></li>"
+        for k, c in enumerate(measured["classes"], 1)
+    )
+    return (
+        f"<p id='robustness' class='{word}' data-robust='{str(word == 'robust').lower()}' "
+        f"data-recurs='{recurs}' data-reruns='{reruns}'>Robustness: <b>{word}</b>, its class "
+        f"recurs in {recurs} of {reruns} reruns under perturbations a real robot would not "
+        "notice (laser noise, starts jittered by a centimetre and half a degree).</p>"
+        f"<details><summary>each rerun's class</summary><ul id='rerun-classes'>{copies}</ul>"
+        "</details>"
     )
 
 

@@ -24,7 +24,7 @@ import numpy.typing as npt
 if TYPE_CHECKING:
     from sitgen.weights import Judgement, Weights
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (
@@ -149,6 +149,18 @@ CREATE TABLE IF NOT EXISTS judgements (
 );
 """
 
+ROBUSTNESS_SCHEMA = """
+CREATE TABLE IF NOT EXISTS robustness (
+    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
+    failure_class TEXT NOT NULL,
+    reruns INTEGER NOT NULL,
+    recurs INTEGER NOT NULL,
+    classes TEXT NOT NULL,
+    perturbation TEXT NOT NULL,
+    sitgen_version TEXT NOT NULL
+);
+"""
+
 TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
@@ -237,7 +249,12 @@ class Store:
         if version is None:
             with self.db:
                 self.db.executescript(
-                    SCHEMA + FAULT_SCHEMA + SHRINK_SCHEMA + SEARCH_SCHEMA + JUDGEMENT_SCHEMA
+                    SCHEMA
+                    + FAULT_SCHEMA
+                    + SHRINK_SCHEMA
+                    + SEARCH_SCHEMA
+                    + JUDGEMENT_SCHEMA
+                    + ROBUSTNESS_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -297,6 +314,10 @@ class Store:
                 # Version 8 adds an expert's pairwise judgements of runs (sitgen judge): one
                 # table, empty until then.
                 self.db.executescript(JUDGEMENT_SCHEMA)
+            if version < 9:
+                # Version 9 adds the robustness of failing runs (reruns under perturbation):
+                # one table, empty until a campaign, search or `sitgen robustness` fills it.
+                self.db.executescript(ROBUSTNESS_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -466,6 +487,48 @@ class Store:
                 f"VALUES ({', '.join('?' for _ in columns)})",
                 (run_id, *row.values()),
             )
+
+    def record_robustness(self, rows: Iterable[dict[str, Any]]) -> None:
+        """Store (or replace) failing runs' robustness: the columns of ``robustness``
+        (``classes`` and ``perturbation`` as JSON-able values), in one transaction."""
+        with self.db:
+            for row in rows:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO robustness (run_id, failure_class, reruns, recurs, "
+                    "classes, perturbation, sitgen_version) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        row["run_id"],
+                        row["failure_class"],
+                        row["reruns"],
+                        row["recurs"],
+                        json.dumps(row["classes"]),
+                        json.dumps(row["perturbation"], sort_keys=True),
+                        row["sitgen_version"],
+                    ),
+                )
+
+    def robustness(self, run_ids: Iterable[int] | None = None) -> dict[int, dict[str, Any]]:
+        """The stored robustness of ``run_ids`` (every measured run if None), by run id; a run
+        never measured is absent."""
+        rows = self.db.execute(
+            "SELECT run_id, failure_class, reruns, recurs, classes, perturbation, "
+            "sitgen_version FROM robustness ORDER BY run_id"
+        ).fetchall()
+        wanted = None if run_ids is None else set(run_ids)
+        out: dict[int, dict[str, Any]] = {}
+        for run_id, key, reruns, recurs, classes, perturbation, version in rows:
+            if wanted is not None and run_id not in wanted:
+                continue
+            out[run_id] = {
+                "run_id": run_id,
+                "failure_class": key,
+                "reruns": reruns,
+                "recurs": recurs,
+                "classes": json.loads(classes),
+                "perturbation": json.loads(perturbation),
+                "sitgen_version": version,
+            }
+        return out
 
     def shrink(self, run_id: int) -> dict[str, Any] | None:
         """Run ``run_id``'s shrink result (JSON columns parsed), or None."""

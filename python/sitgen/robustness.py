@@ -1,0 +1,193 @@
+"""Robustness of a failure: in how many of K perturbed copies of a failing run the same
+failure (its base class key) recurs.
+
+A run is deterministic to the bit and still chaotic: a controller nudged by a rounding error
+can fail with another class. So a failure shown to an engineer, or claimed for a fault, is
+checked on copies of its run that a real robot could not tell from the run itself: seeded laser
+noise at the sensor's datasheet level and every robot's start jittered within a centimetre and
+half a degree (``perturbation`` in the run spec; the sizes and why are in the core's
+``run::perturb``, in one place). Copy ``k`` of a run is the run spec with
+``perturbation = {rerun = k}``, drawn from the run's seed, so the figure is reproducible and
+independent of the worker count. A failure that recurs in at least :data:`ROBUST_SHARE` of
+its copies is *robust*; one that recurs less is *knife-edge*.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sitgen import _core
+from sitgen.campaign import Executor, Job, check_workers
+from sitgen.store import Store, StoreError
+
+RERUNS = 8
+"""Perturbed copies of a run, by default: enough to tell 8/8 from 4/8, few enough that the
+distinct failures of a 500-run campaign cost about a tenth of the campaign."""
+MAX_RERUNS = 1000
+"""Most copies of one run (the core's ``perturbation.rerun`` bound)."""
+ROBUST_SHARE = 0.75
+"""A failure recurring in at least this share of its copies (6 of 8) is robust."""
+CANDIDATES = 3
+"""A distinct failure's highest-scoring runs measured, best first, until one is robust."""
+ERROR = "error"
+"""A copy's class where its run failed to run (its controller failed)."""
+
+
+def perturbed(run_spec: dict[str, Any], k: int) -> dict[str, Any]:
+    """Run spec of copy ``k`` (1-based) of a run with ``run_spec``: the same spec, perturbed
+    at the default sizes."""
+    spec = copy.deepcopy(run_spec)
+    spec["perturbation"] = {"rerun": k}
+    return spec
+
+
+def perturbation_sizes() -> dict[str, float]:
+    """The default sizes of a copy's perturbations, as the core resolves them."""
+    import json
+
+    spec = json.loads(_core.check_run_spec(json.dumps(perturbed({}, 1))))
+    sizes: dict[str, float] = spec["perturbation"]
+    return {k: v for k, v in sizes.items() if k != "rerun"}
+
+
+def check_reruns(reruns: int) -> int:
+    """``reruns`` if it is in [1, MAX_RERUNS], else an error naming the option."""
+    if isinstance(reruns, bool) or not isinstance(reruns, int) or not 1 <= reruns <= MAX_RERUNS:
+        raise _core.SpecError(f"--reruns: {reruns!r} is not a whole number in [1, {MAX_RERUNS}]")
+    return reruns
+
+
+@dataclass(frozen=True)
+class Robustness:
+    """How often a failing run's failure recurs in its perturbed copies."""
+
+    run_id: int
+    failure_class: str
+    """The run's own (base) failure class."""
+    classes: tuple[str | None, ...]
+    """Each copy's failure class, in copy order (None: no failure; ``error``: it failed to
+    run)."""
+
+    @property
+    def reruns(self) -> int:
+        return len(self.classes)
+
+    @property
+    def recurs(self) -> int:
+        return sum(c == self.failure_class for c in self.classes)
+
+    @property
+    def robust(self) -> bool:
+        return is_robust(self.recurs, self.reruns)
+
+    def as_row(self) -> dict[str, Any]:
+        """The store's ``robustness`` row."""
+        return {
+            "run_id": self.run_id,
+            "failure_class": self.failure_class,
+            "reruns": self.reruns,
+            "recurs": self.recurs,
+            "classes": list(self.classes),
+            "perturbation": perturbation_sizes(),
+            "sitgen_version": _core.__version__,
+        }
+
+
+def is_robust(recurs: int, reruns: int) -> bool:
+    """Whether a failure recurring in ``recurs`` of ``reruns`` copies is robust."""
+    return reruns > 0 and recurs >= math.ceil(ROBUST_SHARE * reruns - 1e-9)
+
+
+def verdict(recurs: int, reruns: int) -> str:
+    """``robust`` or ``knife-edge``."""
+    return "robust" if is_robust(recurs, reruns) else "knife-edge"
+
+
+def label(recurs: int, reruns: int) -> str:
+    """``recurs 7/8``: how a person reads it."""
+    return f"recurs {recurs}/{reruns}"
+
+
+def tally(classes: Iterable[str | None]) -> str:
+    """Copies' classes as ``6 × struck_while_stopped_seen, 2 × none``, most frequent first."""
+    counts: dict[str, int] = {}
+    for c in classes:
+        name = "none" if c is None else c
+        counts[name] = counts.get(name, 0) + 1
+    return ", ".join(
+        f"{n} × {c}" for c, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    )
+
+
+def copy_class(result: dict[str, Any]) -> str | None:
+    """A copy's failure class from its job's result (``error`` where it did not run)."""
+    import json
+
+    if not result.get("ok"):
+        return ERROR
+    record = json.loads(result["record"])
+    if record.get("outcome") == "error":
+        return ERROR
+    failure = record.get("failure")
+    return None if failure is None else str(failure["class"])
+
+
+def copy_jobs(row: dict[str, Any], reruns: int, first_index: int) -> list[Job]:
+    """The ``reruns`` perturbed copies of stored run ``row`` (:meth:`Store.run_row`), as jobs
+    numbered from ``first_index``."""
+    return [
+        Job(
+            index=first_index + k - 1,
+            seed=row["situation_seed"],
+            situation=row["situation_spec"],
+            run=perturbed(row["run_spec"], k),
+            run_seed=row["run_seed"],
+        )
+        for k in range(1, reruns + 1)
+    ]
+
+
+def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
+    """Run ``jobs`` (perturbed copies, any controllers) on ``workers``: their results in job
+    order, whatever the worker count."""
+    user = any(j.controller.startswith(("python:", "cmd:")) for j in jobs)
+    by_index: dict[int, dict[str, Any]] = {}
+    for job, result in Executor(workers, user=user).results(iter(jobs)):
+        by_index[job.index] = result
+    return [by_index[j.index] for j in jobs]
+
+
+def measure(
+    rows: Sequence[dict[str, Any]], reruns: int = RERUNS, workers: int = 1
+) -> list[Robustness]:
+    """The robustness of failing stored runs ``rows`` (:meth:`Store.run_row`), all copies run
+    as one batch. Raises StoreError for a run that has no failure."""
+    jobs: list[Job] = []
+    for i, row in enumerate(rows):
+        if row["failure"] is None:
+            raise StoreError(f"run {row['id']}: it did not fail; robustness is a failure's")
+        jobs += copy_jobs(row, reruns, i * reruns)
+    results = copies(jobs, workers)
+    return [
+        Robustness(
+            row["id"],
+            str(row["failure"]["class"]),
+            tuple(copy_class(r) for r in results[i * reruns : (i + 1) * reruns]),
+        )
+        for i, row in enumerate(rows)
+    ]
+
+
+def measure_runs(
+    store: Store, run_ids: Sequence[int], reruns: int = RERUNS, workers: int = 1
+) -> list[Robustness]:
+    """Measure and store the robustness of stored runs ``run_ids`` (each must have failed)."""
+    workers = check_workers(workers, "local")
+    rows = [store.run_row(i) for i in run_ids]
+    measured = measure(rows, check_reruns(reruns), workers)
+    store.record_robustness(r.as_row() for r in measured)
+    return measured
