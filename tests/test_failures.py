@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 import sitgen
 from sitgen import _core
 from sitgen.failures import BROAD_RUNS, classes, distinct_failures, silhouette, split, ward_parts
+from sitgen.robustness import is_robust
 from sitgen.store import SCHEMA_VERSION, Store
 
 from .conftest import run_cli
@@ -80,6 +81,8 @@ def test_failures_lists_each_distinct_failure_once_best_first(
     assert len({r["key"] for r in rows}) == len(rows)
     with Store(db) as store:
         scores = {r["run"]: (r["score"], r["failure_class"]) for r in store.ranked()}
+        measured = store.robustness()
+    assert measured, "the campaign measured its distinct failures' robustness"
     seen: set[int] = set()
     for row in rows:
         members = row["run_ids"]
@@ -88,8 +91,17 @@ def test_failures_lists_each_distinct_failure_once_best_first(
         seen |= set(members)
         assert all(scores[m][1] == row["class"] for m in members)
         best = max(members, key=lambda m: (scores[m][0], -m))
-        assert row["representative"] == best
+        robust = [m for m in members if m in measured and is_robust(**_counts(measured[m]))]
+        # The highest-scoring robust run where one was measured, else the highest-scoring.
+        expected = max(robust, key=lambda m: (scores[m][0], -m)) if robust else best
+        assert row["representative"] == expected
         assert row["best_score"] == scores[best][0]
+        if expected in measured:
+            own = measured[expected]
+            assert (row["recurs"], row["reruns"]) == (own["recurs"], own["reruns"])
+            assert row["robustness"].endswith(f"{own['recurs']}/{own['reruns']}")
+        else:
+            assert row["robustness"] == "unmeasured" and row["robust"] is None
         assert row["share"] == pytest.approx(row["runs"] / 60)
     assert seen == {run for run, (_, key) in scores.items() if key is not None}
     assert failures_json(db) == rows, "deterministic"
@@ -98,6 +110,10 @@ def test_failures_lists_each_distinct_failure_once_best_first(
     assert [t["key"] for t in table] == [row["key"] for row in rows]
     r = run_cli("failures", str(db))
     assert r.returncode == 0 and f"{len(rows)} distinct failures" in r.stdout
+
+
+def _counts(measured: dict[str, Any]) -> dict[str, int]:
+    return {"recurs": measured["recurs"], "reruns": measured["reruns"]}
 
 
 def test_rank_distinct_puts_each_representative_first_then_the_rest(

@@ -12,18 +12,25 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sitgen import _core
 from sitgen.campaign import build_job, parse_campaign
-from sitgen.faults import (
+from sitgen.faults import RUN_STRIDE, fault_slot, faults_of
+from sitgen.kill import (
+    ALPHA,
+    COPIES,
     KILL_MARGIN_POINTS,
-    RUN_STRIDE,
+    MUTANTS,
+    STAGES,
+    Event,
     Outcome,
-    fault_slot,
-    faults_of,
-    kill,
+    p_value,
     score_margin,
+    verdict,
 )
+from sitgen.kill import screen as kill
 from tests.conftest import ROOT, run_cli
 from tests.test_campaign import SMALL, start_command, wait_for_runs, write_spec
 
@@ -73,6 +80,58 @@ def test_errors_kill_only_on_the_faulty_side() -> None:
     assert kill(broken, outcome("drove_into_wall", score=500.0)) is None
     k = kill(outcome(None), broken)
     assert k is not None and k.by == "error"
+
+
+# --- the robust kill rule: the test on perturbed copies, its early stopping, the mutants
+
+
+def test_the_level_needs_near_perfect_separation_of_eight_copies() -> None:
+    assert p_value(8, 0, 8) <= ALPHA and p_value(8, 1, 8) <= ALPHA and p_value(7, 0, 8) <= ALPHA
+    assert p_value(7, 1, 8) > ALPHA and p_value(6, 0, 8) > ALPHA and p_value(8, 2, 8) > ALPHA
+    # Alike counts never kill, however many.
+    assert all(p_value(n, n, 8) > 0.4 for n in range(9))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.booleans(), st.booleans()), min_size=COPIES, max_size=COPIES))
+def test_early_stopping_gives_the_full_tests_verdict(copies: list[tuple[bool, bool]]) -> None:
+    """Curtailment: the verdict at the first look that has one is the verdict of all eight."""
+    faulty, correct = sum(f for f, _ in copies), sum(c for _, c in copies)
+    full = p_value(faulty, correct, COPIES) <= ALPHA
+    assert verdict(faulty, correct, COPIES) is full
+    for look in STAGES:
+        f = sum(x for x, _ in copies[:look])
+        c = sum(y for _, y in copies[:look])
+        early = verdict(f, c, look)
+        if early is not None:
+            assert early is full, (look, f, c)
+            break
+
+
+def test_the_event_a_copy_is_judged_by_is_the_screens_difference() -> None:
+    correct = outcome("approached_by_peer", score=12.0)
+    by_class = Event("class", "drove_into_seen_peer")
+    assert by_class.shown(outcome("drove_into_seen_peer", score=1.0))
+    assert not by_class.shown(outcome("approached_by_peer", "drove_into_seen_peer"))
+    by_score = Event("score", threshold=correct.score + score_margin(correct.score))
+    assert by_score.shown(outcome(None, score=112.5)) and not by_score.shown(
+        outcome(None, score=112)
+    )
+    broken = Outcome(None, frozenset(), 0.0, error=True)
+    assert Event("error").shown(broken) and not by_score.shown(broken)
+
+
+def test_equivalent_mutants_nudge_a_parameter_by_at_most_1e_5() -> None:
+    assert len(MUTANTS) >= 5
+    for m in MUTANTS:
+        assert 0 < abs(m.factor - 1) <= 1e-5 * (1 + 1e-9)
+        nudged = m.params({})[m.param]
+        assert nudged != m.default and abs(nudged / m.default - 1) <= 1e-5 * (1 + 1e-9)
+        assert m.params({m.param: 2.0})[m.param] == 2.0 * m.factor
+        # The core takes the nudged controller.
+        _core.check_run_spec(
+            json.dumps({"controller": {"name": m.controllers[-1], "params": m.params({})}})
+        )
 
 
 # --- without a fault, every controller is unchanged

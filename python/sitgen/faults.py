@@ -5,10 +5,13 @@ rather than run scores or fitness).
 An evaluation takes a campaign spec whose agent has one built-in controller and a list of that
 controller's seeded faults (``docs/faults.md``). Situation ``i`` is the campaign's job ``i``
 (same spec, same seed, so the same situation and run seed a campaign would give it); on it the
-correct controller runs, and so does every fault not yet killed. A fault is *killed* at the first
-situation where :func:`kill` says its run failed in a way the correct run did not. The budget is
-the number of situations; a fault's *runs to first kill* is the number of situations it took
-(1-based), and the kill rate at budget ``b`` is the share of faults killed within ``b``.
+correct controller runs, and so does every fault not yet killed, and every equivalent mutant
+(:data:`sitgen.kill.MUTANTS`) not yet killed. A fault is *killed* at the first situation where
+its run passes :func:`sitgen.kill.screen` and its perturbed copies then show the failure
+significantly more often than the correct controller's (:mod:`sitgen.kill`). The budget is the
+number of situations; a fault's *runs to first kill* is the number of situations it took
+(1-based), ``runs_with_reruns`` the runs with every perturbed copy counted, and the kill rate at
+budget ``b`` is the share of faults killed within ``b``.
 
 Situations go in chunks of :data:`CHUNK`: a fault killed in one chunk is not run in the next.
 Chunks do not depend on the worker count, so neither does anything stored; each chunk's runs
@@ -45,15 +48,27 @@ from sitgen.campaign import (
     started_at,
     stream_jobs,
 )
+from sitgen.kill import (
+    ALPHA,
+    COPIES,
+    KILL_MARGIN_POINTS,
+    KILL_MARGIN_SHARE,
+    MUTANTS,
+    STAGES,
+    Event,
+    Kill,
+    Outcome,
+    event_of,
+    mutants_of,
+    outcome_of_result,
+    p_value,
+    screen,
+    verdict,
+)
 from sitgen.maps import BARN_WORLDS, BarnWorlds
+from sitgen.robustness import perturbed
 from sitgen.store import KINDS, Store, StoreError
 
-KILL_MARGIN_POINTS = 100.0
-"""A faulty run that shows no new failure class kills its fault only if it scores worse than
-the correct run by more than this many points (one collision's start penalty)…"""
-KILL_MARGIN_SHARE = 0.5
-"""…and by more than this share of the correct run's score (a long pinning of the correct run
-varies by more than 100 points from a small perturbation alone)."""
 POSSIBLY_EQUIVALENT_AFTER = 200
 """A fault still alive after this many situations is reported as possibly equivalent."""
 CHUNK = 16
@@ -81,7 +96,11 @@ def catalogue() -> tuple[dict[str, Any], ...]:
 
 @functools.cache
 def _slots() -> dict[str, int]:
-    return {f["id"]: 1 + k for k, f in enumerate(catalogue())}
+    # Faults from 1 up, equivalent mutants down from the top of a situation's ids.
+    faults = {f["id"]: 1 + k for k, f in enumerate(catalogue())}
+    mutants = {m.id: RUN_STRIDE - len(MUTANTS) + k for k, m in enumerate(MUTANTS)}
+    assert len(faults) < RUN_STRIDE - len(MUTANTS), "the ids of a situation's runs overlap"
+    return faults | mutants
 
 
 def faults_of(controller: str) -> list[str]:
@@ -89,57 +108,7 @@ def faults_of(controller: str) -> list[str]:
     return [f["id"] for f in catalogue() if controller in f["controllers"]]
 
 
-# The kill rule.
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What the kill rule reads of a run."""
-
-    failure_class: str | None
-    """The run's failure class (its most severe event's class); None if nothing failed."""
-    classes: frozenset[str]
-    """Every failure class its events show."""
-    score: float
-    error: bool = False
-    """The run could not be made or its controller failed."""
-
-
-@dataclass(frozen=True)
-class Kill:
-    """Why a faulty run killed its fault."""
-
-    by: str
-    """``class``: it fails with a failure class the correct run does not show; ``score``: it
-    scored worse by more than the margin; ``error``: its controller failed where the correct
-    one did not."""
-    classes: tuple[str, ...]
-    """The faulty run's failure class (none for a run without one)."""
-    score_delta: float
-    """Faulty score − correct score."""
-
-
-def score_margin(correct_score: float) -> float:
-    """How much worse than the correct run a faulty run must score to kill by score."""
-    return max(KILL_MARGIN_POINTS, KILL_MARGIN_SHARE * correct_score)
-
-
-def kill(correct: Outcome, faulty: Outcome) -> Kill | None:
-    """Whether the faulty run on a situation kills its fault, given the correct run on the same
-    situation with the same run seed: it fails with a failure class that the correct run does
-    not show at all (not even as a lesser event), or it scores worse by more than
-    :func:`score_margin`. A situation the correct run could not use (an error) kills nothing."""
-    if correct.error:
-        return None
-    delta = faulty.score - correct.score
-    if faulty.error:
-        return Kill("error", (), delta)
-    own = () if faulty.failure_class is None else (faulty.failure_class,)
-    if faulty.failure_class is not None and faulty.failure_class not in correct.classes:
-        return Kill("class", own, delta)
-    if delta > score_margin(correct.score):
-        return Kill("score", own, delta)
-    return None
+# The kill rule (sitgen.kill) on stored runs.
 
 
 def outcome_of(store: Store, run_id: int) -> Outcome | None:
@@ -159,13 +128,28 @@ def outcome_of(store: Store, run_id: int) -> Outcome | None:
 
 @dataclass(frozen=True)
 class FaultPlan:
-    """What an evaluation runs: the agent's controller spec (without a fault) and the faults."""
+    """What an evaluation runs: the agent's controller spec (without a fault), the faults, and
+    the equivalent mutants that check the kill rule."""
 
     controller: dict[str, Any]
     faults: tuple[str, ...]
     strategy: str = "random"
     situations: str | None = None
     """The store the situations come from (strategy ``stored``)."""
+    mutants: tuple[str, ...] = ()
+    """Ids of the equivalent mutants run beside the faults (:data:`sitgen.kill.MUTANTS`)."""
+
+    @property
+    def arms(self) -> tuple[str, ...]:
+        """Everything run beside the correct controller: the faults, then the mutants."""
+        return self.faults + self.mutants
+
+    def controller_of(self, arm: str) -> dict[str, Any]:
+        """The controller spec of fault or mutant ``arm``."""
+        mutant = next((m for m in MUTANTS if m.id == arm), None)
+        if mutant is None:
+            return dict(self.controller, fault=arm)
+        return dict(self.controller, params=mutant.params(self.controller.get("params", {})))
 
     def as_dict(self) -> dict[str, Any]:
         # Only a stored strategy names its source, so older evaluations' plans still match.
@@ -174,9 +158,11 @@ class FaultPlan:
             **source,
             "controller": self.controller,
             "faults": list(self.faults),
+            "mutants": list(self.mutants),
             "strategy": self.strategy,
             "kill_margin_points": KILL_MARGIN_POINTS,
             "kill_margin_share": KILL_MARGIN_SHARE,
+            "kill_rule": {"alpha": ALPHA, "copies": COPIES, "stages": list(STAGES)},
         }
 
 
@@ -211,8 +197,9 @@ def plan_faults(
             f"{where}.name: `{name}` has no seeded faults; these controllers do: "
             + ", ".join(sorted({c for f in catalogue() for c in f["controllers"]}))
         )
+    mutants = tuple(m.id for m in mutants_of(name))
     if faults is None:
-        return FaultPlan(controller, tuple(own), strategy)
+        return FaultPlan(controller, tuple(own), strategy, mutants=mutants)
     known = [f["id"] for f in catalogue()]
     for fault in faults:
         if fault not in known:
@@ -225,11 +212,12 @@ def plan_faults(
             )
     if not faults:
         raise _core.SpecError("--faults: no fault named")
-    return FaultPlan(controller, tuple(f for f in own if f in faults), strategy)
+    return FaultPlan(controller, tuple(f for f in own if f in faults), strategy, mutants=mutants)
 
 
 def fault_slot(fault: str) -> int:
-    """The fault's position in the run ids of a situation (1 + its catalogue position)."""
+    """The position of a fault (1 + its catalogue position) or an equivalent mutant (from
+    the top down) in the run ids of a situation."""
     return _slots()[fault]
 
 
@@ -297,15 +285,22 @@ class Situations:
         return next(stream_jobs(self.spec, self.seed, [i]))
 
 
-def _jobs(situations: Situations, i: int, plan: FaultPlan, faults: list[str]) -> list[Job]:
-    """Situation ``i``'s runs: the correct controller's, then each fault's."""
+def _jobs(situations: Situations, i: int, plan: FaultPlan, arms: list[str]) -> list[Job]:
+    """Situation ``i``'s runs: the correct controller's, then each fault's and mutant's."""
     base = situations.job(i)
-    jobs = []
-    for slot, fault in [(0, None), *((fault_slot(f), f) for f in faults)]:
-        controller = dict(plan.controller, **({"fault": fault} if fault else {}))
-        run = dict(base.run, controller=controller)
-        jobs.append(Job(i * RUN_STRIDE + slot, base.seed, base.situation, run, base.error))
+    jobs = [Job(i * RUN_STRIDE, base.seed, base.situation, _run_of(base, plan, None), base.error)]
+    for arm in arms:
+        run = _run_of(base, plan, arm)
+        jobs.append(
+            Job(i * RUN_STRIDE + fault_slot(arm), base.seed, base.situation, run, base.error)
+        )
     return jobs
+
+
+def _run_of(base: Job, plan: FaultPlan, arm: str | None) -> dict[str, Any]:
+    """The run spec of situation ``base`` for the correct controller (None) or ``arm``."""
+    controller = plan.controller if arm is None else plan.controller_of(arm)
+    return dict(base.run, controller=controller)
 
 
 # Running an evaluation.
@@ -330,23 +325,140 @@ def _alive_before(store: Store, plan: FaultPlan, situation: int) -> list[str]:
             "SELECT fault FROM fault_kills WHERE situation < ?", (situation,)
         )
     }
-    return [f for f in plan.faults if f not in killed]
+    return [f for f in plan.arms if f not in killed]
 
 
-def _kills(store: Store, situations: range, alive: list[str]) -> dict[str, tuple[int, Kill]]:
-    """The first kill within ``situations`` of each fault in ``alive``."""
-    found: dict[str, tuple[int, Kill]] = {}
+def _candidates(
+    store: Store, situations: range, alive: list[str]
+) -> dict[str, list[tuple[int, Kill, Event]]]:
+    """Each arm's situations within ``situations`` whose unperturbed pair passes the screen,
+    in order, with what passed and the event its copies are judged by."""
+    found: dict[str, list[tuple[int, Kill, Event]]] = {}
     for i in situations:
         correct = outcome_of(store, i * RUN_STRIDE)
         if correct is None:
             continue
-        for fault in alive:
-            if fault in found:
-                continue
-            faulty = outcome_of(store, i * RUN_STRIDE + fault_slot(fault))
-            if faulty is not None and (k := kill(correct, faulty)) is not None:
-                found[fault] = (i, k)
+        for arm in alive:
+            faulty = outcome_of(store, i * RUN_STRIDE + fault_slot(arm))
+            if faulty is not None and (k := screen(correct, faulty)) is not None:
+                found.setdefault(arm, []).append((i, k, event_of(correct, k)))
     return found
+
+
+@dataclass
+class Trial:
+    """One candidate situation's sequential test for one arm."""
+
+    arm: str
+    situation: int
+    screened: Kill
+    event: Event
+    faulty: int = 0
+    """Faulty copies that showed the event."""
+    correct: int = 0
+    """Correct copies that showed it."""
+    done: int = 0
+    """Copies of each side run."""
+    killed: bool | None = None
+
+    def kill(self) -> Kill:
+        """The screen's difference with the test's counts."""
+        return dataclasses.replace(
+            self.screened,
+            faulty_recurs=self.faulty,
+            correct_recurs=self.correct,
+            copies=self.done,
+            p_value=self.p_bound(),
+        )
+
+    def p_bound(self) -> float:
+        """The p-value the verdict rests on: for a kill, the most the full test's could be
+        whatever the copies not run would show; for a spare, the least."""
+        left = COPIES - self.done
+        if self.killed:
+            return p_value(self.faulty, self.correct + left, COPIES)
+        return p_value(self.faulty + left, self.correct, COPIES)
+
+    def row(self) -> dict[str, Any]:
+        """The store's row of this trial (:meth:`Store.record_fault_chunk`)."""
+        k = self.kill()
+        return {
+            "fault": self.arm,
+            "situation": self.situation,
+            "run_id": self.situation * RUN_STRIDE + fault_slot(self.arm),
+            "by": k.by,
+            "classes": list(k.classes),
+            "score_delta": k.score_delta,
+            "faulty_recurs": k.faulty_recurs,
+            "correct_recurs": k.correct_recurs,
+            "copies": k.copies,
+            "p_value": k.p_value,
+            "killed": bool(self.killed),
+        }
+
+
+def _classes_of(events_jsonl: str) -> list[str]:
+    return list(_core.event_classes(events_jsonl, 0)) if events_jsonl else []
+
+
+def _confirm(
+    executor: Executor,
+    situations: Situations,
+    plan: FaultPlan,
+    candidates: dict[str, list[tuple[int, Kill, Event]]],
+    stop: Callable[[], bool] | None,
+) -> tuple[list[Trial], int] | None:
+    """Test each arm's candidates in order until one kills it (or none is left): every arm's
+    trial in flight runs its next stage of copies in one batch with the others, and a copy of
+    the correct controller serves every arm tested on its situation. Returns the trials and
+    the copies run; None if stopped part way."""
+    queue = {arm: list(c) for arm, c in candidates.items()}
+    active = {arm: Trial(arm, *queue[arm].pop(0)) for arm in sorted(queue, key=fault_slot)}
+    trials: list[Trial] = []
+    correct: dict[tuple[int, int], Outcome] = {}
+    bases: dict[int, Job] = {}
+    copies = 0
+    while active:
+        wanted: list[tuple[str | None, int, int]] = []
+        for t in active.values():
+            target = next(n for n in STAGES if n > t.done)
+            for k in range(t.done + 1, target + 1):
+                wanted.append((t.arm, t.situation, k))
+                if (t.situation, k) not in correct and (None, t.situation, k) not in wanted:
+                    wanted.append((None, t.situation, k))
+        jobs = []
+        for index, (arm, i, k) in enumerate(wanted):
+            base = bases.setdefault(i, situations.job(i))
+            run = perturbed(_run_of(base, plan, arm), k)
+            jobs.append(Job(index, base.seed, base.situation, run, base.error))
+        seen: dict[int, Outcome] = {}
+        for job, result in executor.results(jobs):
+            seen[job.index] = outcome_of_result(result, _classes_of)
+            if stop is not None and stop():
+                executor.stop()
+        if len(seen) < len(jobs):
+            return None
+        copies += len(jobs)
+        for index, (arm, i, k) in enumerate(wanted):
+            if arm is None:
+                correct[(i, k)] = seen[index]
+        for index, (arm, i, k) in enumerate(wanted):
+            if arm is None:
+                continue
+            t = active[arm]
+            t.faulty += t.event.shown(seen[index])
+            t.correct += t.event.shown(correct[(i, k)])
+            t.done = max(t.done, k)
+        for arm in list(active):
+            t = active[arm]
+            t.killed = verdict(t.faulty, t.correct, t.done)
+            if t.killed is None:
+                continue
+            trials.append(t)
+            del active[arm]
+            if not t.killed and queue[arm]:
+                active[arm] = Trial(arm, *queue[arm].pop(0))
+    return trials, copies
 
 
 def run_faults(
@@ -436,12 +548,13 @@ def _run_faults(
             if len(rows) < len(jobs):
                 interrupted = True
                 break
-            store.record_kills(
-                {
-                    fault: (situation, situation * RUN_STRIDE + fault_slot(fault), k)
-                    for fault, (situation, k) in _kills(store, chunk, alive).items()
-                }
-            )
+            candidates = _candidates(store, chunk, alive)
+            confirmed = _confirm(executor, situations, plan, candidates, stop)
+            if confirmed is None:
+                interrupted = True
+                break
+            trials, copies = confirmed
+            store.record_fault_chunk(chunk.start, copies, (t.row() for t in trials))
             if on_progress:
                 on_progress(chunk.stop, budget)
             if stop is not None and stop():
@@ -480,6 +593,18 @@ class FaultRow:
     possibly_equivalent: bool
     changes: str
     stands_for: str
+    faulty_recurs: int | None = None
+    """Of the killing test's perturbed copies, the faulty ones showing the failure."""
+    correct_recurs: int | None = None
+    """…and the correct ones."""
+    copies: int | None = None
+    """Copies of each side the killing test ran."""
+    p_value: float | None = None
+    """The killing test's p-value (its bound where it stopped early)."""
+    runs_with_reruns: int | None = None
+    """Runs up to the first kill, every perturbed copy counted (those of its chunk too)."""
+    trials: int = 0
+    """Candidate situations tested for it."""
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -496,10 +621,19 @@ class FaultReport:
     situations: int
     """Situations evaluated (equals ``budget`` once finished)."""
     faults: list[FaultRow] = field(default_factory=list)
+    mutants: list[FaultRow] = field(default_factory=list)
+    """The equivalent mutants run beside the faults: a kill of one is a false kill."""
+    runs: int = 0
+    """Runs in all, every perturbed copy counted."""
 
     @property
     def kill_rate(self) -> float:
         return sum(f.killed for f in self.faults) / len(self.faults) if self.faults else 0.0
+
+    @property
+    def false_kill_rate(self) -> float:
+        """The share of equivalent mutants killed (0 where none ran)."""
+        return sum(m.killed for m in self.mutants) / len(self.mutants) if self.mutants else 0.0
 
     def curve(self) -> list[dict[str, float]]:
         """Kill rate at each budget of :data:`CURVE_BUDGETS` up to the situations evaluated,
@@ -516,8 +650,11 @@ class FaultReport:
             "situations": self.situations,
             "kill_rate": self.kill_rate,
             "killed": sum(f.killed for f in self.faults),
+            "false_kill_rate": self.false_kill_rate,
+            "runs": self.runs,
             "curve": self.curve(),
             "faults": [f.as_dict() for f in self.faults],
+            "mutants": [m.as_dict() for m in self.mutants],
         }
 
 
@@ -544,42 +681,86 @@ def fault_report(store: Store) -> FaultReport:
             f"{store.path}: holds a {KINDS[store.kind()]}, not a fault evaluation (sitgen faults)"
         )
     campaign = store.campaign() or {}
+    kill_columns = {c[1] for c in store.db.execute("PRAGMA table_info(fault_kills)")}
+    tested = "faulty_recurs" in kill_columns
+    test = ", faulty_recurs, correct_recurs, copies, p_value" if tested else ""
     kills = {
-        fault: (situation, run_id, by, json.loads(classes), delta)
-        for fault, situation, run_id, by, classes, delta in store.db.execute(
-            "SELECT fault, situation, run_id, by, classes, score_delta FROM fault_kills"
+        row[0]: row[1:]
+        for row in store.db.execute(
+            f"SELECT fault, situation, run_id, by, classes, score_delta{test} FROM fault_kills"
         )
     }
     situations = _evaluated(store)
+    trials: dict[str, int] = {}
+    chunks: list[tuple[int, int]] = []
+    if store.db.execute("SELECT 1 FROM sqlite_master WHERE name = 'fault_trials'").fetchone():
+        trials = dict(
+            store.db.execute("SELECT fault, count(*) FROM fault_trials GROUP BY fault").fetchall()
+        )
+        chunks = store.db.execute(
+            "SELECT first, copies FROM fault_chunks ORDER BY first"
+        ).fetchall()
+    runs_at = _runs_with_reruns(store, chunks)
     info = {f["id"]: f for f in catalogue()}
+    mutant_info = {m.id: m for m in MUTANTS}
     report = FaultReport(
         controller=plan["controller"]["name"],
         strategy=plan["strategy"],
         seed=campaign.get("seed", 0),
         budget=campaign.get("n", 0),
         situations=situations,
+        runs=store.run_count() + sum(c for _, c in chunks),
     )
-    for fault in plan["faults"]:
-        entry = info.get(fault, {"changes": "(not in this sitgen's catalogue)", "stands_for": ""})
+    for arm in [*plan["faults"], *plan.get("mutants", [])]:
+        mutant = mutant_info.get(arm)
+        if mutant is not None:
+            entry = {
+                "changes": f"{mutant.param} × {mutant.factor!r} (a relative nudge of "
+                f"{abs(mutant.factor - 1):.0e})",
+                "stands_for": "an equivalent mutant: no bug at all",
+            }
+        else:
+            entry = info.get(arm, {"changes": "(not in this sitgen's catalogue)", "stands_for": ""})
         row = FaultRow(
-            id=fault,
-            killed=fault in kills,
+            id=arm,
+            killed=arm in kills,
             runs_to_first_kill=None,
             by=None,
             classes=[],
             run=None,
             correct_run=None,
             score_delta=None,
-            possibly_equivalent=fault not in kills and situations >= POSSIBLY_EQUIVALENT_AFTER,
+            possibly_equivalent=arm not in kills and situations >= POSSIBLY_EQUIVALENT_AFTER,
             changes=entry["changes"],
             stands_for=entry["stands_for"],
+            trials=trials.get(arm, 0),
         )
-        if fault in kills:
-            situation, row.run, row.by, row.classes, row.score_delta = kills[fault]
+        if arm in kills:
+            situation, row.run, row.by, classes, row.score_delta, *counts = kills[arm]
+            row.classes = json.loads(classes)
             row.runs_to_first_kill = situation + 1
             row.correct_run = situation * RUN_STRIDE
-        report.faults.append(row)
+            if counts:
+                row.faulty_recurs, row.correct_recurs, row.copies, row.p_value = counts
+            row.runs_with_reruns = runs_at(situation)
+        (report.mutants if mutant is not None else report.faults).append(row)
     return report
+
+
+def _runs_with_reruns(store: Store, chunks: list[tuple[int, int]]) -> Callable[[int], int]:
+    """Runs up to and with situation ``i``, every perturbed copy of the chunks up to and with
+    its own counted."""
+    per_situation: dict[int, int] = dict(
+        store.db.execute(
+            "SELECT id / ?, count(*) FROM runs GROUP BY id / ?", (RUN_STRIDE, RUN_STRIDE)
+        ).fetchall()
+    )
+
+    def at(i: int) -> int:
+        plain = sum(n for s, n in per_situation.items() if s <= i)
+        return plain + sum(c for first, c in chunks if first <= i)
+
+    return at
 
 
 def write_fault_report(report: FaultReport, out: TextIO) -> None:
@@ -598,6 +779,11 @@ def fault_status(row: FaultRow, situations: int) -> str:
             if row.by == "score"
             else "controller error"
         )
+        if row.copies is not None:
+            how += (
+                f"; in {row.faulty_recurs}/{row.copies} perturbed copies against "
+                f"{row.correct_recurs}/{row.copies}, p ≤ {row.p_value:.1g}"
+            )
         return f"killed at situation {row.runs_to_first_kill} ({how})"
     if row.possibly_equivalent:
         return f"possibly equivalent: not killed in {situations} situations"
@@ -607,12 +793,19 @@ def fault_status(row: FaultRow, situations: int) -> str:
 def summary_lines(report: FaultReport) -> list[str]:
     """The kill rate and its curve, in words."""
     curve = ", ".join(f"{c['budget']:g}: {c['kill_rate']:.0%}" for c in report.curve())
-    return [
+    lines = [
         f"{report.controller}, {report.strategy} situations, seed {report.seed}: "
-        f"{sum(f.killed for f in report.faults)} of {len(report.faults)} faults killed in "
-        f"{report.situations} situations (kill rate {report.kill_rate:.0%})",
+        f"{sum(f.killed for f in report.faults)} of {len(report.faults)} faults robustly "
+        f"killed in {report.situations} situations, {report.runs} runs with their perturbed "
+        f"copies (kill rate {report.kill_rate:.0%})",
         f"kill rate by budget: {curve}",
     ]
+    if report.mutants:
+        lines.append(
+            f"equivalent mutants falsely killed: {sum(m.killed for m in report.mutants)} of "
+            f"{len(report.mutants)} (false-kill rate {report.false_kill_rate:.0%})"
+        )
+    return lines
 
 
 def report_from(db: str | Path) -> FaultReport:

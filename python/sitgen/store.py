@@ -113,6 +113,32 @@ CREATE TABLE IF NOT EXISTS fault_kills (
 );
 """
 
+KILL_TEST_SCHEMA = """
+CREATE TABLE IF NOT EXISTS fault_trials (
+    fault TEXT NOT NULL,
+    situation INTEGER NOT NULL,
+    by TEXT NOT NULL,
+    classes TEXT NOT NULL,
+    faulty_recurs INTEGER NOT NULL,
+    correct_recurs INTEGER NOT NULL,
+    copies INTEGER NOT NULL,
+    p_value REAL NOT NULL,
+    killed INTEGER NOT NULL,
+    PRIMARY KEY (fault, situation)
+);
+CREATE TABLE IF NOT EXISTS fault_chunks (
+    first INTEGER PRIMARY KEY,
+    copies INTEGER NOT NULL
+);
+"""
+KILL_TEST_COLUMNS = (
+    "faulty_recurs INTEGER",
+    "correct_recurs INTEGER",
+    "copies INTEGER",
+    "p_value REAL",
+)
+"""Columns of ``fault_kills`` since version 9: the robust kill's test (NULL before)."""
+
 SHRINK_SCHEMA = """
 CREATE TABLE IF NOT EXISTS shrinks (
     run_id INTEGER PRIMARY KEY REFERENCES runs (id),
@@ -255,6 +281,7 @@ class Store:
                     + SEARCH_SCHEMA
                     + JUDGEMENT_SCHEMA
                     + ROBUSTNESS_SCHEMA
+                    + KILL_TEST_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -318,16 +345,24 @@ class Store:
                 # Version 9 adds the robustness of failing runs (reruns under perturbation):
                 # one table, empty until a campaign, search or `sitgen robustness` fills it.
                 self.db.executescript(ROBUSTNESS_SCHEMA)
+                # And the robust kill rule's trials: each candidate situation's test, the
+                # copies each chunk ran, and the killing test's counts on each kill.
+                self.db.executescript(KILL_TEST_SCHEMA)
+                self._add_columns("fault_kills", *KILL_TEST_COLUMNS)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
 
     def _add_run_columns(self, *columns: str) -> None:
         """Add the columns (``name TYPE``) the ``runs`` table lacks."""
-        present = {c[1] for c in self.db.execute("PRAGMA table_info(runs)")}
+        self._add_columns("runs", *columns)
+
+    def _add_columns(self, table: str, *columns: str) -> None:
+        """Add the columns (``name TYPE``) ``table`` lacks."""
+        present = {c[1] for c in self.db.execute(f"PRAGMA table_info({table})")}
         for column in columns:
             if column.split()[0] not in present:
-                self.db.execute(f"ALTER TABLE runs ADD COLUMN {column}")
+                self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column}")
 
     def _schema_version(self) -> int | None:
         has_meta = self.db.execute(
@@ -468,15 +503,46 @@ class Store:
         row = self.db.execute(f"SELECT plan FROM {kind} WHERE id = 1").fetchone()
         return None if row is None else dict(json.loads(row[0]))
 
-    def record_kills(self, kills: dict[str, tuple[int, int, Any]]) -> None:
-        """Store each fault's first kill: fault → (situation, killing run, :class:`Kill`)."""
+    def record_fault_chunk(self, first: int, copies: int, trials: Iterable[dict[str, Any]]) -> None:
+        """Store one chunk of a fault evaluation's kill checks in one transaction: the copies
+        it ran, each trial (the columns of ``fault_trials``, ``classes`` a list, and the run id
+        of the faulty run it tested as ``run_id``), and as a kill each trial that killed."""
         with self.db:
-            for fault, (situation, run_id, k) in kills.items():
+            self._add_columns("fault_kills", *KILL_TEST_COLUMNS)
+            self.db.execute(
+                "INSERT OR REPLACE INTO fault_chunks (first, copies) VALUES (?, ?)",
+                (first, copies),
+            )
+            for t in trials:
+                test = (t["faulty_recurs"], t["correct_recurs"], t["copies"], t["p_value"])
                 self.db.execute(
-                    "INSERT OR REPLACE INTO fault_kills (fault, situation, run_id, by, classes, "
-                    "score_delta) VALUES (?, ?, ?, ?, ?, ?)",
-                    (fault, situation, run_id, k.by, json.dumps(list(k.classes)), k.score_delta),
+                    "INSERT OR REPLACE INTO fault_trials (fault, situation, by, classes, "
+                    "faulty_recurs, correct_recurs, copies, p_value, killed) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        t["fault"],
+                        t["situation"],
+                        t["by"],
+                        json.dumps(t["classes"]),
+                        *test,
+                        int(t["killed"]),
+                    ),
                 )
+                if t["killed"]:
+                    self.db.execute(
+                        "INSERT OR REPLACE INTO fault_kills (fault, situation, run_id, by, "
+                        "classes, score_delta, faulty_recurs, correct_recurs, copies, p_value) "
+                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        (
+                            t["fault"],
+                            t["situation"],
+                            t["run_id"],
+                            t["by"],
+                            json.dumps(t["classes"]),
+                            t["score_delta"],
+                            *test,
+                        ),
+                    )
 
     def record_shrink(self, run_id: int, row: dict[str, Any]) -> None:
         """Store (or replace) the shrink result of run ``run_id``: the columns of ``shrinks``."""
