@@ -26,12 +26,12 @@
 //! generators; the SND faults follow its steps in `reference/algorithms.md` §1 (one of them,
 //! `turn_rate_in_radians`, is Player ≥ 3.1's own unit bug, §1.2).
 
-use std::f64::consts::FRAC_PI_4;
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
 use super::snd::SndParams;
 use super::{Command, Controller};
-use crate::mission::ControllerSpec;
-use crate::sim::Observation;
+use crate::mission::{AtEnd, ControllerSpec};
+use crate::sim::{wrap_angle, Observation};
 use crate::situation::Robot;
 use crate::spec::{join, SpecError};
 
@@ -72,6 +72,26 @@ pub enum Fault {
     DwaNoBrakingMargin,
     /// DWA: the robot a point.
     DwaPointRobot,
+    /// Headings within 10° of ±π read as ±170°.
+    HeadingWrapNearPi,
+    /// Every command a stop once a 16-bit tick count has wrapped (163.84 s).
+    WatchdogOverflow,
+    /// Tracks past the second dropped with their laser returns.
+    TrackDroppedInCrowd,
+    /// SND: a goal behind taken as its mirror image ahead.
+    GoalBehindReflected,
+    /// SND: range jumps of 1.0–1.3 m not taken as gaps.
+    GapBandMissed,
+    /// A `loop` route ends after its first lap.
+    LoopIndexNotReset,
+    /// SND: readings at exactly the maximum range taken as obstacles.
+    MaxRangeAsObstacle,
+    /// Readings under 0.45 m reported as no return.
+    MinRangeDropout,
+    /// The fourth waypoint of a route of six or more skipped.
+    LongRouteWaypointSkipped,
+    /// The heading read through a gyro 3 % off in scale.
+    GyroScaleError,
 }
 
 /// A fault's entry in the catalogue.
@@ -94,7 +114,9 @@ const LASER: &[&str] = &["snd", "snd_follow", "vo", "dwa"];
 const ROUTE: &[&str] = &["snd_follow", "vo", "dwa"];
 
 /// Every fault, in a fixed order (ids are stable; the order is the one reports list them in).
-pub const CATALOGUE: [FaultInfo; 17] = [
+/// The last ten show only in particular circumstances (a heading, a time, a crowd, a route's
+/// shape, a range): they tell generation strategies apart where the first ones do not.
+pub const CATALOGUE: [FaultInfo; 27] = [
     FaultInfo {
         fault: Fault::SectorOffByOne,
         id: "sector_off_by_one",
@@ -226,6 +248,86 @@ pub const CATALOGUE: [FaultInfo; 17] = [
                   only",
         stands_for: "the robot's footprint ignored",
     },
+    FaultInfo {
+        fault: Fault::HeadingWrapNearPi,
+        id: "heading_wrap_near_pi",
+        controllers: LASER,
+        changes: "headings within 10° of ±180° are read as ±170°: driving west, the robot \
+                  believes it is 10° off its course",
+        stands_for: "an angle-wrap error at ±π (a yaw taken through a saturating conversion)",
+    },
+    FaultInfo {
+        fault: Fault::WatchdogOverflow,
+        id: "watchdog_overflow",
+        controllers: LASER,
+        changes: "once a signed 16-bit count of 5 ms ticks has wrapped (163.84 s), every scan \
+                  looks stale to the watchdog and every command is a stop",
+        stands_for: "a counter or timer that overflows after minutes of running",
+    },
+    FaultInfo {
+        fault: Fault::TrackDroppedInCrowd,
+        id: "track_dropped_in_crowd",
+        controllers: LASER,
+        changes: "with three or more robots in view, those past the first two (by id) are \
+                  dropped, and their laser returns removed as clutter",
+        stands_for: "a fixed-size track table overflowing in a crowd",
+    },
+    FaultInfo {
+        fault: Fault::GoalBehindReflected,
+        id: "goal_behind_reflected",
+        controllers: &["snd_follow"],
+        changes: "a waypoint more than 90° off the heading is taken as its mirror image ahead: \
+                  the robot drives away from a goal behind it",
+        stands_for: "a wrong branch for goals behind the robot (an acos where an atan2 belongs)",
+    },
+    FaultInfo {
+        fault: Fault::GapBandMissed,
+        id: "gap_band_missed",
+        controllers: SND,
+        changes: "range jumps between 1.0 and 1.3 m are not taken as gaps, so openings behind \
+                  such a step are not seen",
+        stands_for: "a gap test wrong only for one band of widths (a missing bin of a table)",
+    },
+    FaultInfo {
+        fault: Fault::LoopIndexNotReset,
+        id: "loop_index_not_reset",
+        controllers: ROUTE,
+        changes: "a `loop` route's waypoint index is not reset after the first lap: the robot \
+                  stops at the last waypoint",
+        stands_for: "a loop counter not reset (state that only a second pass exercises)",
+    },
+    FaultInfo {
+        fault: Fault::MaxRangeAsObstacle,
+        id: "max_range_as_obstacle",
+        controllers: SND,
+        changes: "readings at exactly the laser's maximum range are taken as obstacles there \
+                  (`<=` where `<` belongs)",
+        stands_for: "a no-return sentinel not filtered (an off-by-one comparison)",
+    },
+    FaultInfo {
+        fault: Fault::MinRangeDropout,
+        id: "min_range_dropout",
+        controllers: &["snd", "snd_follow", "dwa"],
+        changes: "readings under 0.45 m are reported as no return: whatever nearly touches \
+                  the robot vanishes",
+        stands_for: "a driver's too-close status mapped to no return",
+    },
+    FaultInfo {
+        fault: Fault::LongRouteWaypointSkipped,
+        id: "long_route_waypoint_skipped",
+        controllers: ROUTE,
+        changes: "on routes of six or more waypoints the fourth is skipped: the robot cuts \
+                  from the third to the fifth",
+        stands_for: "an index incremented twice on one path through the code",
+    },
+    FaultInfo {
+        fault: Fault::GyroScaleError,
+        id: "gyro_scale_error",
+        controllers: LASER,
+        changes: "the heading is the start heading plus 1.03 times the turn since: a net turn \
+                  of 180° leaves it 5.4° off",
+        stands_for: "a sensor scale factor off by a few per cent (a gyro calibration)",
+    },
 ];
 
 impl Fault {
@@ -337,14 +439,42 @@ pub fn own_radius_m(fault: Option<Fault>, robot: &Robot) -> f64 {
 
 /// Half the field of view `narrow_fov` leaves, radians.
 const NARROW_HALF_FOV: f64 = FRAC_PI_4;
+/// How near ±π a heading `heading_wrap_near_pi` saturates, radians (10°).
+const WRAP_BAND: f64 = PI / 18.0;
+/// When `watchdog_overflow`'s signed 16-bit count of 5 ms ticks wraps, seconds.
+const WATCHDOG_WRAP_S: f64 = 32_768.0 * 0.005;
+/// Tracks `track_dropped_in_crowd`'s table holds.
+const TRACK_TABLE: usize = 2;
+/// Returns this near a dropped track's centre are removed with it, metres (a Pioneer's
+/// enclosing radius and a margin).
+const TRACK_CLUTTER_M: f64 = 0.5;
+/// Readings `min_range_dropout` reports as no return, metres.
+const DROPOUT_M: f64 = 0.45;
+/// `gyro_scale_error`'s scale factor.
+const GYRO_SCALE: f64 = 1.03;
 
-/// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees.
+/// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees, or the
+/// route it is given at reset.
 pub fn wrap(controller: Box<dyn Controller>, fault: Option<Fault>) -> Box<dyn Controller> {
     match fault {
-        Some(f @ (Fault::MirroredScan | Fault::StaleScan | Fault::NarrowFov)) => Box::new(Seeded {
+        Some(
+            f @ (Fault::MirroredScan
+            | Fault::StaleScan
+            | Fault::NarrowFov
+            | Fault::HeadingWrapNearPi
+            | Fault::WatchdogOverflow
+            | Fault::TrackDroppedInCrowd
+            | Fault::GoalBehindReflected
+            | Fault::LoopIndexNotReset
+            | Fault::MaxRangeAsObstacle
+            | Fault::MinRangeDropout
+            | Fault::LongRouteWaypointSkipped
+            | Fault::GyroScaleError),
+        ) => Box::new(Seeded {
             inner: controller,
             fault: f,
             last: None,
+            gyro: None,
         }),
         _ => controller,
     }
@@ -356,9 +486,25 @@ pub struct Seeded {
     fault: Fault,
     /// The previous observation (`stale_scan`).
     last: Option<Observation>,
+    /// The start heading, and the true heading last seen with the turn since (unwrapped),
+    /// radians (`gyro_scale_error`).
+    gyro: Option<(f64, f64, f64)>,
 }
 
 impl Seeded {
+    /// The route the controller is given at reset.
+    fn route_of(&self, robot: &Robot) -> Robot {
+        let mut given = robot.clone();
+        match self.fault {
+            Fault::LoopIndexNotReset if given.at_end == AtEnd::Loop => given.at_end = AtEnd::Stop,
+            Fault::LongRouteWaypointSkipped if given.waypoints.len() >= 6 => {
+                given.waypoints.remove(3);
+            }
+            _ => {}
+        }
+        given
+    }
+
     /// What the controller sees of `obs`.
     fn view(&mut self, obs: &Observation) -> Observation {
         let mut seen = obs.clone();
@@ -393,6 +539,59 @@ impl Seeded {
                     bearing.sin().atan2(bearing.cos()).abs() <= NARROW_HALF_FOV
                 });
             }
+            Fault::HeadingWrapNearPi => {
+                let h = obs.pose.heading_rad;
+                seen.pose.heading_rad = h.clamp(-PI + WRAP_BAND, PI - WRAP_BAND);
+            }
+            Fault::TrackDroppedInCrowd if obs.tracks.len() > TRACK_TABLE => {
+                let dropped = seen.tracks.split_off(TRACK_TABLE);
+                let p = obs.pose;
+                for (r, a) in seen.ranges.iter_mut().zip(&obs.angles) {
+                    let (sin, cos) = (p.heading_rad + a).sin_cos();
+                    let hit = (p.x_m + *r * cos, p.y_m + *r * sin);
+                    let near = |t: &crate::sim::Track| {
+                        (hit.0 - t.position.0).hypot(hit.1 - t.position.1) <= TRACK_CLUTTER_M
+                    };
+                    if *r < obs.max_range_m && dropped.iter().any(near) {
+                        *r = obs.max_range_m;
+                    }
+                }
+            }
+            Fault::GoalBehindReflected => {
+                let target = self
+                    .inner
+                    .route()
+                    .and_then(|r| r.remaining().first().copied());
+                if let Some((x, y)) = target {
+                    let p = obs.pose;
+                    let b = wrap_angle((y - p.y_m).atan2(x - p.x_m) - p.heading_rad);
+                    if b.abs() > FRAC_PI_2 {
+                        // The bearing b seen as its mirror image in the lateral axis,
+                        // ±π − b, by turning the heading the controller reads.
+                        let mirrored = PI.copysign(b) - b;
+                        seen.pose.heading_rad = wrap_angle(p.heading_rad + b - mirrored);
+                    }
+                }
+            }
+            Fault::MaxRangeAsObstacle => {
+                // The smallest maximum above the true one: a reading of exactly the maximum
+                // is then below it, as `<=` would take it.
+                seen.max_range_m = obs.max_range_m.next_up();
+            }
+            Fault::MinRangeDropout => {
+                for r in &mut seen.ranges {
+                    if *r < DROPOUT_M {
+                        *r = obs.max_range_m;
+                    }
+                }
+            }
+            Fault::GyroScaleError => {
+                let h = obs.pose.heading_rad;
+                let (start, last, turned) = self.gyro.unwrap_or((h, h, 0.0));
+                let turned = turned + wrap_angle(h - last);
+                self.gyro = Some((start, h, turned));
+                seen.pose.heading_rad = wrap_angle(start + GYRO_SCALE * turned);
+            }
             _ => {}
         }
         seen
@@ -410,10 +609,15 @@ impl Controller for Seeded {
 
     fn reset(&mut self, robot: &Robot) {
         self.last = None;
-        self.inner.reset(robot);
+        self.gyro = None;
+        let given = self.route_of(robot);
+        self.inner.reset(&given);
     }
 
     fn act(&mut self, obs: &Observation) -> Command {
+        if Fault::WatchdogOverflow.is(Some(self.fault)) && obs.time_s >= WATCHDOG_WRAP_S {
+            return (0.0, 0.0);
+        }
         let seen = self.view(obs);
         self.inner.act(&seen)
     }

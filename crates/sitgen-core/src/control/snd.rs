@@ -480,9 +480,20 @@ pub fn safety_distance(d_min: f64, r: f64, ds_max: f64) -> f64 {
     (5.0 * (d_min - r)).clamp(0.0, ds_max)
 }
 
+/// Range jumps seeded fault `gap_band_missed` does not take as gaps, metres.
+const MISSED_GAP_BAND: std::ops::RangeInclusive<f64> = 1.0..=1.3;
+
 /// Step 4: the gaps in increasing sector order, forced gaps at the edges of a scan narrower
-/// than the circle, then merged ([`merge_gaps`]). `beams` is L.
-pub fn find_gaps(full: &[f64], pnd: &[f64], beams: usize, min_gap_width: f64, gaps: &mut Vec<Gap>) {
+/// than the circle, then merged ([`merge_gaps`]). `beams` is L; `fault` is SND's seeded
+/// fault, if any.
+pub fn find_gaps(
+    full: &[f64],
+    pnd: &[f64],
+    beams: usize,
+    min_gap_width: f64,
+    fault: Option<Fault>,
+    gaps: &mut Vec<Gap>,
+) {
     gaps.clear();
     let n = full.len() as i64;
     let l = beams as i64;
@@ -498,6 +509,10 @@ pub fn find_gaps(full: &[f64], pnd: &[f64], beams: usize, min_gap_width: f64, ga
     for s in first + 1..first + l {
         let (s, u) = (s as usize, s as usize - 1);
         let delta = pnd[s] - pnd[u];
+        // Seeded fault `gap_band_missed`.
+        if Fault::GapBandMissed.is(fault) && MISSED_GAP_BAND.contains(&delta.abs()) {
+            continue;
+        }
         if delta > min_gap_width {
             gaps.push(Gap {
                 sector: u as i64,
@@ -882,7 +897,14 @@ pub fn snd_step_into(
     }
     out.d_min = nearness_diagram(&out.full, max_range, r, &mut out.pnd);
     out.ds = safety_distance(out.d_min, r, p.obstacle_avoid_dist);
-    find_gaps(&out.full, &out.pnd, beams, p.min_gap_width, &mut out.gaps);
+    find_gaps(
+        &out.full,
+        &out.pnd,
+        beams,
+        p.min_gap_width,
+        p.fault,
+        &mut out.gaps,
+    );
     // Seeded fault `corner_clearance_halved`: the corner test's 2.2R becomes 1.1R.
     let corner_r = if Fault::CornerClearanceHalved.is(p.fault) {
         r / 2.0

@@ -3,7 +3,7 @@
 //! `fault` is a one-line error naming the field.
 
 use std::collections::BTreeMap;
-use std::f64::consts::FRAC_PI_2;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 use super::*;
 use crate::control::build;
@@ -51,12 +51,22 @@ fn situation(map: &Map, robots: Vec<Robot>) -> Situation {
     Situation::new(map, robots, SituationSpec::default(), 0)
 }
 
-/// Three hand-built situations between them exercise every fault:
+/// Hand-built situations that between them exercise every fault, each with the steps to run:
 /// - a doorway 0.8 m wide (narrower than SND's 2.2 R corner test passes) across a room;
 /// - a crossing: a route with a right-angle turn, a peer driving across its first leg and a
-///   rock beside it;
-/// - a corridor 0.8 m wide the agent starts in (its walls inside R = 0.438 m).
-fn situations() -> Vec<(&'static str, Situation)> {
+///   rock beside it (the turn also shows `gyro_scale_error`, the open field beyond the laser's
+///   range `max_range_as_obstacle`);
+/// - a corridor 0.8 m wide the agent starts in (its walls inside R = 0.438 m, and inside
+///   `min_range_dropout`'s 0.45 m);
+/// - a drive due west (`heading_wrap_near_pi`);
+/// - a 116 m drive that lasts past 163.84 s (`watchdog_overflow`);
+/// - three robots standing in view ahead (`track_dropped_in_crowd`);
+/// - a first waypoint behind the start (`goal_behind_reflected`);
+/// - a wall ahead with an opening on the right and a wall behind that (a range jump of
+///   1.28 m at the opening's edge: `gap_band_missed`);
+/// - a `loop` route of two waypoints (`loop_index_not_reset`);
+/// - a zigzag route of six waypoints (`long_route_waypoint_skipped`).
+fn situations() -> Vec<(&'static str, Situation, usize)> {
     let room = map(10.0, 6.0, 0.02, |x, y| {
         (5.0..5.2).contains(&x) && (y - 3.0).abs() > 0.4
     });
@@ -86,20 +96,94 @@ fn situations() -> Vec<(&'static str, Situation)> {
         &hall,
         vec![robot(0, Role::Agent, (4.0, 3.0, 0.0), vec![[11.0, 3.0]])],
     );
+    let open = map(20.0, 20.0, 0.05, |_, _| false);
+    let west = situation(
+        &open,
+        vec![robot(0, Role::Agent, (15.0, 10.0, PI), vec![[3.0, 10.0]])],
+    );
+    let strip = map(120.0, 8.0, 0.1, |_, _| false);
+    let long = situation(
+        &strip,
+        vec![robot(0, Role::Agent, (2.0, 4.0, 0.0), vec![[118.0, 4.0]])],
+    );
+    let standing = |id, x, y| robot(id, Role::Peer, (x, y, PI), vec![]);
+    let crowd = situation(
+        &open,
+        vec![
+            robot(0, Role::Agent, (3.0, 10.0, 0.0), vec![[17.0, 10.0]]),
+            standing(1, 7.0, 8.5),
+            standing(2, 7.0, 11.5),
+            standing(3, 8.0, 10.0),
+        ],
+    );
+    let behind = situation(
+        &open,
+        vec![robot(
+            0,
+            Role::Agent,
+            (10.0, 10.0, 0.0),
+            vec![[7.0, 10.0], [7.0, 14.0]],
+        )],
+    );
+    let stepped = map(10.0, 7.0, 0.02, |x, y| {
+        let near = (4.0..4.2).contains(&x) && !(1.6..3.0).contains(&y);
+        let far = (5.2..5.4).contains(&x) && y < 2.4;
+        near || far
+    });
+    let step = situation(
+        &stepped,
+        vec![robot(0, Role::Agent, (2.0, 3.5, 0.0), vec![[8.0, 3.5]])],
+    );
+    let mut looping = robot(
+        0,
+        Role::Agent,
+        (5.0, 5.0, 0.0),
+        vec![[9.0, 5.0], [9.0, 9.0]],
+    );
+    looping.at_end = AtEnd::Loop;
+    let lap = situation(&open, vec![looping]);
+    let zigzag = situation(
+        &open,
+        vec![robot(
+            0,
+            Role::Agent,
+            (2.0, 2.0, 0.0),
+            vec![
+                [5.0, 2.0],
+                [5.0, 5.0],
+                [8.0, 5.0],
+                [8.0, 8.0],
+                [11.0, 8.0],
+                [11.0, 11.0],
+            ],
+        )],
+    );
     vec![
-        ("doorway", doorway),
-        ("crossing", crossing),
-        ("corridor", corridor),
+        ("doorway", doorway, STEPS),
+        ("crossing", crossing, STEPS),
+        ("corridor", corridor, STEPS),
+        ("west", west, STEPS),
+        ("long", long, 1800),
+        ("crowd", crowd, STEPS),
+        ("behind", behind, STEPS),
+        ("step", step, STEPS),
+        ("lap", lap, STEPS),
+        ("zigzag", zigzag, STEPS),
     ]
 }
 
 const STEPS: usize = 600;
 
-/// The agent's poses over a run of `s` with `agent`, for at most [`STEPS`] steps; with
+/// The agent's poses over a run of `s` with `agent`, for at most `steps` steps; with
 /// `reference`, it stops at the first pose that differs from it.
-fn poses(s: &Situation, agent: &ControllerSpec, reference: Option<&[Pose]>) -> Vec<Pose> {
+fn poses(
+    s: &Situation,
+    agent: &ControllerSpec,
+    steps: usize,
+    reference: Option<&[Pose]>,
+) -> Vec<Pose> {
     let mut out = Vec::new();
-    run_situation(s, agent, STEPS, |w| {
+    run_situation(s, agent, steps, |w| {
         let pose = w.robots()[0].pose;
         let differs = reference.is_some_and(|r| r.get(out.len()) != Some(&pose));
         out.push(pose);
@@ -116,14 +200,14 @@ fn every_fault_changes_what_each_of_its_controllers_does_on_a_hand_built_situati
         for &controller in info.controllers {
             let changed: Vec<&str> = situations
                 .iter()
-                .filter(|(name, s)| {
+                .filter(|(name, s, steps)| {
                     let correct = reference
                         .entry((controller, *name))
-                        .or_insert_with(|| poses(s, &spec(controller, None), None));
-                    let faulty = poses(s, &spec(controller, Some(info.id)), Some(correct));
+                        .or_insert_with(|| poses(s, &spec(controller, None), *steps, None));
+                    let faulty = poses(s, &spec(controller, Some(info.id)), *steps, Some(correct));
                     faulty != *correct
                 })
-                .map(|(name, _)| *name)
+                .map(|(name, _, _)| *name)
                 .collect();
             assert!(
                 !changed.is_empty(),
