@@ -1219,6 +1219,101 @@ def rerun(
         raise typer.Exit(EXIT_FAILED)
 
 
+@app.command("diff")
+def diff_command(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    a: Annotated[
+        str,
+        typer.Option(
+            "--a",
+            help="Controller A (the old version): a name, NAME+FAULT, python:MODULE:CLASS, "
+            "'cmd:PROGRAM ARGS', or a JSON controller table with params.",
+        ),
+    ] = "snd_follow",
+    b: Annotated[str, typer.Option("--b", help="Controller B (the new version), as --a.")] = "",
+    n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
+    seed: CampaignSeedOption = 0,
+    situations: Annotated[
+        Path | None,
+        typer.Option(
+            "--situations",
+            help="Use a stored campaign's or search's situations (its first N runs) instead of "
+            "generating them.",
+        ),
+    ] = None,
+    db: Annotated[Path, typer.Option("--db", help="Diff store (SQLite).")] = Path("diff.db"),
+    junit: Annotated[
+        Path | None, typer.Option("--junit", help="Write the verdict as JUnit XML here.")
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: WorkersOption = None,
+) -> None:
+    """What a controller change fixed and what it broke: run the same situations with A and B
+    and judge each difference in failure on perturbed copies of both (docs/failures.md):
+    each distinct failure robustly new in B, robustly fixed, unchanged, or not robust either
+    way. Exits 1 when B has robust new failures. Ctrl-C stops; the same command resumes."""
+    from sitgen.diff import DiffPlan, diff_report, parse_controller, run_diff, summary_lines
+    from sitgen.diff import write_junit as write_diff_junit
+    from sitgen.store import Store
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    if not b:
+        raise UsageError("--b: the controller to compare with A is required")
+    plan = DiffPlan(
+        parse_controller(a, "--a"),
+        parse_controller(b, "--b"),
+        "stored" if situations else "random",
+        str(situations) if situations else None,
+    )
+    parsed = _campaign_spec(spec)
+    result = _stored(
+        "diff",
+        n,
+        "situations",
+        lambda on_progress, stop: run_diff(
+            parsed,
+            db,
+            plan,
+            seed=seed,
+            n=n,
+            workers=workers or os.cpu_count() or 1,
+            on_progress=on_progress,
+            stop=stop,
+            situations_db=situations,
+        ),
+    )
+    with Store(db) as store:
+        report = diff_report(store)
+    if junit is not None:
+        junit.parent.mkdir(parents=True, exist_ok=True)
+        with junit.open("w") as out:
+            write_diff_junit(report, out)
+    if format == "json":
+        json.dump(report.as_dict(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        table = Table(title=f"{db}: distinct failures, A against B")
+        for column in ("class", "verdict", "new in B", "fixed", "unchanged", "not robust"):
+            table.add_column(column, justify="left" if column in ("class", "verdict") else "right")
+        for c in report.classes:
+            table.add_row(
+                c.failure_class, c.verdict, str(len(c.new)), str(len(c.fixed)),
+                str(len(c.unchanged)), str(len(c.not_robust)),
+            )  # fmt: skip
+        Console(width=160).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        raise typer.Exit(130)
+    if report.robust_new:
+        raise typer.Exit(EXIT_FAILED)
+
+
 @app.command()
 def robustness(
     db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],

@@ -187,6 +187,26 @@ CREATE TABLE IF NOT EXISTS robustness (
 );
 """
 
+DIFF_SCHEMA = """
+CREATE TABLE IF NOT EXISTS diff (
+    id INTEGER PRIMARY KEY CHECK (id = 1),
+    plan TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS diff_results (
+    situation INTEGER NOT NULL,
+    failure_class TEXT NOT NULL,
+    a_recurs INTEGER,
+    b_recurs INTEGER,
+    copies INTEGER NOT NULL,
+    verdict TEXT NOT NULL,
+    PRIMARY KEY (situation, failure_class)
+);
+CREATE TABLE IF NOT EXISTS diff_chunks (
+    first INTEGER PRIMARY KEY,
+    copies INTEGER NOT NULL
+);
+"""
+
 TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
@@ -237,11 +257,17 @@ class RunRow:
     re-simulation, :mod:`sitgen.recall`)."""
 
 
-KINDS = {"campaign": "campaign", "fault_evaluation": "fault evaluation", "search": "search"}
+KINDS = {
+    "campaign": "campaign",
+    "fault_evaluation": "fault evaluation",
+    "search": "search",
+    "diff": "controller diff",
+}
 """What a store can hold, as a sentence names it."""
 PLAN_PARTS = {
     "fault_evaluation": "its controller, faults or strategy",
     "search": "its strategy, measures or objective",
+    "diff": "its controllers or situations",
 }
 
 TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
@@ -282,6 +308,7 @@ class Store:
                     + JUDGEMENT_SCHEMA
                     + ROBUSTNESS_SCHEMA
                     + KILL_TEST_SCHEMA
+                    + DIFF_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -349,6 +376,8 @@ class Store:
                 # copies each chunk ran, and the killing test's counts on each kill.
                 self.db.executescript(KILL_TEST_SCHEMA)
                 self._add_columns("fault_kills", *KILL_TEST_COLUMNS)
+                # And controller diffs (sitgen diff): their plan and verdicts.
+                self.db.executescript(DIFF_SCHEMA)
             self.db.execute(
                 "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
             )
@@ -442,11 +471,12 @@ class Store:
         created_at: str,
         evaluation: dict[str, Any] | None = None,
         search: dict[str, Any] | None = None,
+        diff: dict[str, Any] | None = None,
     ) -> None:
         """Record the campaign (with ``evaluation``, the plan of a fault evaluation; with
         ``search``, the plan of a search), or check that the store holds this one (then resume
         it)."""
-        plans = {"fault_evaluation": evaluation, "search": search}
+        plans = {"fault_evaluation": evaluation, "search": search, "diff": diff}
         stored = self.campaign()
         if stored is None:
             with self.db:
@@ -492,8 +522,8 @@ class Store:
                 self.db.execute("UPDATE campaign SET n = ? WHERE id = 1", (n,))
 
     def kind(self) -> str:
-        """What the store holds: ``campaign``, ``fault_evaluation`` or ``search``."""
-        for table in ("fault_evaluation", "search"):
+        """What the store holds: ``campaign``, ``fault_evaluation``, ``search`` or ``diff``."""
+        for table in ("fault_evaluation", "search", "diff"):
             if self.db.execute(f"SELECT 1 FROM {table} WHERE id = 1").fetchone():
                 return table
         return "campaign"
@@ -543,6 +573,35 @@ class Store:
                             *test,
                         ),
                     )
+
+    def record_diff_chunk(
+        self,
+        first: int,
+        copies: int,
+        judged: Iterable[dict[str, Any]],
+        alike: Iterable[tuple[int, str]],
+    ) -> None:
+        """Store one chunk of a controller diff in one transaction: the copies it ran, each
+        judged class (the columns of ``diff_results``) and each class both sides showed alike
+        (verdict ``unchanged``)."""
+        with self.db:
+            self.db.execute(
+                "INSERT OR REPLACE INTO diff_chunks (first, copies) VALUES (?, ?)",
+                (first, copies),
+            )
+            for j in judged:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, a_recurs, "
+                    "b_recurs, copies, verdict) VALUES (?, ?, ?, ?, ?, ?)",
+                    (j["situation"], j["failure_class"], j["a_recurs"], j["b_recurs"],
+                     j["copies"], j["verdict"]),
+                )  # fmt: skip
+            for situation, failure_class in alike:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, copies, "
+                    "verdict) VALUES (?, ?, 0, 'unchanged')",
+                    (situation, failure_class),
+                )
 
     def record_shrink(self, run_id: int, row: dict[str, Any]) -> None:
         """Store (or replace) the shrink result of run ``run_id``: the columns of ``shrinks``."""

@@ -1,0 +1,447 @@
+"""What a controller change fixed and what it broke: the same situations under controller A
+and controller B, each difference in failure judged on perturbed copies.
+
+Situation ``i`` is a campaign's job ``i`` (``strategy = random``: its spec and seed) or the
+``i``-th run of a stored campaign or search (``stored``: its situation, run spec and seed). On
+it A and B run unperturbed. Where both fail with the same class, or neither fails, the
+situation is *unchanged*. Where they differ, each class C that either shows is judged on the
+same :data:`sitgen.kill.COPIES` perturbed copies of both (:mod:`sitgen.robustness`): C is
+*robustly new in B* on that situation when B's copies fail with C significantly more often
+than A's (the kill rule's one-sided Fisher exact test, at its level, stopped early the same
+way), *robustly fixed in B* when A's do, and *not robust either way* otherwise.
+
+A distinct failure here is a base failure class. Its verdict sums its situations: new in B
+where it is robustly new somewhere and fixed nowhere, fixed where the reverse, ``new and
+fixed`` where both, unchanged where it showed alike on every situation it showed on, and not
+robust either way for the rest. B *has robust new failures* when any class is robustly new on
+any situation: ``sitgen diff`` then exits 1, and ``--junit`` writes a failed test case for it.
+
+Situations go in chunks of :data:`CHUNK`; each chunk's runs are stored as they finish and its
+verdicts in one transaction after its copies, so a killed diff resumes with the same command.
+Runs are stored like a campaign's: run ``2i`` is A on situation ``i``, ``2i + 1`` is B.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, TextIO
+from xml.etree import ElementTree
+
+from sitgen import _core
+from sitgen.campaign import CampaignSpec, Executor, Job, _row, check_campaign, started_at
+from sitgen.faults import Situations, outcome_of
+from sitgen.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_result, verdict
+from sitgen.robustness import perturbed
+from sitgen.store import Store, StoreError
+
+CHUNK = 16
+"""Situations run between two rounds of perturbed copies."""
+MAX_SITUATIONS = 1_000_000
+SIDES = ("a", "b")
+
+NEW = "new in B"
+FIXED = "fixed in B"
+BOTH = "new and fixed"
+UNCHANGED = "unchanged"
+NOT_ROBUST = "not robust either way"
+
+
+def parse_controller(text: str, option: str) -> dict[str, Any]:
+    """A controller as ``--a``/``--b`` give it: a name (``snd_follow``, ``python:m:C``,
+    ``cmd:prog args``), a built-in with a fault (``snd_follow+safety_distance_halved``), or a
+    JSON controller table (``{"name": "snd_follow", "params": {"max_speed": 0.4}}``). Raises
+    SpecError naming the option."""
+    text = text.strip()
+    if text.startswith("{"):
+        try:
+            controller = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise _core.SpecError(f"{option}: not a JSON controller table ({e.msg})") from None
+        if not isinstance(controller, dict):
+            raise _core.SpecError(f"{option}: expected a JSON object with a name")
+    elif "+" in text and not text.startswith(("python:", "cmd:")):
+        name, _, fault = text.partition("+")
+        controller = {"name": name, "fault": fault}
+    else:
+        controller = {"name": text}
+    if not isinstance(controller.get("name"), str) or not controller["name"]:
+        raise _core.SpecError(f"{option}: expected a controller name")
+    try:
+        _core.check_run_spec(json.dumps({"controller": controller}))
+    except _core.SpecError as e:
+        raise _core.SpecError(f"{option}: {e}") from None
+    return controller
+
+
+@dataclass(frozen=True)
+class DiffPlan:
+    """What a diff compares."""
+
+    a: dict[str, Any]
+    b: dict[str, Any]
+    strategy: str = "random"
+    situations: str | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        source = {} if self.situations is None else {"situations": self.situations}
+        return {
+            **source,
+            "a": self.a,
+            "b": self.b,
+            "strategy": self.strategy,
+            "kill_rule": {"alpha": ALPHA, "copies": COPIES, "stages": list(STAGES)},
+        }
+
+    def controller(self, side: str) -> dict[str, Any]:
+        return self.a if side == "a" else self.b
+
+
+@dataclass
+class Judgement:
+    """One class on one situation where A and B differ, judged on perturbed copies."""
+
+    situation: int
+    failure_class: str
+    a_recurs: int = 0
+    b_recurs: int = 0
+    copies: int = 0
+    new: bool | None = None
+    """B's copies show it significantly more often (None: undecided yet)."""
+    fixed: bool | None = None
+
+    @property
+    def verdict(self) -> str:
+        if self.new:
+            return NEW
+        if self.fixed:
+            return FIXED
+        return NOT_ROBUST
+
+    def settle(self) -> bool:
+        """Decide what the copies so far allow; whether both directions are decided."""
+        if self.new is None:
+            self.new = verdict(self.b_recurs, self.a_recurs, self.copies)
+        if self.fixed is None:
+            self.fixed = verdict(self.a_recurs, self.b_recurs, self.copies)
+        return self.new is not None and self.fixed is not None
+
+
+def _run_of(base: Job, plan: DiffPlan, side: str) -> dict[str, Any]:
+    return dict(base.run, controller=plan.controller(side))
+
+
+def _jobs(situations: Situations, i: int, plan: DiffPlan) -> list[Job]:
+    base = situations.job(i)
+    return [
+        Job(2 * i + k, base.seed, base.situation, _run_of(base, plan, side), base.error)
+        for k, side in enumerate(SIDES)
+    ]
+
+
+def _differences(store: Store, chunk: range) -> tuple[list[Judgement], list[tuple[int, str]]]:
+    """The classes to judge on the chunk's situations, and each (situation, class) both
+    sides showed alike (unchanged)."""
+    judge: list[Judgement] = []
+    alike: list[tuple[int, str]] = []
+    for i in chunk:
+        a, b = outcome_of(store, 2 * i), outcome_of(store, 2 * i + 1)
+        if a is None or b is None or a.error or b.error:
+            continue
+        if a.failure_class == b.failure_class:
+            if a.failure_class is not None:
+                alike.append((i, a.failure_class))
+            continue
+        shown = {a.failure_class, b.failure_class}
+        for c in sorted(x for x in shown if x is not None):
+            judge.append(Judgement(i, c))
+    return judge, alike
+
+
+def _judge(
+    executor: Executor,
+    situations: Situations,
+    plan: DiffPlan,
+    judgements: list[Judgement],
+    stop: Callable[[], bool] | None,
+) -> int | None:
+    """Run perturbed copies of both sides, stage by stage, until every judgement is settled;
+    copies of one situation serve every class judged there. The copies run, or None if
+    stopped part way."""
+    seen: dict[tuple[str, int, int], Outcome] = {}
+    copies = 0
+    done = 0
+    for target in STAGES:
+        open_ = [j for j in judgements if not (j.new is not None and j.fixed is not None)]
+        if not open_:
+            break
+        wanted = sorted(
+            {
+                (side, j.situation, k)
+                for j in open_
+                for side in SIDES
+                for k in range(done + 1, target + 1)
+            }
+        )
+        jobs = []
+        for index, (side, i, k) in enumerate(wanted):
+            base = situations.job(i)
+            jobs.append(
+                Job(
+                    index,
+                    base.seed,
+                    base.situation,
+                    perturbed(_run_of(base, plan, side), k),
+                    base.error,
+                )
+            )
+        got: dict[int, Outcome] = {}
+        for job, result in executor.results(jobs):
+            got[job.index] = outcome_of_result(result, lambda _: [])
+            if stop is not None and stop():
+                executor.stop()
+        if len(got) < len(jobs):
+            return None
+        copies += len(jobs)
+        for index, key in enumerate(wanted):
+            seen[key] = got[index]
+        for j in open_:
+            for k in range(done + 1, target + 1):
+                j.a_recurs += seen[("a", j.situation, k)].failure_class == j.failure_class
+                j.b_recurs += seen[("b", j.situation, k)].failure_class == j.failure_class
+            j.copies = target
+            j.settle()
+        done = target
+    return copies
+
+
+@dataclass(frozen=True)
+class DiffResult:
+    ran: int
+    situations: int
+    interrupted: bool
+    wall_s: float
+
+
+def run_diff(
+    spec: CampaignSpec,
+    db: str | Path,
+    plan: DiffPlan,
+    seed: int = 0,
+    n: int = 100,
+    workers: int = 1,
+    on_progress: Callable[[int, int], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+    situations_db: Path | None = None,
+) -> DiffResult:
+    """Compare (or resume comparing) ``plan``'s controllers on ``n`` situations into ``db``."""
+    if not 1 <= n <= MAX_SITUATIONS:
+        raise _core.SpecError(f"--n: {n} is not in [1, {MAX_SITUATIONS}]")
+    started = time.perf_counter()
+    situations = Situations(spec, seed, plan.strategy, None, situations_db)
+    try:
+        if n > situations.most():
+            raise _core.SpecError(
+                f"--n: {n} is more than the {situations.most()} runs of {situations_db}"
+            )
+        check_campaign(spec, seed, n if plan.strategy == "random" else 0, stop)
+        user = any(str(plan.controller(s)["name"]).startswith(("python:", "cmd:")) for s in SIDES)
+        with Store(db, create=True) as store:
+            store.lock_for_writing()
+            store.start_campaign(
+                spec.source, seed, n, _core.__version__, started_at(), diff=plan.as_dict()
+            )
+            done = store.done_ids()
+            judged = {s for (s,) in store.db.execute("SELECT first FROM diff_chunks")}
+            executor = Executor(workers, user=user)
+            ran, interrupted = 0, False
+            for first in range(0, n, CHUNK):
+                chunk = range(first, min(first + CHUNK, n))
+                if first in judged:
+                    continue
+                jobs = [j for i in chunk for j in _jobs(situations, i, plan) if j.index not in done]
+                rows = []
+                for job, result in executor.results(jobs):
+                    rows.append(_row(job, result))
+                    ran += 1
+                    if stop is not None and stop():
+                        executor.stop()
+                store.add_runs(rows)
+                done.update(r.id for r in rows)
+                if len(rows) < len(jobs):
+                    interrupted = True
+                    break
+                judgements, alike = _differences(store, chunk)
+                copies = _judge(executor, situations, plan, judgements, stop)
+                if copies is None:
+                    interrupted = True
+                    break
+                ran += copies
+                store.record_diff_chunk(first, copies, [_row_of(j) for j in judgements], alike)
+                if on_progress:
+                    on_progress(chunk.stop, n)
+                if stop is not None and stop():
+                    interrupted = chunk.stop < n
+                    break
+            evaluated = store.db.execute("SELECT count(*) FROM runs WHERE id % 2 = 0").fetchone()[0]
+    finally:
+        situations.close()
+    return DiffResult(ran, int(evaluated), interrupted, time.perf_counter() - started)
+
+
+def _row_of(j: Judgement) -> dict[str, Any]:
+    return {
+        "situation": j.situation,
+        "failure_class": j.failure_class,
+        "a_recurs": j.a_recurs,
+        "b_recurs": j.b_recurs,
+        "copies": j.copies,
+        "verdict": j.verdict,
+    }
+
+
+# Reading a diff.
+
+
+@dataclass
+class ClassDiff:
+    """One distinct failure (a base failure class) across the diff's situations."""
+
+    failure_class: str
+    description: str
+    verdict: str
+    new: list[int] = field(default_factory=list)
+    """Situations where it is robustly new in B."""
+    fixed: list[int] = field(default_factory=list)
+    unchanged: list[int] = field(default_factory=list)
+    not_robust: list[int] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["class"] = d.pop("failure_class")
+        return d
+
+
+@dataclass
+class DiffReport:
+    a: dict[str, Any]
+    b: dict[str, Any]
+    situations: int
+    runs: int
+    """Runs in all, every perturbed copy counted."""
+    classes: list[ClassDiff]
+
+    @property
+    def robust_new(self) -> list[ClassDiff]:
+        return [c for c in self.classes if c.new]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "a": self.a,
+            "b": self.b,
+            "situations": self.situations,
+            "runs": self.runs,
+            "robust_new": len(self.robust_new),
+            "classes": [c.as_dict() for c in self.classes],
+        }
+
+
+def diff_report(store: Store) -> DiffReport:
+    """The results stored in a diff's store. Raises StoreError if it holds none."""
+    plan = store.plan("diff")
+    if plan is None:
+        raise StoreError(f"{store.path}: holds no controller diff (sitgen diff)")
+    sentences = dict(_core.failure_classes())
+    by_class: dict[str, ClassDiff] = {}
+
+    def entry(c: str) -> ClassDiff:
+        return by_class.setdefault(c, ClassDiff(c, sentences.get(c, c), UNCHANGED))
+
+    for situation, c, verdict_ in store.db.execute(
+        "SELECT situation, failure_class, verdict FROM diff_results "
+        "ORDER BY situation, failure_class"
+    ):
+        e = entry(c)
+        {NEW: e.new, FIXED: e.fixed, UNCHANGED: e.unchanged}.get(verdict_, e.not_robust).append(
+            situation
+        )
+    for c in by_class.values():
+        c.verdict = (
+            BOTH
+            if c.new and c.fixed
+            else NEW
+            if c.new
+            else FIXED
+            if c.fixed
+            else NOT_ROBUST
+            if c.not_robust
+            else UNCHANGED
+        )
+    order = {k: i for i, (k, _) in enumerate(_core.failure_classes())}
+    classes = sorted(
+        by_class.values(), key=lambda c: (order.get(c.failure_class, 99), c.failure_class)
+    )
+    copies = store.db.execute("SELECT coalesce(sum(copies), 0) FROM diff_chunks").fetchone()[0]
+    evaluated = store.db.execute("SELECT count(*) FROM runs WHERE id % 2 = 0").fetchone()[0]
+    return DiffReport(
+        plan["a"], plan["b"], int(evaluated), store.run_count() + int(copies), classes
+    )
+
+
+def controller_label(controller: dict[str, Any]) -> str:
+    """``snd_follow+safety_distance_halved``, or the name with its parameters."""
+    name = str(controller["name"])
+    if controller.get("fault"):
+        name += f"+{controller['fault']}"
+    if controller.get("params"):
+        name += " " + json.dumps(controller["params"], sort_keys=True)
+    return name
+
+
+def write_junit(report: DiffReport, out: TextIO) -> None:
+    """The verdict as JUnit XML: one test case per distinct failure, failed where it is
+    robustly new in B."""
+    suite = ElementTree.Element(
+        "testsuite",
+        name=f"sitgen diff: {controller_label(report.a)} -> {controller_label(report.b)}",
+        tests=str(len(report.classes)),
+        failures=str(len(report.robust_new)),
+        errors="0",
+        skipped="0",
+    )
+    for c in report.classes:
+        case = ElementTree.SubElement(
+            suite, "testcase", classname="sitgen.diff", name=c.failure_class
+        )
+        if c.new:
+            failure = ElementTree.SubElement(
+                case, "failure", message=f"{c.description}: robustly new in B"
+            )
+            failure.text = (
+                f"robustly new in B on situations {', '.join(map(str, c.new))} "
+                f"(runs {', '.join(str(2 * s + 1) for s in c.new)}); fixed on "
+                f"{len(c.fixed)}, unchanged on {len(c.unchanged)}, not robust on "
+                f"{len(c.not_robust)}"
+            )
+        else:
+            ElementTree.SubElement(case, "system-out").text = c.verdict
+    root = ElementTree.Element("testsuites")
+    root.append(suite)
+    ElementTree.indent(root)
+    out.write(ElementTree.tostring(root, encoding="unicode", xml_declaration=True))
+    out.write("\n")
+
+
+def summary_lines(report: DiffReport) -> Iterable[str]:
+    yield (
+        f"{controller_label(report.a)} (A) against {controller_label(report.b)} (B) on "
+        f"{report.situations} situations, {report.runs} runs with their perturbed copies"
+    )
+    new = report.robust_new
+    yield (
+        f"B has {len(new)} robustly new distinct failure{'s' if len(new) != 1 else ''}"
+        + (": " + ", ".join(c.failure_class for c in new) if new else "")
+    )
