@@ -56,8 +56,6 @@ RerunsOption = Annotated[
     int,
     typer.Option(
         "--reruns",
-        min=0,
-        max=1000,
         help="Perturbed copies of each distinct failure's representative run at the end, to "
         "tell robust failures from knife-edge ones (docs/failures.md); 0: none.",
     ),
@@ -627,6 +625,7 @@ def campaign(
     command again resumes."""
     from sitgen.campaign import DEFAULT_KEEP, run_campaign
 
+    _check_reruns(reruns)
     parsed = _campaign_spec(spec)
     total_n = parsed.n if n is None else n
     result = _stored(
@@ -693,6 +692,14 @@ def _echo_stored(
         )
     if interrupted:
         raise typer.Exit(130)
+
+
+def _check_reruns(reruns: int) -> None:
+    """``--reruns``: 0 (measure nothing) or a number of copies, checked before any run."""
+    from sitgen.robustness import check_reruns
+
+    if reruns != 0:
+        check_reruns(reruns)
 
 
 def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
@@ -885,6 +892,7 @@ def search(
     it). Ctrl-C stops after the runs in flight; the same command resumes."""
     from sitgen.search import SearchPlan, SearchProgress, SearchResult, run_search
 
+    _check_reruns(reruns)
     parsed = _campaign_spec(spec)
     learned = _weights(weights)
     if learned is not None:
@@ -1321,9 +1329,7 @@ def robustness(
         list[int] | None,
         typer.Argument(help="Failing runs to measure (default: every distinct failure's)."),
     ] = None,
-    reruns: Annotated[
-        int, typer.Option("--reruns", min=1, max=1000, help="Perturbed copies of each run.")
-    ] = 8,
+    reruns: Annotated[int, typer.Option("--reruns", help="Perturbed copies of each run.")] = 8,
     workers: WorkersOption = None,
     format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
 ) -> None:
@@ -1332,11 +1338,12 @@ def robustness(
     many copies each one's failure class recurs: robust or knife-edge (docs/failures.md).
     Stored; `failures`, `rank` and `report` show it."""
     from sitgen.failures import distinct_failures, measure_robustness
-    from sitgen.robustness import measure_runs, tally, verdict
+    from sitgen.robustness import check_reruns, measure_runs, tally, verdict
     from sitgen.store import Store
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
+    check_reruns(reruns)
     require_store(db)
     for run_id in run_ids or []:
         if not 0 <= run_id < 2**63:

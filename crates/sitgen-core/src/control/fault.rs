@@ -26,7 +26,7 @@
 //! generators; the SND faults follow its steps in `reference/algorithms.md` §1 (one of them,
 //! `turn_rate_in_radians`, is Player ≥ 3.1's own unit bug, §1.2).
 
-use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+use std::f64::consts::{FRAC_PI_4, PI};
 
 use super::snd::SndParams;
 use super::{Command, Controller};
@@ -72,25 +72,25 @@ pub enum Fault {
     DwaNoBrakingMargin,
     /// DWA: the robot a point.
     DwaPointRobot,
-    /// Headings within 10° of ±π read as ±170°.
+    /// Headings within 3° of ±π read as ±177°.
     HeadingWrapNearPi,
-    /// Every command a stop once a 16-bit tick count has wrapped (163.84 s).
+    /// Every command a stop once a 16-bit tick count has wrapped (524.288 s).
     WatchdogOverflow,
-    /// Tracks past the second dropped with their laser returns.
+    /// Tracks past the third dropped with their laser returns.
     TrackDroppedInCrowd,
     /// SND: a goal behind taken as its mirror image ahead.
     GoalBehindReflected,
-    /// SND: range jumps of 1.0–1.3 m not taken as gaps.
+    /// SND: range jumps of 1.15–1.25 m not taken as gaps.
     GapBandMissed,
     /// A `loop` route ends after its first lap.
     LoopIndexNotReset,
     /// SND: readings at exactly the maximum range taken as obstacles.
     MaxRangeAsObstacle,
-    /// Readings under 0.45 m reported as no return.
+    /// Readings under 0.35 m reported as no return.
     MinRangeDropout,
-    /// The fourth waypoint of a route of six or more skipped.
+    /// The tenth waypoint of a route of twelve or more skipped.
     LongRouteWaypointSkipped,
-    /// The heading read through a gyro 3 % off in scale.
+    /// The heading read through a gyro 1.5 % off in scale.
     GyroScaleError,
 }
 
@@ -252,23 +252,23 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::HeadingWrapNearPi,
         id: "heading_wrap_near_pi",
         controllers: LASER,
-        changes: "headings within 10° of ±180° are read as ±170°: driving west, the robot \
-                  believes it is 10° off its course",
+        changes: "headings within 3° of ±180° are read as ±177°: driving due west, the robot \
+                  believes it is a few degrees off its course",
         stands_for: "an angle-wrap error at ±π (a yaw taken through a saturating conversion)",
     },
     FaultInfo {
         fault: Fault::WatchdogOverflow,
         id: "watchdog_overflow",
         controllers: LASER,
-        changes: "once a signed 16-bit count of 5 ms ticks has wrapped (163.84 s), every scan \
-                  looks stale to the watchdog and every command is a stop",
+        changes: "once a 16-bit count of 8 ms ticks has wrapped (524.288 s), every scan looks \
+                  stale to the watchdog and every command is a stop",
         stands_for: "a counter or timer that overflows after minutes of running",
     },
     FaultInfo {
         fault: Fault::TrackDroppedInCrowd,
         id: "track_dropped_in_crowd",
         controllers: LASER,
-        changes: "with three or more robots in view, those past the first two (by id) are \
+        changes: "with four or more robots in view, those past the first three (by id) are \
                   dropped, and their laser returns removed as clutter",
         stands_for: "a fixed-size track table overflowing in a crowd",
     },
@@ -276,16 +276,16 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::GoalBehindReflected,
         id: "goal_behind_reflected",
         controllers: &["snd_follow"],
-        changes: "a waypoint more than 90° off the heading is taken as its mirror image ahead: \
-                  the robot drives away from a goal behind it",
+        changes: "a waypoint more than 170° off the heading is taken as its mirror image ahead: \
+                  the robot drives away from a goal right behind it",
         stands_for: "a wrong branch for goals behind the robot (an acos where an atan2 belongs)",
     },
     FaultInfo {
         fault: Fault::GapBandMissed,
         id: "gap_band_missed",
         controllers: SND,
-        changes: "range jumps between 1.0 and 1.3 m are not taken as gaps, so openings behind \
-                  such a step are not seen",
+        changes: "range jumps between 1.15 and 1.25 m are not taken as gaps, so openings \
+                  behind such a step are not seen",
         stands_for: "a gap test wrong only for one band of widths (a missing bin of a table)",
     },
     FaultInfo {
@@ -308,7 +308,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::MinRangeDropout,
         id: "min_range_dropout",
         controllers: &["snd", "snd_follow", "dwa"],
-        changes: "readings under 0.45 m are reported as no return: whatever nearly touches \
+        changes: "readings under 0.35 m are reported as no return: whatever nearly touches \
                   the robot vanishes",
         stands_for: "a driver's too-close status mapped to no return",
     },
@@ -316,16 +316,16 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::LongRouteWaypointSkipped,
         id: "long_route_waypoint_skipped",
         controllers: ROUTE,
-        changes: "on routes of six or more waypoints the fourth is skipped: the robot cuts \
-                  from the third to the fifth",
+        changes: "on routes of twelve or more waypoints the tenth is skipped: the robot cuts \
+                  from the ninth to the eleventh",
         stands_for: "an index incremented twice on one path through the code",
     },
     FaultInfo {
         fault: Fault::GyroScaleError,
         id: "gyro_scale_error",
         controllers: LASER,
-        changes: "the heading is the start heading plus 1.03 times the turn since: a net turn \
-                  of 180° leaves it 5.4° off",
+        changes: "the heading is the start heading plus 1.015 times the turn since: a net \
+                  turn of 360° leaves it 5.4° off",
         stands_for: "a sensor scale factor off by a few per cent (a gyro calibration)",
     },
 ];
@@ -439,19 +439,21 @@ pub fn own_radius_m(fault: Option<Fault>, robot: &Robot) -> f64 {
 
 /// Half the field of view `narrow_fov` leaves, radians.
 const NARROW_HALF_FOV: f64 = FRAC_PI_4;
-/// How near ±π a heading `heading_wrap_near_pi` saturates, radians (10°).
-const WRAP_BAND: f64 = PI / 18.0;
-/// When `watchdog_overflow`'s signed 16-bit count of 5 ms ticks wraps, seconds.
-const WATCHDOG_WRAP_S: f64 = 32_768.0 * 0.005;
+/// How near ±π a heading `heading_wrap_near_pi` saturates, radians (3°).
+const WRAP_BAND: f64 = PI / 60.0;
+/// When `watchdog_overflow`'s 16-bit count of 8 ms ticks wraps, seconds.
+const WATCHDOG_WRAP_S: f64 = 65_536.0 * 0.008;
+/// How far off the heading a waypoint must be for `goal_behind_reflected`, radians (170°).
+const BEHIND: f64 = PI * 17.0 / 18.0;
 /// Tracks `track_dropped_in_crowd`'s table holds.
-const TRACK_TABLE: usize = 2;
+const TRACK_TABLE: usize = 3;
 /// Returns this near a dropped track's centre are removed with it, metres (a Pioneer's
 /// enclosing radius and a margin).
 const TRACK_CLUTTER_M: f64 = 0.5;
 /// Readings `min_range_dropout` reports as no return, metres.
-const DROPOUT_M: f64 = 0.45;
+const DROPOUT_M: f64 = 0.35;
 /// `gyro_scale_error`'s scale factor.
-const GYRO_SCALE: f64 = 1.03;
+const GYRO_SCALE: f64 = 1.015;
 
 /// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees, or the
 /// route it is given at reset.
@@ -497,8 +499,8 @@ impl Seeded {
         let mut given = robot.clone();
         match self.fault {
             Fault::LoopIndexNotReset if given.at_end == AtEnd::Loop => given.at_end = AtEnd::Stop,
-            Fault::LongRouteWaypointSkipped if given.waypoints.len() >= 6 => {
-                given.waypoints.remove(3);
+            Fault::LongRouteWaypointSkipped if given.waypoints.len() >= 12 => {
+                given.waypoints.remove(9);
             }
             _ => {}
         }
@@ -565,7 +567,7 @@ impl Seeded {
                 if let Some((x, y)) = target {
                     let p = obs.pose;
                     let b = wrap_angle((y - p.y_m).atan2(x - p.x_m) - p.heading_rad);
-                    if b.abs() > FRAC_PI_2 {
+                    if b.abs() > BEHIND {
                         // The bearing b seen as its mirror image in the lateral axis,
                         // ±π − b, by turning the heading the controller reads.
                         let mirrored = PI.copysign(b) - b;

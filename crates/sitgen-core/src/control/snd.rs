@@ -481,7 +481,7 @@ pub fn safety_distance(d_min: f64, r: f64, ds_max: f64) -> f64 {
 }
 
 /// Range jumps seeded fault `gap_band_missed` does not take as gaps, metres.
-const MISSED_GAP_BAND: std::ops::RangeInclusive<f64> = 1.0..=1.3;
+const MISSED_GAP_BAND: std::ops::RangeInclusive<f64> = 1.15..=1.25;
 
 /// Step 4: the gaps in increasing sector order, forced gaps at the edges of a scan narrower
 /// than the circle, then merged ([`merge_gaps`]). `beams` is L; `fault` is SND's seeded

@@ -56,16 +56,17 @@ fn situation(map: &Map, robots: Vec<Robot>) -> Situation {
 /// - a crossing: a route with a right-angle turn, a peer driving across its first leg and a
 ///   rock beside it (the turn also shows `gyro_scale_error`, the open field beyond the laser's
 ///   range `max_range_as_obstacle`);
-/// - a corridor 0.8 m wide the agent starts in (its walls inside R = 0.438 m, and inside
-///   `min_range_dropout`'s 0.45 m);
+/// - a corridor 0.8 m wide the agent starts in (its walls inside R = 0.438 m);
+/// - a post beside the agent's laser, and one ahead of it, within `min_range_dropout`'s
+///   0.35 m;
 /// - a drive due west (`heading_wrap_near_pi`);
-/// - a 116 m drive that lasts past 163.84 s (`watchdog_overflow`);
-/// - three robots standing in view ahead (`track_dropped_in_crowd`);
+/// - a 296 m drive that lasts past 524.288 s (`watchdog_overflow`);
+/// - four robots standing in view ahead (`track_dropped_in_crowd`);
 /// - a first waypoint behind the start (`goal_behind_reflected`);
 /// - a wall ahead with an opening on the right and a wall behind that (a range jump of
-///   1.28 m at the opening's edge: `gap_band_missed`);
+///   1.20 m at the opening's edge: `gap_band_missed`);
 /// - a `loop` route of two waypoints (`loop_index_not_reset`);
-/// - a zigzag route of six waypoints (`long_route_waypoint_skipped`).
+/// - a zigzag route of twelve waypoints (`long_route_waypoint_skipped`).
 fn situations() -> Vec<(&'static str, Situation, usize)> {
     let room = map(10.0, 6.0, 0.02, |x, y| {
         (5.0..5.2).contains(&x) && (y - 3.0).abs() > 0.4
@@ -101,10 +102,10 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
         &open,
         vec![robot(0, Role::Agent, (15.0, 10.0, PI), vec![[3.0, 10.0]])],
     );
-    let strip = map(120.0, 8.0, 0.1, |_, _| false);
+    let strip = map(300.0, 8.0, 0.1, |_, _| false);
     let long = situation(
         &strip,
-        vec![robot(0, Role::Agent, (2.0, 4.0, 0.0), vec![[118.0, 4.0]])],
+        vec![robot(0, Role::Agent, (2.0, 4.0, 0.0), vec![[298.0, 4.0]])],
     );
     let standing = |id, x, y| robot(id, Role::Peer, (x, y, PI), vec![]);
     let crowd = situation(
@@ -113,7 +114,8 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
             robot(0, Role::Agent, (3.0, 10.0, 0.0), vec![[17.0, 10.0]]),
             standing(1, 7.0, 8.5),
             standing(2, 7.0, 11.5),
-            standing(3, 8.0, 10.0),
+            standing(3, 6.0, 13.5),
+            standing(4, 8.0, 10.0),
         ],
     );
     let behind = situation(
@@ -127,7 +129,7 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
     );
     let stepped = map(10.0, 7.0, 0.02, |x, y| {
         let near = (4.0..4.2).contains(&x) && !(1.6..3.0).contains(&y);
-        let far = (5.2..5.4).contains(&x) && y < 2.4;
+        let far = (5.15..5.35).contains(&x) && y < 2.4;
         near || far
     });
     let step = situation(
@@ -149,26 +151,48 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
             Role::Agent,
             (2.0, 2.0, 0.0),
             vec![
-                [5.0, 2.0],
-                [5.0, 5.0],
+                [4.0, 2.0],
+                [5.0, 3.5],
+                [7.0, 3.5],
                 [8.0, 5.0],
-                [8.0, 8.0],
-                [11.0, 8.0],
-                [11.0, 11.0],
+                [10.0, 5.0],
+                [11.0, 6.5],
+                [13.0, 6.5],
+                [14.0, 8.0],
+                [16.0, 8.0],
+                [17.0, 9.5],
+                [17.0, 11.5],
+                [16.0, 13.0],
             ],
         )],
     );
+    let posted = map(12.0, 6.0, 0.02, |x, y| {
+        (3.98..4.02).contains(&x) && (3.28..3.32).contains(&y)
+    });
+    let post = situation(
+        &posted,
+        vec![robot(0, Role::Agent, (4.0, 3.0, 0.0), vec![[11.0, 3.0]])],
+    );
+    let posted_ahead = map(12.0, 6.0, 0.02, |x, y| {
+        (4.20..4.24).contains(&x) && (3.27..3.31).contains(&y)
+    });
+    let post_ahead = situation(
+        &posted_ahead,
+        vec![robot(0, Role::Agent, (4.0, 3.0, 0.0), vec![[11.0, 3.0]])],
+    );
     vec![
         ("doorway", doorway, STEPS),
+        ("post", post, STEPS),
+        ("post ahead", post_ahead, STEPS),
         ("crossing", crossing, STEPS),
         ("corridor", corridor, STEPS),
         ("west", west, STEPS),
-        ("long", long, 1800),
+        ("long", long, 5400),
         ("crowd", crowd, STEPS),
         ("behind", behind, STEPS),
         ("step", step, STEPS),
         ("lap", lap, STEPS),
-        ("zigzag", zigzag, STEPS),
+        ("zigzag", zigzag, 2000),
     ]
 }
 

@@ -1,0 +1,144 @@
+"""`sitgen diff` end to end: a real fault shows robust new failures and exits 1, a 1e-5 nudge
+shows none and exits 0, JUnit for CI, the same verdicts whatever the worker count, resuming
+after SIGKILL, stored situations, and bad input as one-line errors."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sqlite3
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+from xml.etree import ElementTree
+
+import pytest
+
+from sitgen.diff import BOTH, FIXED, NEW, NOT_ROBUST, UNCHANGED, parse_controller
+from tests.conftest import run_cli, sitgen_command
+
+N = "32"
+HALVED = "snd_follow+safety_distance_halved"
+NUDGED = '{"name": "snd_follow", "params": {"max_speed": 0.499995}}'
+
+
+def diff_json(db: Path, *args: str) -> tuple[int, dict[str, Any]]:
+    done = run_cli("diff", "--n", N, "--seed", "1", "--db", str(db), "--format", "json", *args)
+    assert done.returncode in (0, 1), done.stderr
+    report: dict[str, Any] = json.loads(done.stdout)
+    return done.returncode, report
+
+
+@pytest.fixture(scope="module")
+def halved(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, int, dict[str, Any]]:
+    folder = tmp_path_factory.mktemp("diff")
+    db = folder / "halved.db"
+    code, report = diff_json(db, "--b", HALVED, "--junit", str(folder / "junit.xml"))
+    return db, code, report
+
+
+def test_a_real_fault_has_robust_new_failures_and_fails_the_command(
+    halved: tuple[Path, int, dict[str, Any]],
+) -> None:
+    db, code, report = halved
+    assert code == 1
+    assert report["robust_new"] >= 1
+    assert report["b"] == {"name": "snd_follow", "fault": "safety_distance_halved"}
+    verdicts = {c["class"]: c["verdict"] for c in report["classes"]}
+    assert set(verdicts.values()) <= {NEW, FIXED, BOTH, UNCHANGED, NOT_ROBUST}
+    with sqlite3.connect(db) as c:
+        rows = c.execute(
+            "SELECT situation, failure_class, a_recurs, b_recurs, copies, verdict "
+            "FROM diff_results WHERE verdict != 'unchanged'"
+        ).fetchall()
+    for situation, key, a, b, copies, verdict in rows:
+        assert 0 <= a <= copies and 0 <= b <= copies and copies in (2, 4, 8)
+        if verdict == NEW:
+            assert b - a >= 6, (situation, key, a, b)
+        if verdict == FIXED:
+            assert a - b >= 6, (situation, key, a, b)
+    new = [c for c in report["classes"] if c["new"]]
+    assert len(new) == report["robust_new"]
+    # Runs 2i and 2i + 1 are A and B on situation i.
+    with sqlite3.connect(db) as c:
+        controllers = dict(c.execute("SELECT id, controller FROM runs WHERE id < 4"))
+    assert controllers == {0: "snd_follow", 1: HALVED, 2: "snd_follow", 3: HALVED}
+
+
+def test_junit_has_a_failed_case_per_robust_new_failure(
+    halved: tuple[Path, int, dict[str, Any]],
+) -> None:
+    db, _, report = halved
+    suite = ElementTree.parse(db.parent / "junit.xml").getroot().find("testsuite")
+    assert suite is not None
+    cases = suite.findall("testcase")
+    assert [c.get("name") for c in cases] == [c["class"] for c in report["classes"]]
+    failed = [c.get("name") for c in cases if c.find("failure") is not None]
+    assert failed == [c["class"] for c in report["classes"] if c["new"]]
+    assert suite.get("failures") == str(len(failed))
+
+
+def test_a_negligible_nudge_has_no_robust_new_failure_and_passes(tmp_path: Path) -> None:
+    code, report = diff_json(tmp_path / "nudged.db", "--b", NUDGED)
+    assert code == 0
+    assert report["robust_new"] == 0
+    assert not any(c["new"] for c in report["classes"])
+
+
+def test_the_same_verdicts_whatever_the_workers_and_after_a_sigkill(
+    halved: tuple[Path, int, dict[str, Any]], tmp_path: Path
+) -> None:
+    _, _, expected = halved
+    _, one = diff_json(tmp_path / "one.db", "--b", HALVED, "--workers", "1")
+    assert one == expected
+    db = tmp_path / "killed.db"
+    args = ["diff", "--n", N, "--seed", "1", "--db", str(db), "--b", HALVED, "--format", "json"]
+    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and stored_runs(db) < 20:
+            time.sleep(0.05)
+        assert proc.poll() is None, "killed part way, not after the end"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    _, resumed = diff_json(db, "--b", HALVED)
+    assert resumed == expected
+
+
+def stored_runs(db: Path) -> int:
+    if not db.exists():
+        return 0
+    try:
+        with sqlite3.connect(db, timeout=5) as c:
+            return int(c.execute("SELECT count(*) FROM runs").fetchone()[0])
+    except sqlite3.OperationalError:
+        return 0
+
+
+def test_stored_situations_are_diffed_as_they_were_run(tmp_path: Path) -> None:
+    campaign = tmp_path / "campaign.db"
+    assert run_cli("campaign", "--n", "8", "--seed", "2", "--db", str(campaign)).returncode == 0
+    code, report = diff_json(
+        tmp_path / "stored.db", "--situations", str(campaign), "--b", NUDGED, "--n", "8"
+    )
+    assert code == 0 and report["situations"] == 8
+
+
+def test_bad_input_is_a_one_line_error(tmp_path: Path) -> None:
+    db = tmp_path / "bad.db"
+    for args, expected in [
+        ((), "--b"),
+        (("--b", "snd_follow+nope"), "--b: run.controller.fault: unknown fault `nope`"),
+        (("--b", "{not json"), "--b: not a JSON controller table"),
+        (("--b", "warp_drive"), "--b:"),
+        (("--b", HALVED, "--format", "xml"), "--format"),
+    ]:
+        done = run_cli("diff", "--n", "2", "--db", str(db), *args)
+        assert done.returncode == 2, (args, done.stdout, done.stderr)
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and expected in lines[0], (args, done.stderr)
+    assert not db.exists()
+    with pytest.raises(Exception, match="--a: expected a controller name"):
+        parse_controller('{"params": {}}', "--a")
