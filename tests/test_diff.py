@@ -142,3 +142,28 @@ def test_bad_input_is_a_one_line_error(tmp_path: Path) -> None:
     assert not db.exists()
     with pytest.raises(Exception, match="--a: expected a controller name"):
         parse_controller('{"params": {}}', "--a")
+
+
+def test_the_report_shows_each_robust_difference_as_a_and_b_side_by_side(
+    halved: tuple[Path, int, dict[str, Any]], tmp_path: Path
+) -> None:
+    db, _, report = halved
+    out = tmp_path / "report"
+    done = run_cli("report", str(db), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    index = (out / "index.html").read_text()
+    section = index.split("<section id='diff'>")[1].split("</section>")[0]
+    new = [c for c in report["classes"] if c["verdict"] in (NEW, BOTH)]
+    assert new
+    for c in new:
+        first = next(p for p in c["pairs"] if p["verdict"] == NEW)
+        situation = first["situation"]
+        block = section.split(f"<h3>{c['description']}: ")[1].split("<h3>")[0]
+        pair = block.split(f"<div class='pair' data-situation='{situation}'")[1]
+        pair = pair.split("</div></div>")[0]
+        assert pair.startswith(f" data-verdict='{NEW}'")
+        # A's run is 2i, B's 2i + 1; both have a page and a figure beside each other.
+        a, b = 2 * situation, 2 * situation + 1
+        assert pair.index(f"run-{a}.png") < pair.index(f"run-{b}.png")
+        assert (out / f"run-{a}.html").is_file() and (out / f"run-{b}.html").is_file()
+        assert f"A {first['a_recurs']}/{first['copies']}, B {first['b_recurs']}/" in pair

@@ -345,10 +345,11 @@ def test_the_documented_catalogue_is_the_catalogue() -> None:
     catalogue = _core.fault_catalogue()
     assert sorted(rows) == sorted(f["id"] for f in catalogue)
     for f in catalogue:
-        controllers, _seam, changes, stands_for = rows[f["id"]]
+        controllers, _seam, changes, stands_for, exposed_by = rows[f["id"]]
         assert controllers == ", ".join(f["controllers"]), f["id"]
         # The catalogue's text, with names of code set as code.
         assert (changes.replace("`", ""), stands_for) == (f["changes"], f["stands_for"]), f["id"]
+        assert exposed_by == (f["exposed_by"] or "-"), f["id"]
 
 
 def test_barn_worlds_are_a_strategy_of_their_own(tmp_path: Path, shared_data: Path) -> None:

@@ -306,6 +306,26 @@ def _row_of(j: Judgement) -> dict[str, Any]:
 # Reading a diff.
 
 
+@dataclass(frozen=True)
+class Pair:
+    """A situation where A and B differ in one class: A's run and B's run, side by side, and
+    how often their perturbed copies showed the class."""
+
+    situation: int
+    verdict: str
+    a_recurs: int | None
+    b_recurs: int | None
+    copies: int
+
+    @property
+    def a_run(self) -> int:
+        return 2 * self.situation
+
+    @property
+    def b_run(self) -> int:
+        return 2 * self.situation + 1
+
+
 @dataclass
 class ClassDiff:
     """One distinct failure (a base failure class) across the diff's situations."""
@@ -318,6 +338,8 @@ class ClassDiff:
     fixed: list[int] = field(default_factory=list)
     unchanged: list[int] = field(default_factory=list)
     not_robust: list[int] = field(default_factory=list)
+    pairs: list[Pair] = field(default_factory=list)
+    """Each situation where A and B differ in it, in situation order."""
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -360,14 +382,16 @@ def diff_report(store: Store) -> DiffReport:
     def entry(c: str) -> ClassDiff:
         return by_class.setdefault(c, ClassDiff(c, sentences.get(c, c), UNCHANGED))
 
-    for situation, c, verdict_ in store.db.execute(
-        "SELECT situation, failure_class, verdict FROM diff_results "
+    for situation, c, a_recurs, b_recurs, copies, verdict_ in store.db.execute(
+        "SELECT situation, failure_class, a_recurs, b_recurs, copies, verdict FROM diff_results "
         "ORDER BY situation, failure_class"
     ):
         e = entry(c)
         {NEW: e.new, FIXED: e.fixed, UNCHANGED: e.unchanged}.get(verdict_, e.not_robust).append(
             situation
         )
+        if verdict_ != UNCHANGED:
+            e.pairs.append(Pair(situation, verdict_, a_recurs, b_recurs, copies))
     for c in by_class.values():
         c.verdict = (
             BOTH

@@ -89,9 +89,15 @@ CURVE_BUDGETS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
 
 @functools.cache
 def catalogue() -> tuple[dict[str, Any], ...]:
-    """Every seeded fault (``id``, ``controllers``, ``changes``, ``stands_for``), in catalogue
-    order (read from the core once)."""
+    """Every seeded fault (``id``, ``controllers``, ``changes``, ``stands_for``,
+    ``exposed_by``), in catalogue order (read from the core once)."""
     return tuple(_core.fault_catalogue())
+
+
+def is_harder(fault: str) -> bool:
+    """Whether ``fault`` shows only in particular circumstances (its catalogue entry names the
+    kind of situation that exposes it): the faults that tell strategies apart."""
+    return any(f["id"] == fault and f["exposed_by"] for f in catalogue())
 
 
 @functools.cache
@@ -660,12 +666,16 @@ class FaultReport:
 
 def kill_rate_at(report: FaultReport, budget: int) -> float:
     """The share of the report's faults killed within ``budget`` situations."""
-    if not report.faults:
+    return share_killed_within(report.faults, budget)
+
+
+def share_killed_within(rows: list[FaultRow], budget: int) -> float:
+    """The share of ``rows`` (faults, or equivalent mutants) killed within ``budget``
+    situations; 0 for none."""
+    if not rows:
         return 0.0
-    killed = sum(
-        f.runs_to_first_kill is not None and f.runs_to_first_kill <= budget for f in report.faults
-    )
-    return killed / len(report.faults)
+    killed = sum(f.runs_to_first_kill is not None and f.runs_to_first_kill <= budget for f in rows)
+    return killed / len(rows)
 
 
 def evaluation(store: Store) -> dict[str, Any] | None:

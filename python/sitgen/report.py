@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from sitgen.coverage import RunCoverage, dimensions, stored, summarise
+from sitgen.diff import NEW, DiffReport, Pair, controller_label, diff_report
+from sitgen.diff import summary_lines as diff_summary_lines
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
@@ -49,6 +51,9 @@ canvas { border: 1px solid #ccc; image-rendering: pixelated; max-width: 100%; }
 .cards { display: grid; grid-template-columns: repeat(auto-fill, minmax(270px, 1fr)); gap: 12px; }
 .card { border: 1px solid #ddd; border-radius: 6px; padding: 8px 10px; background: #fafafa; }
 .card h3 { font-size: 1em; margin: .1em 0 .3em; } .card p { margin: .3em 0; }
+.pair { display: grid; grid-template-columns: 1fr 1fr; gap: 12px; margin-bottom: 12px; }
+.pair p { grid-column: 1 / 3; margin: .3em 0; }
+.side img { width: 100%; height: 250px; object-fit: contain; }
 .card img { width: 100%; height: 250px; object-fit: contain; background: #fff;
   border: 1px solid #ccc; display: block; } .muted { color: #666; }
 td.class { max-width: 22em; } [data-seek] { cursor: pointer; }
@@ -223,10 +228,14 @@ def _faults_section(report: FaultReport, pages: set[int]) -> str:
     body.append(
         "</p><p class='muted'>A fault is killed at the first situation where its run fails with "
         "a failure class the correct run does not show, or scores worse by more than the "
-        "margin (docs/faults.md).</p><table><tr><th>fault</th><th>result</th><th>killing run"
-        "</th><th>correct run</th><th>changes</th><th>stands for</th></tr>"
+        "margin, and its perturbed copies then show that failure significantly more often "
+        "than the correct controller's (one-sided Fisher exact test at 0.001; docs/faults.md). "
+        "Equivalent mutants, the correct controller with a parameter nudged by 10⁻⁵ or less, "
+        "go through the same rule: a kill of one is a false kill.</p><table><tr><th>fault</th>"
+        "<th>result</th><th>killing run</th><th>correct run</th><th>changes</th>"
+        "<th>stands for</th></tr>"
     )
-    for f in report.faults:
+    for f in [*report.faults, *report.mutants]:
         body.append(
             f"<tr data-fault='{html.escape(f.id)}' data-killed='{str(f.killed).lower()}'>"
             f"<td><code>{html.escape(f.id)}</code></td>"
@@ -235,6 +244,76 @@ def _faults_section(report: FaultReport, pages: set[int]) -> str:
             f"<td>{html.escape(f.changes)}</td><td>{html.escape(f.stands_for)}</td></tr>"
         )
     body.append("</table></section>")
+    return "".join(body)
+
+
+DIFF_PAIRS_SHOWN = 6
+"""Pairs shown side by side per distinct failure of a diff (the JSON has every one)."""
+
+
+def diff_runs(report: DiffReport) -> list[int]:
+    """The runs a diff's section shows side by side: A's and B's for each class's first
+    :data:`DIFF_PAIRS_SHOWN` robust differences."""
+    shown = [p for c in report.classes for p in _robust_pairs(c.pairs)[:DIFF_PAIRS_SHOWN]]
+    return [r for p in shown for r in (p.a_run, p.b_run)]
+
+
+def _robust_pairs(pairs: list[Pair]) -> list[Pair]:
+    """Robust differences first (new in B, then fixed), then those not robust either way."""
+    return sorted(pairs, key=lambda p: (p.verdict != NEW, p.verdict.startswith("not"), p.situation))
+
+
+def _diff_section(report: DiffReport, pages: set[int], classes_of: dict[int, str | None]) -> str:
+    """A controller diff's verdict: per distinct failure what B's change did, and its
+    differing situations as A's run beside B's run, with their perturbed copies' counts."""
+
+    def side(run_id: int, label: str) -> str:
+        cls = classes_of.get(run_id) or "no failure"
+        if run_id not in pages:
+            return f"<div class='side'>{label}: run {run_id}, {html.escape(cls)}</div>"
+        return (
+            f"<div class='side'><a href='run-{run_id}.html'><img src='run-{run_id}.png' "
+            f"loading='lazy' alt='situation figure of run {run_id}'></a><br>{label}: "
+            f"<a href='run-{run_id}.html'>run {run_id}</a>, {html.escape(cls)}</div>"
+        )
+
+    body = ["<section id='diff'><h2>Controller diff</h2><p>"]
+    body += [html.escape(line) + "<br>" for line in diff_summary_lines(report)]
+    body.append(
+        f"</p><p class='muted'>A is <code>{html.escape(controller_label(report.a))}</code>, B "
+        f"is <code>{html.escape(controller_label(report.b))}</code>, on the same situations and "
+        "run seeds. Where they differ in a failure class, the class is robustly new in B (or "
+        "fixed) when B's perturbed copies show it significantly more often than A's (or "
+        "fewer), by the kill rule's test (docs/failures.md).</p>"
+    )
+    body.append(
+        "<table><tr><th>distinct failure</th><th>verdict</th><th>new in B</th><th>fixed</th>"
+        "<th>unchanged</th><th>not robust</th></tr>"
+    )
+    for c in report.classes:
+        body.append(
+            f"<tr data-class='{html.escape(c.failure_class)}' data-verdict='"
+            f"{html.escape(c.verdict)}'><td>{html.escape(c.description)}</td>"
+            f"<td>{html.escape(c.verdict)}</td><td class='num'>{len(c.new)}</td>"
+            f"<td class='num'>{len(c.fixed)}</td><td class='num'>{len(c.unchanged)}</td>"
+            f"<td class='num'>{len(c.not_robust)}</td></tr>"
+        )
+    body.append("</table>")
+    for c in report.classes:
+        shown = _robust_pairs(c.pairs)[:DIFF_PAIRS_SHOWN]
+        if not shown:
+            continue
+        body.append(f"<h3>{html.escape(c.description)}: {html.escape(c.verdict)}</h3>")
+        for p in shown:
+            body.append(
+                f"<div class='pair' data-situation='{p.situation}' data-verdict='"
+                f"{html.escape(p.verdict)}'><p>situation {p.situation}: "
+                f"{html.escape(p.verdict)}; copies showing it: A {p.a_recurs}/{p.copies}, "
+                f"B {p.b_recurs}/{p.copies}</p>{side(p.a_run, 'A')}{side(p.b_run, 'B')}</div>"
+            )
+        if len(c.pairs) > len(shown):
+            body.append(f"<p class='muted'>and {len(c.pairs) - len(shown)} more situations.</p>")
+    body.append("</section>")
     return "".join(body)
 
 
@@ -404,6 +483,7 @@ def _index(
     faults: FaultReport | None = None,
     search: SearchReplay | None = None,
     weights_name: str = "",
+    diff: DiffReport | None = None,
 ) -> str:
     campaign = store.campaign() or {}
     scores = [r["score"] for r in rows]
@@ -461,6 +541,9 @@ def _index(
         body.append(_faults_section(faults, pages))
     if search is not None:
         body.append(_search_section(search, pages))
+    if diff is not None:
+        classes_of = {r["run"]: r["failure_class"] for r in rows}
+        body.append(_diff_section(diff, pages, classes_of))
     shrunk = {
         run_id: json.loads(after)
         for run_id, after in store.db.execute("SELECT run_id, after FROM shrinks")
@@ -1032,6 +1115,10 @@ def write_report(
         if search is not None:
             # Every elite of the archive gets a page: the grid links them.
             wanted += search.archive.elites()
+        diff = diff_report(store) if store.kind() == "diff" else None
+        if diff is not None:
+            # A diff's differing situations are shown as A's run beside B's.
+            wanted += diff_runs(diff)
         pages: set[int] = set()
         for run_id in dict.fromkeys(wanted):
             made = run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))
@@ -1044,5 +1131,5 @@ def write_report(
             pages.add(run_id)
             written.append(path)
         index = out / "index.html"
-        index.write_text(_index(store, ranked, failures, pages, faults, search, weights_name))
+        index.write_text(_index(store, ranked, failures, pages, faults, search, weights_name, diff))
     return [index, *written]

@@ -4,8 +4,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sitgen_core::control::fault::CATALOGUE;
 
-/// Every seeded fault, in catalogue order: dicts with `id`, `controllers`, `changes` and
-/// `stands_for`.
+/// Every seeded fault, in catalogue order: dicts with `id`, `controllers`, `changes`,
+/// `stands_for` and `exposed_by` (None for a fault not bound to a circumstance).
 #[pyfunction]
 fn fault_catalogue(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
     CATALOGUE
@@ -16,6 +16,7 @@ fn fault_catalogue(py: Python<'_>) -> PyResult<Vec<Bound<'_, PyDict>>> {
             d.set_item("controllers", info.controllers.to_vec())?;
             d.set_item("changes", info.changes)?;
             d.set_item("stands_for", info.stands_for)?;
+            d.set_item("exposed_by", info.exposed_by)?;
             Ok(d)
         })
         .collect()

@@ -107,6 +107,9 @@ pub struct FaultInfo {
     pub changes: &'static str,
     /// The real bug class it stands for.
     pub stands_for: &'static str,
+    /// The kind of situation that exposes it, for a fault that shows only in particular
+    /// circumstances; None for one that can show wherever its controller avoids anything.
+    pub exposed_by: Option<&'static str>,
 }
 
 const SND: &[&str] = &["snd", "snd_follow"];
@@ -123,6 +126,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: SND,
         changes: "every beam lands one sector counter-clockwise of its own in SND's full circle",
         stands_for: "off-by-one in an index mapping",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::MirroredScan,
@@ -131,6 +135,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes:
             "the scan's ranges are read in reverse order: what lies right is taken to lie left",
         stands_for: "a frame or handedness convention mismatch between a driver and its user",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::TurnRateInRadians,
@@ -138,6 +143,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: SND,
         changes: "max_turn_rate_deg_s is taken as radians per second (60 becomes 3438°/s)",
         stands_for: "a unit mix-up (Player ≥ 3.1's SND has this very bug)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::SafetyDistanceHalved,
@@ -146,6 +152,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "Ds_max (obstacle_avoid_dist) is halved: SND deviates later and slows less near \
                   obstacles",
         stands_for: "a wrong constant or a parameter tuned for another robot",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::CorridorTestSkipped,
@@ -154,6 +161,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "the goal-corridor test always passes: SND heads for the goal whenever it lies \
                   ahead, however blocked the way",
         stands_for: "a missing check (a guard deleted or short-circuited)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::InsideRadiusStopRemoved,
@@ -162,6 +170,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "step 7's stop for an obstacle inside the robot radius is gone: SND steers on by \
                   valleys",
         stands_for: "a removed safety interlock",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::StaleScan,
@@ -169,6 +178,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: LASER,
         changes: "the controller acts on the previous step's scan and tracks with the current pose",
         stands_for: "stale sensor data (a buffering or threading bug, latency not accounted for)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::NarrowFov,
@@ -177,6 +187,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "beams and tracks more than 45° off the heading are dropped: a 90° laser in \
                   place of 180°",
         stands_for: "a sensor misconfigured (the driver's field of view narrower than the device)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::SwitchDistanceTooLarge,
@@ -185,6 +196,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "a waypoint counts as reached at four times the switching distance: corners are \
                   cut",
         stands_for: "a mis-tuned arrival tolerance",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::DeviationSignFlipped,
@@ -192,6 +204,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: SND,
         changes: "the smooth deviation S_ao pushes toward nearby obstacles instead of away",
         stands_for: "a sign error",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::SpeedIgnoresClearance,
@@ -199,6 +212,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: SND,
         changes: "the speed law drops its clearance factor: full speed up to obstacles",
         stands_for: "a missing term in a control law",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::PlayerDefaultRadius,
@@ -208,6 +222,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
                   Pioneer 3-AT), and the gap and safety distances that default to multiples of \
                   R follow it",
         stands_for: "a configuration default that does not fit the robot",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::CornerClearanceHalved,
@@ -216,6 +231,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "the valley corner test asks for 1.1 R instead of 2.2 R: SND heads for openings \
                   its body cannot pass",
         stands_for: "a wrong constant",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::VoStaticPeers,
@@ -224,6 +240,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "tracked robots' velocities are taken as zero: peers are treated as standing \
                   obstacles",
         stands_for: "an input not wired through (the velocity estimate dropped)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::VoPointRobot,
@@ -231,6 +248,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         controllers: &["vo"],
         changes: "the robot's own radius is left out of every velocity obstacle",
         stands_for: "the robot's footprint ignored (the Minkowski sum omitted)",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::DwaNoBrakingMargin,
@@ -239,6 +257,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "admissibility forgets that a command holds for a control period: the whole \
                   clearance counts as braking distance",
         stands_for: "a discrete-time effect ignored in a safety bound",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::DwaPointRobot,
@@ -247,6 +266,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "the robot is a point: its disc has radius 0, so arcs are cleared for its centre \
                   only",
         stands_for: "the robot's footprint ignored",
+        exposed_by: None,
     },
     FaultInfo {
         fault: Fault::HeadingWrapNearPi,
@@ -255,6 +275,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "headings within 3° of ±180° are read as ±177°: driving due west, the robot \
                   believes it is a few degrees off its course",
         stands_for: "an angle-wrap error at ±π (a yaw taken through a saturating conversion)",
+        exposed_by: Some("driving within 3° of due west (a route leg heading west)"),
     },
     FaultInfo {
         fault: Fault::WatchdogOverflow,
@@ -263,6 +284,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "once a 16-bit count of 8 ms ticks has wrapped (524.288 s), every scan looks \
                   stale to the watchdog and every command is a stop",
         stands_for: "a counter or timer that overflows after minutes of running",
+        exposed_by: Some("a run that lasts more than 524 s"),
     },
     FaultInfo {
         fault: Fault::TrackDroppedInCrowd,
@@ -271,6 +293,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "with four or more robots in view, those past the first three (by id) are \
                   dropped, and their laser returns removed as clutter",
         stands_for: "a fixed-size track table overflowing in a crowd",
+        exposed_by: Some("four or more robots in view at once"),
     },
     FaultInfo {
         fault: Fault::GoalBehindReflected,
@@ -279,6 +302,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "a waypoint more than 170° off the heading is taken as its mirror image ahead: \
                   the robot drives away from a goal right behind it",
         stands_for: "a wrong branch for goals behind the robot (an acos where an atan2 belongs)",
+        exposed_by: Some("a waypoint more than 170° off the heading (a route that doubles back)"),
     },
     FaultInfo {
         fault: Fault::GapBandMissed,
@@ -287,6 +311,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "range jumps between 1.15 and 1.25 m are not taken as gaps, so openings \
                   behind such a step are not seen",
         stands_for: "a gap test wrong only for one band of widths (a missing bin of a table)",
+        exposed_by: Some("a range step of 1.15-1.25 m between neighbouring beams at an opening"),
     },
     FaultInfo {
         fault: Fault::LoopIndexNotReset,
@@ -295,6 +320,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "a `loop` route's waypoint index is not reset after the first lap: the robot \
                   stops at the last waypoint",
         stands_for: "a loop counter not reset (state that only a second pass exercises)",
+        exposed_by: Some("a loop route driven past its first lap"),
     },
     FaultInfo {
         fault: Fault::MaxRangeAsObstacle,
@@ -303,6 +329,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "readings at exactly the laser's maximum range are taken as obstacles there \
                   (`<=` where `<` belongs)",
         stands_for: "a no-return sentinel not filtered (an off-by-one comparison)",
+        exposed_by: Some("open space with beams out to the laser's maximum range"),
     },
     FaultInfo {
         fault: Fault::MinRangeDropout,
@@ -311,6 +338,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "readings under 0.35 m are reported as no return: whatever nearly touches \
                   the robot vanishes",
         stands_for: "a driver's too-close status mapped to no return",
+        exposed_by: Some("something within 0.35 m of the laser (a peer or wall nearly touching)"),
     },
     FaultInfo {
         fault: Fault::LongRouteWaypointSkipped,
@@ -319,6 +347,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "on routes of twelve or more waypoints the tenth is skipped: the robot cuts \
                   from the ninth to the eleventh",
         stands_for: "an index incremented twice on one path through the code",
+        exposed_by: Some("a route of twelve or more waypoints whose tenth matters"),
     },
     FaultInfo {
         fault: Fault::GyroScaleError,
@@ -327,6 +356,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         changes: "the heading is the start heading plus 1.015 times the turn since: a net \
                   turn of 360° leaves it 5.4° off",
         stands_for: "a sensor scale factor off by a few per cent (a gyro calibration)",
+        exposed_by: Some("turning through a large net angle (loops, long winding routes)"),
     },
 ];
 
