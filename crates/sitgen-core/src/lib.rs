@@ -16,6 +16,7 @@
 pub mod control;
 pub mod coverage;
 pub mod crosscheck;
+pub mod error;
 pub mod failure;
 pub mod geometry;
 pub mod grid;

@@ -14,7 +14,7 @@ fn read(json: &str) -> PyResult<Situation> {
     Situation::from_json(json).map_err(|e| SpecError::new_err(e.to_string()))
 }
 
-fn spec_error(e: sitgen_core::spec::SpecError) -> PyErr {
+fn spec_error(e: sitgen_core::error::SpecError) -> PyErr {
     SpecError::new_err(e.to_string())
 }
 

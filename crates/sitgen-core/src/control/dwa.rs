@@ -72,9 +72,9 @@ use std::collections::BTreeMap;
 use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
+use crate::error::{join, SpecError};
 use crate::sim::{integrate, wrap_angle, Observation};
 use crate::situation::{Pose, Robot};
-use crate::spec::{join, SpecError};
 
 type Point = (f64, f64);
 

@@ -15,7 +15,8 @@
 //! - *observation*: [`wrap`] puts the controller behind [`Seeded`], which changes what it is
 //!   given to see (`mirrored_scan`, `stale_scan`, `narrow_fov`);
 //! - *parameters*: the controller's resolved parameters are changed once, at reset
-//!   ([`adjust_snd`], [`switch_m`], [`own_radius_m`]);
+//!   ([`switch_m`], [`own_radius_m`], and SND's own `SndParams::under_fault` in `snd.rs`,
+//!   which keeps this file free of any controller's types);
 //! - *logic*: one changed line in the algorithm, at a `Seeded fault` comment that names it
 //!   (`snd.rs`, `vo.rs`, `dwa.rs`), tested with [`Fault::is`].
 //!
@@ -28,12 +29,11 @@
 
 use std::f64::consts::{FRAC_PI_4, PI};
 
-use super::snd::SndParams;
 use super::{Command, Controller};
+use crate::error::{join, SpecError};
 use crate::mission::{AtEnd, ControllerSpec};
 use crate::sim::{wrap_angle, Observation};
 use crate::situation::Robot;
-use crate::spec::{join, SpecError};
 
 /// A seeded fault.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -427,27 +427,6 @@ pub fn of(spec: &ControllerSpec, path: &str) -> Result<Option<Fault>, SpecError>
     }
     Ok(Some(fault))
 }
-
-/// Parameter seam: SND's resolved parameters under `fault`.
-pub fn adjust_snd(fault: Option<Fault>, p: &mut SndParams) {
-    match fault {
-        Some(Fault::TurnRateInRadians) => p.max_turn_rate = p.max_turn_rate.to_degrees(),
-        Some(Fault::SafetyDistanceHalved) => p.obstacle_avoid_dist /= 2.0,
-        Some(Fault::PlayerDefaultRadius) => {
-            *p = SndParams {
-                max_speed: p.max_speed,
-                max_turn_rate: p.max_turn_rate,
-                goal_angle_tol: p.goal_angle_tol,
-                ..SndParams::with_radius(PLAYER_ROBOT_RADIUS_M)
-            }
-        }
-        _ => {}
-    }
-    p.fault = fault;
-}
-
-/// Player's `snd` default `robot_radius`, metres.
-const PLAYER_ROBOT_RADIUS_M: f64 = 0.25;
 
 /// Parameter seam: the waypoint switching distance under `fault`.
 pub fn switch_m(fault: Option<Fault>, switch_m: f64) -> f64 {

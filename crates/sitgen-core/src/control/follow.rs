@@ -37,9 +37,9 @@ use std::collections::BTreeMap;
 
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
+use crate::error::SpecError;
 use crate::sim::Observation;
 use crate::situation::Robot;
-use crate::spec::SpecError;
 
 type Point = (f64, f64);
 

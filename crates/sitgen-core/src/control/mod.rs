@@ -25,10 +25,10 @@ pub use snd_follow::SndFollow;
 pub use straight::Straight;
 pub use vo::Vo;
 
+use crate::error::{join, SpecError};
 use crate::mission::ControllerSpec;
 use crate::sim::Observation;
 use crate::situation::Robot;
-use crate::spec::{join, SpecError};
 
 /// A velocity command: (v m/s, ω rad/s).
 pub type Command = (f64, f64);

@@ -63,11 +63,11 @@
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, FRAC_PI_6, PI, TAU};
 
-use super::fault::{self, Fault};
+use super::fault::Fault;
 use super::{check_known, Command, Controller};
+use crate::error::{join, SpecError};
 use crate::sim::Observation;
 use crate::situation::{Pose, Robot};
-use crate::spec::{join, SpecError};
 
 /// SND's parameters in SI units (m, m/s, rad/s, rad), every default resolved.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -104,7 +104,32 @@ impl SndParams {
             fault: None,
         }
     }
+
+    /// These parameters under seeded fault `fault` (`fault.rs`'s parameter seam, kept here so
+    /// that the catalogue needs none of SND's types): some faults change a parameter once, at
+    /// reset, and every fault is remembered for the logic seams.
+    pub fn under_fault(mut self, fault: Option<Fault>) -> Self {
+        match fault {
+            Some(Fault::TurnRateInRadians) => self.max_turn_rate = self.max_turn_rate.to_degrees(),
+            Some(Fault::SafetyDistanceHalved) => self.obstacle_avoid_dist /= 2.0,
+            Some(Fault::PlayerDefaultRadius) => {
+                self = SndParams {
+                    max_speed: self.max_speed,
+                    max_turn_rate: self.max_turn_rate,
+                    goal_angle_tol: self.goal_angle_tol,
+                    ..SndParams::with_radius(PLAYER_ROBOT_RADIUS_M)
+                }
+            }
+            _ => {}
+        }
+        self.fault = fault;
+        self
+    }
 }
+
+/// Player's `snd` default `robot_radius`, metres (`player_default_radius` puts it in place of
+/// the body's).
+const PLAYER_ROBOT_RADIUS_M: f64 = 0.25;
 
 /// SND's parameter names, as specs write them.
 pub const SND_PARAMS: &[&str] = &[
@@ -1004,9 +1029,8 @@ impl Snd {
 
     /// Take `robot`'s body (for the defaults depending on R) and forget any goal.
     pub fn start(&mut self, robot: &Robot) {
-        let mut params = self.config.resolve(robot.body.enclosing_radius());
-        fault::adjust_snd(self.fault, &mut params);
-        self.params = Some(params);
+        let params = self.config.resolve(robot.body.enclosing_radius());
+        self.params = Some(params.under_fault(self.fault));
         self.goal = None;
         self.waiting = false;
     }

@@ -30,9 +30,9 @@ use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::snd::{final_goal, Goal, Snd, SndConfig, SND_PARAMS};
 use super::{check_known, Command, Controller};
+use crate::error::{join, SpecError};
 use crate::sim::Observation;
 use crate::situation::Robot;
-use crate::spec::{join, SpecError};
 
 /// The `snd_follow` controller.
 #[derive(Debug, Clone)]

@@ -22,9 +22,9 @@ use std::collections::BTreeMap;
 
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
+use crate::error::SpecError;
 use crate::sim::{wrap_angle, Observation};
 use crate::situation::Robot;
-use crate::spec::SpecError;
 
 /// The `straight` controller.
 #[derive(Debug, Clone)]

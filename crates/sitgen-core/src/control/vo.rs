@@ -54,9 +54,9 @@ use std::collections::BTreeMap;
 use super::fault::{self, Fault};
 use super::route::RouteFollower;
 use super::{param, Command, Controller};
+use crate::error::SpecError;
 use crate::sim::Observation;
 use crate::situation::Robot;
-use crate::spec::SpecError;
 
 type Vector = (f64, f64);
 

@@ -7,7 +7,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::spec::{join, SpecError};
+use crate::error::{join, SpecError};
 
 /// A robot body: a rectangle, offset along the robot's x axis from its rotation centre.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -30,8 +30,8 @@ pub use routes::{check_peer_legs, generate};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::geometry::Body;
-use crate::spec::{join, SpecError};
 
 /// How peers' legs are chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]

@@ -26,9 +26,9 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize, Serializer};
 
+use crate::error::{join, SpecError};
 use crate::sim::{RobotState, World};
 use crate::situation::{Role, Situation};
-use crate::spec::{join, SpecError};
 
 /// The monitor's thresholds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -11,11 +11,11 @@
 
 use super::{Command, Outcome, Run, RunRecord, RunSpec};
 use crate::control::period_steps;
+use crate::error::SpecError;
 use crate::mission::ControllerSpec;
 use crate::monitor::Event;
 use crate::sim::Observation;
 use crate::situation::Situation;
-use crate::spec::SpecError;
 
 /// The controller name the agent of an episode runs under: external, so that its commands come
 /// from the caller.

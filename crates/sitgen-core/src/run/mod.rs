@@ -24,13 +24,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::{self, Command, Controller};
 use crate::coverage::{CoverageRecord, Observer};
+use crate::error::{join, SpecError};
 use crate::failure::{self, Failure};
 use crate::mission::ControllerSpec;
 use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
 use crate::scoring::{self, Score, ScoringSpec};
 use crate::sim::{Observation, SimSpec, World};
 use crate::situation::Situation;
-use crate::spec::{join, SpecError};
 
 pub mod episodes;
 pub mod perturb;

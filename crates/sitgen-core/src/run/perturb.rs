@@ -36,10 +36,10 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::rng::ChoiceSource;
 use crate::sim::{wrap_angle, SimSpec, World};
 use crate::situation::{Pose, Situation};
-use crate::spec::{join, SpecError};
 
 /// Default range noise, metres: the LMS200's 1σ statistical error.
 pub const LASER_NOISE_SD_M: f64 = 0.005;

@@ -3,7 +3,7 @@
 //! Arnold & Alexander's case study line by line with its source (docs/profiles.md); `default`
 //! is sitgen's own defaults, named so that a campaign can say which one it ran under.
 
-use crate::spec::{join, SpecError};
+use crate::error::{join, SpecError};
 
 /// Profile names, in the order they are listed to users.
 pub const NAMES: &[&str] = &["default", "paper"];

@@ -12,9 +12,9 @@
 use serde::Deserialize;
 
 use crate::control::{self, Command, Controller};
+use crate::error::SpecError;
 use crate::sim::{Observation, Track};
 use crate::situation::{Pose, Situation};
-use crate::spec::SpecError;
 
 use super::{controller_spec, RunSpec};
 

@@ -31,9 +31,9 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::failure::{Failure, FailureClass};
 use crate::monitor::{Event, EventKind};
-use crate::spec::{join, SpecError};
 
 /// Points for one event kind.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]

@@ -17,8 +17,8 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::collision::Rect;
+use crate::error::{join, SpecError};
 use crate::grid::Map;
-use crate::spec::{join, SpecError};
 
 /// The laser's parameters; defaults are the SICK LMS200 as Arnold & Alexander used it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

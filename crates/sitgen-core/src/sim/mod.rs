@@ -28,11 +28,11 @@ use std::sync::Mutex;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::geometry::Body;
 use crate::grid::Map;
 use crate::rng::{stream, ChoiceSource};
 use crate::situation::{Pose, Role, Situation};
-use crate::spec::{join, SpecError};
 
 use collision::Rect;
 use laser::{ray_to_rect, LaserSpec, RayGrid, ScanStart};

@@ -10,10 +10,9 @@
 //! The typed structs are the single source of truth: the JSON Schema in `schema/` is generated
 //! from them, and every field's doc comment gives its unit, default and allowed range.
 
-pub(crate) mod error;
-
-pub(crate) use error::kind_tagged;
-pub use error::{join, SpecError};
+// Spec errors live below every stage (`crate::error`), so that terrain and mission, which this
+// module composes, need nothing of it; they are named here too, where users look for them.
+pub use crate::error::{join, SpecError};
 
 use std::path::Path;
 

@@ -21,9 +21,9 @@ use std::path::Path;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, kind_tagged, SpecError};
 use crate::grid::{Map, OccupancyGrid, ScalarField};
 use crate::rng::ChoiceSource;
-use crate::spec::{join, kind_tagged, SpecError};
 
 use filters::{
     Border, Coverage, Dilate, Erode, Invert, KeepLargestFreeRegion, Pixelise, RemoveIslands,

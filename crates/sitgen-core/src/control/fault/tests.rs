@@ -7,7 +7,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 use super::*;
 use crate::control::build;
-use crate::control::snd::{snd_step, Goal, SndCase};
+use crate::control::snd::{snd_step, Goal, SndCase, SndParams};
 use crate::control::tests::{map, run_situation};
 use crate::geometry::Body;
 use crate::grid::Map;
@@ -244,8 +244,7 @@ fn every_fault_changes_what_each_of_its_controllers_does_on_a_hand_built_situati
 
 /// One SND step with fault `fault` on `ranges` (the SICK geometry, goal 5 m ahead, R = 0.25).
 fn step(fault: Option<Fault>, ranges: &[f64]) -> crate::control::snd::SndDecision {
-    let mut p = SndParams::with_radius(0.25);
-    adjust_snd(fault, &mut p);
+    let p = SndParams::with_radius(0.25).under_fault(fault);
     let goal = Goal {
         x_m: 5.0,
         y_m: 0.0,
@@ -313,11 +312,7 @@ fn the_snd_logic_seams_do_what_the_catalogue_says() {
 #[test]
 fn the_parameter_seams_change_the_resolved_parameters() {
     let r = Body::default().enclosing_radius();
-    let resolved = |fault| {
-        let mut p = SndParams::with_radius(r);
-        adjust_snd(fault, &mut p);
-        p
-    };
+    let resolved = |fault| SndParams::with_radius(r).under_fault(fault);
     let correct = resolved(None);
     // 60°/s read as 60 rad/s.
     assert!((resolved(Some(Fault::TurnRateInRadians)).max_turn_rate - 60.0).abs() < 1e-9);

@@ -14,8 +14,8 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::expect_occupancy;
+use crate::error::{join, SpecError};
 use crate::grid::cells_for;
-use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Parameters of the `border` filter.

@@ -34,9 +34,9 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::binarize;
+use crate::error::{join, SpecError};
 use crate::grid::distance::squared_distance_to;
 use crate::grid::{OccupancyGrid, ScalarField};
-use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Most evaluations of the rest of the chain that the search makes.

@@ -17,7 +17,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::{expect_occupancy, within_radius};
-use crate::spec::{join, SpecError};
+use crate::error::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Parameters of the `erode` filter.

@@ -12,7 +12,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::spec::SpecError;
+use crate::error::SpecError;
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// The `invert` filter (no parameters).

@@ -16,8 +16,8 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::expect_occupancy;
+use crate::error::SpecError;
 use crate::grid::regions::{label_regions, Connectivity, Regions};
-use crate::spec::SpecError;
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// The `keep_largest_free_region` filter (no parameters).

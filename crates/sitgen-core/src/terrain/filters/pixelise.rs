@@ -17,8 +17,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::{cells_for, OccupancyGrid, ScalarField};
-use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Parameters of the `pixelise` filter.

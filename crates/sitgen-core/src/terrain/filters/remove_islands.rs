@@ -16,8 +16,8 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::expect_occupancy;
+use crate::error::{join, SpecError};
 use crate::grid::regions::{label_regions, Connectivity, Regions};
-use crate::spec::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Parameters of the `remove_islands` filter.

@@ -17,7 +17,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::binarize;
-use crate::spec::{join, SpecError};
+use crate::error::{join, SpecError};
 use crate::terrain::{Filter, Layer, LayerKind};
 
 /// Parameters of the `threshold` filter.

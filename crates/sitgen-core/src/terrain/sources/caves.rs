@@ -27,9 +27,9 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::{cells_for, OccupancyGrid};
 use crate::rng::ChoiceSource;
-use crate::spec::{join, SpecError};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// Parameters of the `caves` source.

@@ -21,10 +21,10 @@ use std::path::{Path, PathBuf};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::{nearest_source, ScalarField};
 use crate::interchange::image::read_darkness;
 use crate::rng::ChoiceSource;
-use crate::spec::{join, SpecError};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// Parameters of the `image` source.

@@ -22,10 +22,10 @@ use std::path::{Path, PathBuf};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::{cells_for, OccupancyGrid};
 use crate::interchange::maps::{load_map, Unknown};
 use crate::rng::ChoiceSource;
-use crate::spec::{join, SpecError};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// How unknown cells are read.

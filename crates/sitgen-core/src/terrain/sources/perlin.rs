@@ -23,9 +23,9 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::ScalarField;
 use crate::rng::ChoiceSource;
-use crate::spec::{join, SpecError};
 use crate::terrain::noise::{add_perlin_in_cube, Axis, Corners};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 

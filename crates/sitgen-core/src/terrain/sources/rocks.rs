@@ -22,9 +22,9 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{join, SpecError};
 use crate::grid::OccupancyGrid;
 use crate::rng::ChoiceSource;
-use crate::spec::{join, SpecError};
 use crate::terrain::{Extent, Layer, LayerKind, Source};
 
 /// The outline of each rock.

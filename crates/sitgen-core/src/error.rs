@@ -144,7 +144,7 @@ macro_rules! kind_tagged {
         impl<'de> serde::Deserialize<'de> for $enum {
             fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
                 use serde::de::Error;
-                use $crate::spec::error::{nested, tagged_fields};
+                use $crate::error::{nested, tagged_fields};
                 let mut table = toml::Table::deserialize(d)?;
                 let expected = Self::KINDS.join(", ");
                 let kind = match table.remove("kind") {
