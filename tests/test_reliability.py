@@ -116,6 +116,30 @@ def test_a_controller_that_hangs_exits_or_crashes_is_that_runs_error(
     assert checked.returncode == 1 and "FAIL act" in checked.stdout, checked.stdout
 
 
+@pytest.mark.parametrize(
+    ("mode", "reason"),
+    [
+        ("stderrflood", "exited with code 3 on reset: 'last words before the crash'"),
+        ("longline", "a line longer than 1048576 bytes"),
+    ],
+)
+def test_a_controllers_output_is_bounded_however_much_it_writes(
+    situation_file: Path, mode: str, reason: str
+) -> None:
+    """600 MiB of stderr or a 2 MiB line cost sitgen no more than a small bound: the last line
+    of stderr is still quoted, and the run is an error, in 512 MiB of address space."""
+    done = run_limited(
+        "run",
+        str(situation_file),
+        "--controller",
+        f"{MISBEHAVING} {mode}",
+        memory_bytes=512 << 20,
+        timeout_s=120,
+    )
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "outcome error" in done.stdout and reason in done.stdout, done.stdout + done.stderr
+
+
 def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
     situation: sitgen.Situation,
 ) -> None:

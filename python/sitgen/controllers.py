@@ -26,7 +26,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -42,6 +41,12 @@ STEP_TIMEOUT_S = 1.0
 START_TIMEOUT_S = 10.0
 """Default wall-clock time a program has to start and answer the reset message (an
 interpreter's start-up can take seconds on a loaded machine)."""
+MAX_REPLY_BYTES = 1 << 20
+"""Longest line a controller program may send (a reply is a few dozen bytes; a program that
+writes more without a newline is broken, and is stopped before it costs memory)."""
+STDERR_TAIL_BYTES = 4096
+"""What is kept of a controller program's stderr: its tail, read as it comes, so that the
+last line can be quoted when it dies however much it writes."""
 
 
 class ControllerError(Exception):
@@ -209,9 +214,9 @@ class ProcessController(UserController):
         self._proc: subprocess.Popen[bytes] | None = None
         self._failed = False
         self._buffer = b""
-        # Where the program's stderr goes: a pipe nobody reads could fill and hang it; the
-        # last line is quoted when it dies. Closed in close().
-        self._stderr = tempfile.TemporaryFile()  # noqa: SIM115
+        # The program's stderr is a pipe drained whenever sitgen waits on the program (so it
+        # never fills and hangs it), of which only the tail is kept, to quote when it dies.
+        self._stderr_tail = bytearray()
         self._selector = selectors.DefaultSelector()
 
     def reset(self, info: dict[str, Any]) -> None:
@@ -231,15 +236,17 @@ class ProcessController(UserController):
                 [*_die_with_parent_prefix(), *self._argv],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
-                stderr=self._stderr,
+                stderr=subprocess.PIPE,
                 start_new_session=True,
             )
         except OSError as e:
             raise ControllerError(f"controller {self.name} could not start: {e}") from e
-        assert self._proc.stdout is not None and self._proc.stdin is not None
-        os.set_blocking(self._proc.stdout.fileno(), False)
-        os.set_blocking(self._proc.stdin.fileno(), False)
-        self._selector.register(self._proc.stdout, selectors.EVENT_READ)
+        proc = self._proc
+        assert proc.stdout is not None and proc.stdin is not None and proc.stderr is not None
+        for pipe in (proc.stdout, proc.stdin, proc.stderr):
+            os.set_blocking(pipe.fileno(), False)
+        self._selector.register(proc.stdout, selectors.EVENT_READ)
+        self._selector.register(proc.stderr, selectors.EVENT_READ)
 
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         message = {
@@ -299,10 +306,17 @@ class ProcessController(UserController):
         fd = proc.stdin.fileno()
         with selectors.DefaultSelector() as writable:
             writable.register(fd, selectors.EVENT_WRITE)
+            assert proc.stderr is not None
+            writable.register(proc.stderr, selectors.EVENT_READ)
             while data:
                 left = deadline - time.monotonic()
-                if left <= 0 or not writable.select(left):
+                ready = writable.select(left) if left > 0 else []
+                if not ready:
                     raise ControllerError(self._stuck("stopped reading its input", when))
+                if any(key.fileobj is proc.stderr for key, _ in ready) and not self._drain_stderr():
+                    writable.unregister(proc.stderr)
+                if not any(key.fd == fd for key, _ in ready):
+                    continue
                 try:
                     data = data[os.write(fd, data) :]
                 except BlockingIOError:
@@ -314,9 +328,19 @@ class ProcessController(UserController):
         proc = self._proc
         assert proc is not None and proc.stdout is not None
         while b"\n" not in self._buffer:
+            if len(self._buffer) > MAX_REPLY_BYTES:
+                raise ControllerError(
+                    f"controller {self.name} sent a malformed reply {when}: a line longer than "
+                    f"{MAX_REPLY_BYTES} bytes"
+                )
             left = deadline - time.monotonic()
-            if left <= 0 or not self._selector.select(left):
+            ready = self._selector.select(left) if left > 0 else []
+            if not ready:
                 raise ControllerError(self._stuck(f"did not reply within {timeout_s:g} s", when))
+            if any(key.fileobj is proc.stderr for key, _ in ready):
+                self._drain_stderr()
+            if not any(key.fileobj is proc.stdout for key, _ in ready):
+                continue
             try:
                 chunk = os.read(proc.stdout.fileno(), 1 << 16)
             except BlockingIOError:
@@ -325,7 +349,36 @@ class ProcessController(UserController):
                 raise ControllerError(self._died(when))
             self._buffer += chunk
         line, _, self._buffer = self._buffer.partition(b"\n")
+        if len(line) > MAX_REPLY_BYTES:
+            raise ControllerError(
+                f"controller {self.name} sent a malformed reply {when}: a line longer than "
+                f"{MAX_REPLY_BYTES} bytes"
+            )
         return line.strip()
+
+    def _drain_stderr(self, most: int = 1 << 22) -> bool:
+        """Read what the program has written to stderr (up to ``most`` bytes at a time, so a
+        flood cannot hold sitgen here), keeping only the tail; False once it is closed."""
+        proc = self._proc
+        if proc is None or proc.stderr is None:
+            return False
+        fd = proc.stderr.fileno()
+        read = 0
+        while read < most:
+            try:
+                chunk = os.read(fd, 1 << 16)
+            except BlockingIOError:
+                return True
+            except OSError:
+                chunk = b""
+            if not chunk:
+                with contextlib.suppress(KeyError, ValueError):
+                    self._selector.unregister(proc.stderr)
+                return False
+            read += len(chunk)
+            self._stderr_tail += chunk
+            del self._stderr_tail[:-STDERR_TAIL_BYTES]
+        return True
 
     def _stuck(self, how: str, when: str) -> str:
         """Why a deadline passed: the program died, or it runs on and ``how``."""
@@ -342,8 +395,8 @@ class ProcessController(UserController):
             code = self._proc.wait(timeout=1.0)
         except subprocess.TimeoutExpired:
             code = None
-        self._stderr.seek(0)
-        tail = self._stderr.read().decode(errors="replace").strip().splitlines()
+        self._drain_stderr()
+        tail = self._stderr_tail.decode(errors="replace").strip().splitlines()
         said = f": {_short(tail[-1])}" if tail else ""
         if code is None:
             how = "closed its output"
@@ -368,11 +421,10 @@ class ProcessController(UserController):
                 os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
             self._selector.close()
-            for pipe in (proc.stdin, proc.stdout):
+            for pipe in (proc.stdin, proc.stdout, proc.stderr):
                 if pipe is not None:
                     with contextlib.suppress(OSError):
                         pipe.close()
-        self._stderr.close()
         self._proc = None
 
 

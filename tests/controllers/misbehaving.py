@@ -3,7 +3,9 @@ few steps, `hang` stops replying, `garbage` replies with text that is not JSON, 
 an object without a command, `nan` sends NaN; `sometimes` crashes in runs whose start x is in
 an even metre; `closeout` closes its output and runs on; `deaf` stops reading its input and
 floods its output; `spawn` starts a child that sleeps, writes its pid to the file named by the
-second argument and then hangs; `good` drives straight at 0.3 m/s."""
+second argument and then hangs; `stderrflood` writes 600 MiB to stderr on reset, then a last
+line, and exits; `longline` sends a 2 MiB line with no end and hangs; `good` drives straight at
+0.3 m/s."""
 
 import json
 import os
@@ -19,6 +21,13 @@ for step, line in enumerate(sys.stdin):
     if message["type"] == "reset":
         if mode == "sometimes" and int(message["start"][0]) % 2 == 0:
             sys.exit(4)
+        if mode == "stderrflood":
+            block = b"noise " * (1 << 20)
+            for _ in range(100):
+                sys.stderr.buffer.write(block)
+            sys.stderr.buffer.write(b"\nlast words before the crash\n")
+            sys.stderr.flush()
+            sys.exit(3)
         reply = '{"ready": true}'
     elif step >= 5 and mode == "crash":
         print("simulated failure in the planner", file=sys.stderr)
@@ -40,6 +49,10 @@ for step, line in enumerate(sys.stdin):
         while True:
             sys.stdout.write('{"v": 0.3, "omega": 0.0}\n' * 1000)
             sys.stdout.flush()
+    elif step >= 5 and mode == "longline":
+        sys.stdout.write("x" * (2 << 20))
+        sys.stdout.flush()
+        time.sleep(600)
     elif step >= 5 and mode == "spawn":
         child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
         with open(sys.argv[2], "w") as f:
