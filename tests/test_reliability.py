@@ -6,17 +6,20 @@ message, and that stores keep every run they had."""
 from __future__ import annotations
 
 import base64
+import http.client
 import json
 import os
+import re
 import resource
 import signal
 import sqlite3
 import struct
 import subprocess
 import sys
+import threading
 import time
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +30,7 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen.campaign import build_job, campaign_from_data, parse_campaign
+from sitgen.store import Store
 from tests.conftest import ROOT, Result, sitgen_command
 
 MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehaving.py'}"
@@ -687,3 +691,84 @@ def test_fuzzed_campaign_and_run_specs_parse_or_name_a_field() -> None:
 
     check()
     check_run()
+
+
+# Local servers: only this machine's browser, on the page itself, with bounded requests.
+
+
+@pytest.fixture
+def judging(small_store: Path, tmp_path: Path) -> Iterator[Any]:
+    from sitgen.judge import JudgingServer
+
+    server = JudgingServer(_copy(small_store, tmp_path / "judged.db"), "tester")
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    yield server
+    server.shutdown()
+
+
+def _request(
+    server: Any, method: str, path: str, headers: dict[str, str], body: bytes = b""
+) -> tuple[int, bytes]:
+    host, port = server.httpd.server_address[:2]
+    connection = http.client.HTTPConnection(host, port, timeout=10)
+    connection.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
+    for key, value in headers.items():
+        connection.putheader(key, value)
+    connection.endheaders(body or None)
+    response = connection.getresponse()
+    return response.status, response.read()
+
+
+def test_the_judging_page_answers_only_its_own_host_and_origin(judging: Any) -> None:
+    port = judging.httpd.server_address[1]
+    own = {"Host": f"127.0.0.1:{port}"}
+    status, page = _request(judging, "GET", "/", own)
+    assert status == 200
+    # A page elsewhere that rebinds its name to 127.0.0.1 sends its own name as Host.
+    for host in (f"rebound.example:{port}", "127.0.0.1", f"127.0.0.1:{port + 1}"):
+        for path in ("/", "/judgements.json", "/runs/run-0.html"):
+            assert _request(judging, "GET", path, {"Host": host})[0] == 421, (host, path)
+    assert _request(judging, "GET", "/", {})[0] == 421, "no Host at all"
+    token = re.search(rb"name='token' value='([^']+)'", page)
+    a = re.search(rb"name='a' value='(\d+)'", page)
+    b = re.search(rb"name='b' value='(\d+)'", page)
+    assert token and a and b
+    form = b"token=%s&a=%s&b=%s&worse=a" % (token[1], a[1], b[1])
+    length = {"Content-Length": str(len(form))}
+    refused = [
+        ({"Origin": "http://rebound.example"}, form, 403),
+        ({"Sec-Fetch-Site": "cross-site"}, form, 403),
+        ({"Content-Length": "abc"}, form, 400),
+        ({"Content-Length": str(300 << 20)}, b"", 413),
+        ({}, b"token=%s&a=99999999999999999999&b=%s&worse=a" % (token[1], b[1]), 400),
+    ]
+    for headers, body, code in refused:
+        sent = {**own, **length, **headers}
+        if body is not form and "Content-Length" not in headers:
+            sent["Content-Length"] = str(len(body))
+        assert _request(judging, "POST", "/judge", sent, body)[0] == code, headers
+    with Store(judging.db) as store:
+        assert store.judgements() == []
+    origin = {"Origin": f"http://127.0.0.1:{port}", "Sec-Fetch-Site": "same-origin"}
+    assert _request(judging, "POST", "/judge", {**own, **length, **origin}, form)[0] == 303
+    with Store(judging.db) as store:
+        assert len(store.judgements()) == 1
+
+
+def test_run_ids_beyond_64_bits_are_runs_the_store_does_not_hold(
+    small_store: Path, tmp_path: Path
+) -> None:
+    huge = str(2**64)
+    for args in (
+        ("rerun", str(small_store), huge),
+        ("show", str(small_store), "--run", huge, "-o", str(tmp_path / "x.png")),
+    ):
+        one_line_error(run_limited(*args), 1, f"{small_store}: no run {huge}")
+    done = run_limited("shrink", str(small_store), huge, "-o", str(tmp_path / "min.json"))
+    assert done.returncode != 0 and "Traceback" not in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and huge in done.stderr, done.stderr
+    judgements = tmp_path / "j.json"
+    judgements.write_text(json.dumps([{"a": 2**64, "b": 0, "worse": "a"}]))
+    done = run_limited("judgements", "import", str(small_store), str(judgements))
+    assert done.returncode != 0 and f"run {2**64} is not in" in done.stderr, done.stderr

@@ -1345,9 +1345,6 @@ def robustness(
         raise UsageError(f"--format: `{format}` is not one of table, json")
     check_reruns(reruns)
     require_store(db)
-    for run_id in run_ids or []:
-        if not 0 <= run_id < 2**63:
-            raise UsageError(f"RUN_IDS: {run_id} is not a run id (0 to 2^63 - 1)")
     with Store(db) as store:
         if run_ids:
             for run_id in run_ids:

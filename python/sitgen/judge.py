@@ -5,9 +5,15 @@ Each run shows as its report page without rank, score or breakdown (so a run is 
 happened, not by what it scored): failure class, replay, event timeline, situation figure and
 event log. The pair is the most informative one left (:func:`sitgen.weights.next_pair`);
 a judgement goes into the store's ``judgements`` table with who made it and when, and the next
-pair is chosen with it. Bound to 127.0.0.1 only; a judgement must carry the page's token, so
-no other page in the browser can post one. Run pages are rendered on first request into a
-temporary folder (a run kept as a summary is re-simulated then).
+pair is chosen with it. Run pages are rendered on first request into a temporary folder (a
+run kept as a summary is re-simulated then).
+
+Only this machine's browser may use it, as browsers' DNS-rebinding defences expect of a local
+server (:meth:`JudgingServer.refusal`): it is bound to 127.0.0.1; every request must name it
+in ``Host`` (a page elsewhere that rebinds its own name to 127.0.0.1 sends its own name); a
+judgement must come from the page itself (``Origin`` and ``Sec-Fetch-Site``, where the browser
+sends them) and carry the page's token; and a request body is read only up to
+:data:`MAX_BODY_BYTES`.
 """
 
 from __future__ import annotations
@@ -28,6 +34,9 @@ from urllib.parse import parse_qs, urlsplit
 
 from sitgen.store import Store
 from sitgen.weights import WORSE, Judgement, next_pair
+
+MAX_BODY_BYTES = 16 << 10
+"""Largest judgement form read (one is under 200 bytes)."""
 
 PAGE_STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1em; color: #222; }
@@ -63,10 +72,12 @@ class JudgingServer:
 
         class Handler(BaseHTTPRequestHandler):
             def do_GET(self) -> None:
-                server.get(self)
+                if not server.refuse(self, write=False):
+                    server.get(self)
 
             def do_POST(self) -> None:
-                server.post(self)
+                if not server.refuse(self, write=True):
+                    server.post(self)
 
             def log_message(self, format: str, *args: Any) -> None:
                 pass
@@ -87,6 +98,40 @@ class JudgingServer:
         shutil.rmtree(self.pages, ignore_errors=True)
 
     # Requests.
+
+    def refusal(self, headers: Any, write: bool) -> tuple[HTTPStatus, str] | None:
+        """Why a request with ``headers`` is refused (a status and a line), or None: a ``Host``
+        that is not this server's address, a write from another origin, or a body that is not
+        a length up to :data:`MAX_BODY_BYTES`."""
+        port = self.httpd.server_address[1]
+        hosts = {f"127.0.0.1:{port}", f"localhost:{port}"}
+        host = headers.get("Host")
+        if host not in hosts:
+            return HTTPStatus.MISDIRECTED_REQUEST, f"Host {host!r} is not this server (127.0.0.1)"
+        if not write:
+            return None
+        origin = headers.get("Origin")
+        if origin is not None and origin not in {f"http://{h}" for h in hosts}:
+            return HTTPStatus.FORBIDDEN, f"a judgement from another origin ({origin!r})"
+        site = headers.get("Sec-Fetch-Site")
+        if site is not None and site not in ("same-origin", "none"):
+            return HTTPStatus.FORBIDDEN, f"a judgement from a {site} page"
+        length = headers.get("Content-Length") or "0"
+        if not length.isdigit():
+            return HTTPStatus.BAD_REQUEST, f"Content-Length {length!r} is not a length"
+        if int(length) > MAX_BODY_BYTES:
+            return HTTPStatus.REQUEST_ENTITY_TOO_LARGE, f"a body over {MAX_BODY_BYTES} bytes"
+        return None
+
+    def refuse(self, request: BaseHTTPRequestHandler, write: bool) -> bool:
+        """Answer a refused request (:meth:`refusal`) and close its connection; whether it
+        was refused."""
+        why = self.refusal(request.headers, write)
+        if why is None:
+            return False
+        request.close_connection = True
+        self._send(request, why[0], "text/plain", f"refused: {why[1]}\n".encode())
+        return True
 
     def get(self, request: BaseHTTPRequestHandler) -> None:
         url = urlsplit(request.path)
@@ -110,6 +155,7 @@ class JudgingServer:
         if urlsplit(request.path).path != "/judge":
             self._send(request, HTTPStatus.NOT_FOUND, "text/plain", b"not found\n")
             return
+        # refusal() has checked the length.
         length = int(request.headers.get("Content-Length") or 0)
         form = parse_qs(request.rfile.read(length).decode("utf-8", "replace"))
         try:

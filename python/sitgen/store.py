@@ -211,6 +211,17 @@ TRAJECTORY_ENCODING = "f32le-zlib"
 """Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
 
 
+MAX_RUN_ID = 2**63 - 1
+"""The largest run id (SQLite's INTEGER is a signed 64-bit number)."""
+
+
+def is_run_id(value: object) -> bool:
+    """Whether ``value`` can be a run id: an integer (not a bool) in [0, 2^63 - 1]. Every place
+    a run id enters (the command line, the judging page, a judgements file) goes through the
+    store's readers, which treat anything else as a run the store does not hold."""
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_RUN_ID
+
+
 class StoreError(Exception):
     """A store that cannot be used (wrong file, other campaign, newer schema)."""
 
@@ -657,6 +668,8 @@ class Store:
 
     def shrink(self, run_id: int) -> dict[str, Any] | None:
         """Run ``run_id``'s shrink result (JSON columns parsed), or None."""
+        if not is_run_id(run_id):
+            return None
         cursor = self.db.execute("SELECT * FROM shrinks WHERE run_id = ?", (run_id,))
         row = cursor.fetchone()
         if row is None:
@@ -691,7 +704,7 @@ class Store:
 
     def has_runs(self, ids: Iterable[int]) -> set[int]:
         """Those of ``ids`` that are runs of this store."""
-        wanted = sorted(set(ids))
+        wanted = sorted({i for i in ids if is_run_id(i)})
         found: set[int] = set()
         for i in range(0, len(wanted), 500):
             chunk = wanted[i : i + 500]
@@ -916,6 +929,8 @@ class Store:
         """Run ``run_id`` as stored: its situation (None if it was never generated, or the
         run is kept as a summary: see ``kept``), specs, seeds and event log ('' for a
         summary; ``events_sha256`` is its digest)."""
+        if not is_run_id(run_id):
+            raise StoreError(f"{self.path}: no run {run_id} (a run id is 0 to 2^63 - 1)")
         row = self.db.execute(
             "SELECT r.id, s.seed, s.spec, s.situation, s.content_hash, r.run_spec, r.run_seed, "
             "r.controller, r.score, r.events_jsonl, r.outcome, r.failure, r.kept, "
@@ -965,6 +980,8 @@ class Store:
         )
 
     def trajectory(self, run_id: int) -> npt.NDArray[np.float32] | None:
+        if not is_run_id(run_id):
+            return None
         row = self.db.execute(
             "SELECT robots, rows, encoding, data FROM trajectories WHERE run_id = ?", (run_id,)
         ).fetchone()
