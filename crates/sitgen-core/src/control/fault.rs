@@ -88,9 +88,9 @@ pub enum Fault {
     MaxRangeAsObstacle,
     /// Readings under 0.35 m reported as no return.
     MinRangeDropout,
-    /// The tenth waypoint of a route of twelve or more skipped.
+    /// The tenth waypoint of a route of fourteen or more skipped.
     LongRouteWaypointSkipped,
-    /// The heading read through a gyro 1.5 % off in scale.
+    /// The heading read through a gyro 1 % off in scale.
     GyroScaleError,
 }
 
@@ -317,7 +317,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::LoopIndexNotReset,
         id: "loop_index_not_reset",
         controllers: ROUTE,
-        changes: "a `loop` route's waypoint index is not reset after the first lap: the robot \
+        changes: "a loop route's waypoint index is not reset after the first lap: the robot \
                   stops at the last waypoint",
         stands_for: "a loop counter not reset (state that only a second pass exercises)",
         exposed_by: Some("a loop route driven past its first lap"),
@@ -327,7 +327,7 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         id: "max_range_as_obstacle",
         controllers: SND,
         changes: "readings at exactly the laser's maximum range are taken as obstacles there \
-                  (`<=` where `<` belongs)",
+                  (<= where < belongs)",
         stands_for: "a no-return sentinel not filtered (an off-by-one comparison)",
         exposed_by: Some("open space with beams out to the laser's maximum range"),
     },
@@ -344,18 +344,18 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::LongRouteWaypointSkipped,
         id: "long_route_waypoint_skipped",
         controllers: ROUTE,
-        changes: "on routes of twelve or more waypoints the tenth is skipped: the robot cuts \
+        changes: "on routes of fourteen or more waypoints the tenth is skipped: the robot cuts \
                   from the ninth to the eleventh",
         stands_for: "an index incremented twice on one path through the code",
-        exposed_by: Some("a route of twelve or more waypoints whose tenth matters"),
+        exposed_by: Some("a route of fourteen or more waypoints whose tenth matters"),
     },
     FaultInfo {
         fault: Fault::GyroScaleError,
         id: "gyro_scale_error",
         controllers: LASER,
-        changes: "the heading is the start heading plus 1.015 times the turn since: a net \
-                  turn of 360° leaves it 5.4° off",
-        stands_for: "a sensor scale factor off by a few per cent (a gyro calibration)",
+        changes: "the heading is the start heading plus 1.01 times the turn since: a net \
+                  turn of 360° leaves it 3.6° off",
+        stands_for: "a sensor scale factor off by a per cent (an uncalibrated gyro)",
         exposed_by: Some("turning through a large net angle (loops, long winding routes)"),
     },
 ];
@@ -462,7 +462,9 @@ const TRACK_CLUTTER_M: f64 = 0.5;
 /// Readings `min_range_dropout` reports as no return, metres.
 const DROPOUT_M: f64 = 0.35;
 /// `gyro_scale_error`'s scale factor.
-const GYRO_SCALE: f64 = 1.015;
+const GYRO_SCALE: f64 = 1.01;
+/// Waypoints a route needs for `long_route_waypoint_skipped` to skip its tenth.
+const LONG_ROUTE: usize = 14;
 
 /// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees, or the
 /// route it is given at reset.
@@ -508,7 +510,7 @@ impl Seeded {
         let mut given = robot.clone();
         match self.fault {
             Fault::LoopIndexNotReset if given.at_end == AtEnd::Loop => given.at_end = AtEnd::Stop,
-            Fault::LongRouteWaypointSkipped if given.waypoints.len() >= 12 => {
+            Fault::LongRouteWaypointSkipped if given.waypoints.len() >= LONG_ROUTE => {
                 given.waypoints.remove(9);
             }
             _ => {}

@@ -66,7 +66,7 @@ fn situation(map: &Map, robots: Vec<Robot>) -> Situation {
 /// - a wall ahead with an opening on the right and a wall behind that (a range jump of
 ///   1.20 m at the opening's edge: `gap_band_missed`);
 /// - a `loop` route of two waypoints (`loop_index_not_reset`);
-/// - a zigzag route of twelve waypoints (`long_route_waypoint_skipped`).
+/// - a zigzag route of fourteen waypoints (`long_route_waypoint_skipped`).
 fn situations() -> Vec<(&'static str, Situation, usize)> {
     let room = map(10.0, 6.0, 0.02, |x, y| {
         (5.0..5.2).contains(&x) && (y - 3.0).abs() > 0.4
@@ -163,6 +163,8 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
                 [17.0, 9.5],
                 [17.0, 11.5],
                 [16.0, 13.0],
+                [14.0, 14.0],
+                [12.0, 14.0],
             ],
         )],
     );
