@@ -349,6 +349,34 @@ def test_a_map_redrawn_finer_than_the_cap_is_refused(tmp_path: Path) -> None:
     assert "13333 × 13333 cells is more than the 100000000 a map may have" in done.stderr
 
 
+@pytest.mark.parametrize(
+    ("name", "text", "expected"),
+    [
+        ("m.map", "type octile\nheight 1\nwidth 3\nmap\n.x.\n", "unknown character 'x'"),
+        ("m.yaml", "image: m.pgm\nresolution: 0.1\noccupied_thresh: 1.5\n", "not in [0, 1]"),
+        ("m.yaml", "image: m.pgm\nresolution: 0.1\noccupied_thresh: .nan\n", "NaN is not in"),
+        (
+            "m.yaml",
+            "image: m.pgm\nresolution: 0.1\noccupied_thresh: 0.2\nfree_thresh: 0.6\n",
+            "free_thresh 0.6 is above occupied_thresh 0.2",
+        ),
+    ],
+)
+def test_map_files_a_reader_cannot_trust_are_refused(
+    tmp_path: Path, name: str, text: str, expected: str
+) -> None:
+    """Characters MovingAI does not define, and ROS thresholds outside [0, 1], NaN or inverted
+    (which would make the whole map occupied), are one-line errors naming the file."""
+    (tmp_path / name).write_text(text)
+    (tmp_path / "m.pgm").write_bytes(b"P5\n2 2\n255\n" + bytes([254, 0, 254, 254]))
+    spec = tmp_path / "s.toml"
+    spec.write_text(f'[terrain.source]\nkind = "map"\npath = "{name}"\n')
+    done = run_limited("generate", str(spec), "-o", str(tmp_path / "s.json"))
+    assert done.returncode in (1, 2), done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and expected in lines[0] and name in lines[0], done.stderr
+
+
 def test_a_barn_grid_larger_than_the_cap_is_refused_before_it_is_read(tmp_path: Path) -> None:
     # A sparse file whose header and length both say 10001 × 10001 cells, 2 × 10^4 over the cap.
     path = tmp_path / "huge.npy"
@@ -772,3 +800,21 @@ def test_run_ids_beyond_64_bits_are_runs_the_store_does_not_hold(
     judgements.write_text(json.dumps([{"a": 2**64, "b": 0, "worse": "a"}]))
     done = run_limited("judgements", "import", str(small_store), str(judgements))
     assert done.returncode != 0 and f"run {2**64} is not in" in done.stderr, done.stderr
+
+
+def test_gym_environments_refuse_what_would_exhaust_memory_or_poison_rewards() -> None:
+    from sitgen.gym import MAX_ENVS, NavigateEnv, NavigateVectorEnv
+
+    for n in (0, MAX_ENVS + 1, 100_000, 2.5, True):
+        with pytest.raises(ValueError, match="num_envs"):
+            NavigateVectorEnv(num_envs=n)  # type: ignore[arg-type]
+    for weight in (float("nan"), float("inf"), -1.0, "1"):
+        with pytest.raises(ValueError, match="penalty_weight"):
+            NavigateEnv(penalty_weight=weight)  # type: ignore[arg-type]
+    env = NavigateEnv(seed=1)
+    env.reset()
+    for action in (np.array([0.3 + 1j, 0.0]), ["fast", "left"], [0.3, 0.0, 0.1]):
+        with pytest.raises(ValueError, match="action"):
+            env.step(action)  # type: ignore[arg-type]
+    _, reward, *_ = env.step(np.array([0.3, 0.0], dtype=np.float32))
+    assert np.isfinite(reward)

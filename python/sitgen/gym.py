@@ -38,6 +38,7 @@ ended on the next step (Gymnasium's next-step autoreset).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -63,6 +64,8 @@ DEFAULT_SPEC: dict[str, Any] = {
 rocky desert, 0-5 peers that avoid nothing)."""
 GENERATION_TRIES = 20
 """Seeds tried for one episode before a spec that keeps failing to generate is an error."""
+MAX_ENVS = 4096
+"""Most worlds of one vector environment (each holds its map, robots and scans: a few MB)."""
 
 Observation = dict[str, Any]
 """``ranges``, ``goal``, ``velocity``: float32 arrays."""
@@ -79,6 +82,10 @@ class _Worlds:
         n: int,
         threads: int = 0,
     ) -> None:
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_ENVS:
+            raise ValueError(f"num_envs: {n!r} is not a whole number in [1, {MAX_ENVS}]")
+        if isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= 4096:
+            raise ValueError(f"threads: {threads!r} is not a whole number in [0, 4096]")
         self.spec = spec if spec is not None else DEFAULT_SPEC
         self.core = _core.Episodes(json.dumps(dict(run or {})), n, threads)
         resolved = json.loads(self.core.spec_json)
@@ -149,7 +156,7 @@ class NavigateEnv(gymnasium.Env[Observation, npt.NDArray[np.float32]]):
         self._worlds = _Worlds(spec, run, 1, threads=1)
         self.observation_space = self._worlds.observation_space
         self.action_space = self._worlds.action_space
-        self.penalty_weight = penalty_weight
+        self.penalty_weight = _penalty_weight(penalty_weight)
         self._seed = seed
         self._live = False
 
@@ -170,7 +177,7 @@ class NavigateEnv(gymnasium.Env[Observation, npt.NDArray[np.float32]]):
     ) -> tuple[Observation, float, bool, bool, dict[str, Any]]:
         if not self._live:
             raise RuntimeError("the episode has ended: call reset()")
-        command = np.asarray(action, dtype=np.float64).reshape(1, 2)
+        command = _commands(action, 1)
         out = self._worlds.core.step(command)
         penalty = float(out["penalty"][0])
         self._worlds.scores[0] += penalty
@@ -212,7 +219,7 @@ class NavigateVectorEnv(VectorEnv[Observation, npt.NDArray[np.float32], npt.NDAr
         self.single_action_space = self._worlds.action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self.penalty_weight = penalty_weight
+        self.penalty_weight = _penalty_weight(penalty_weight)
         self._seed = seed
         self._rngs = [np.random.default_rng() for _ in range(num_envs)]
         self._ended = np.zeros(num_envs, dtype=bool)
@@ -247,12 +254,11 @@ class NavigateVectorEnv(VectorEnv[Observation, npt.NDArray[np.float32], npt.NDAr
         npt.NDArray[np.bool_],
         dict[str, Any],
     ]:
+        commands = _commands(actions, self.num_envs)
         restart = np.flatnonzero(self._ended)
         for i in restart:
             self._worlds.finish(int(i))
-        out = self._worlds.core.step(
-            np.asarray(actions, dtype=np.float64).reshape(self.num_envs, 2)
-        )
+        out = self._worlds.core.step(commands)
         for i in restart:
             self._worlds.start(int(i), self._rngs[int(i)])
         penalty = np.asarray(out["penalty"], dtype=np.float64)
@@ -290,3 +296,22 @@ def _register() -> None:
 
 
 _register()
+
+
+def _penalty_weight(value: float) -> float:
+    """``value`` if it is a finite number ≥ 0 (a negative weight would make penalties a bonus,
+    NaN every reward NaN), else a ValueError naming it."""
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0 <= value < math.inf:
+        raise ValueError(f"penalty_weight: {value!r} is not a finite number ≥ 0")
+    return float(value)
+
+
+def _commands(actions: Any, n: int) -> npt.NDArray[np.float64]:
+    """``n`` actions as an (n, 2) array of real numbers (speed, turn rate), or a ValueError
+    saying what was given."""
+    given = np.asarray(actions)
+    if given.dtype.kind not in "iuf":
+        raise ValueError(f"action: expected real numbers (v, omega), got dtype {given.dtype}")
+    if given.size != 2 * n:
+        raise ValueError(f"action: expected {n} × (v, omega), got shape {given.shape}")
+    return given.astype(np.float64).reshape(n, 2)

@@ -145,6 +145,22 @@ fn load_ros_yaml(path: &Path, unknown: Unknown) -> Result<LoadedMap, String> {
         serde_yaml_ng::Value::Number(n) => n.as_i64() != Some(0),
         other => return Err(format!("{shown}: negate: expected 0 or 1, found {other:?}")),
     };
+    for (field, value) in [
+        ("occupied_thresh", yaml.occupied_thresh),
+        ("free_thresh", yaml.free_thresh),
+    ] {
+        if !(0.0..=1.0).contains(&value) {
+            return Err(format!("{shown}: {field}: {value} is not in [0, 1]"));
+        }
+    }
+    // map_server's own rule: a cell cannot be both free and occupied.
+    if yaml.free_thresh > yaml.occupied_thresh {
+        return Err(format!(
+            "{shown}: free_thresh {} is above occupied_thresh {}; expected free_thresh <= \
+             occupied_thresh",
+            yaml.free_thresh, yaml.occupied_thresh
+        ));
+    }
     let image = path.parent().unwrap_or(Path::new(".")).join(&yaml.image);
     let thresholds = Thresholds {
         occupied: yaml.occupied_thresh,
@@ -223,6 +239,36 @@ mod tests {
         let free = load_map(&world, 0.1, Unknown::Free).unwrap();
         assert!(occupied.grid.occupied_count() > free.grid.occupied_count());
         assert_eq!((occupied.grid.cols, occupied.grid.rows), (384, 384));
+    }
+
+    #[test]
+    fn thresholds_out_of_range_inverted_or_nan_are_refused() {
+        let dir = std::env::temp_dir().join(format!("sitgen-thresh-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("m.yaml");
+        for (occupied, free, expected) in [
+            ("1.5", "0.2", "occupied_thresh: 1.5 is not in [0, 1]"),
+            ("0.65", "-0.1", "free_thresh: -0.1 is not in [0, 1]"),
+            (".nan", "0.2", "occupied_thresh: NaN is not in [0, 1]"),
+            (
+                "0.2",
+                "0.65",
+                "free_thresh 0.65 is above occupied_thresh 0.2",
+            ),
+        ] {
+            std::fs::write(
+                &path,
+                format!(
+                    "image: m.pgm\nresolution: 0.05\noccupied_thresh: {occupied}\n\
+                     free_thresh: {free}\n"
+                ),
+            )
+            .unwrap();
+            let e = load_map(&path, 0.1, Unknown::Occupied).unwrap_err();
+            assert!(e.contains(expected), "{e}");
+            assert!(e.starts_with(&path.display().to_string()), "{e}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! Format (Sturtevant, "Benchmarks for Grid-Based Pathfinding", IEEE TCIAIG 4(2), 2012, and the
 //! benchmark's own loader): a header `type octile`, `height H`, `width W`, `map`, then H lines of
 //! W characters, row 0 at the top. `.`, `G` and `S` are passable; every other character
-//! (`@`, `O`, `T`, `W`) is blocked. Lines may end in CRLF. A scenario file starts `version 1`
+//! (`@`, `O`, `T`, `W`) is blocked; any other character is an error. Lines may end in CRLF. A scenario file starts `version 1`
 //! and lists one problem per line, tab-separated: bucket, map, width, height, start x, start y,
 //! goal x, goal y, optimal length (x = column, y = row).
 
@@ -50,7 +50,19 @@ pub fn parse_map(text: &str) -> Result<OccupancyGrid, String> {
             ));
         }
         for (c, ch) in line.chars().enumerate() {
-            grid.set(r, c, !matches!(ch, '.' | 'G' | 'S'));
+            let blocked = match ch {
+                '.' | 'G' | 'S' => false,
+                '@' | 'O' | 'T' | 'W' => true,
+                // A character the benchmark does not define is more likely a damaged or
+                // foreign file than an obstacle.
+                other => {
+                    return Err(format!(
+                        "map row {r}, column {c}: unknown character {other:?}; expected one of \
+                         . G S (passable) or @ O T W (blocked)"
+                    ))
+                }
+            };
+            grid.set(r, c, blocked);
         }
         read += 1;
     }
@@ -108,6 +120,17 @@ mod tests {
         assert!(e.contains("more than the 100000000"), "{e}");
         let e = parse_map("type octile\nheight 0\nwidth 5\nmap\n").unwrap_err();
         assert!(e.contains("empty map"), "{e}");
+    }
+
+    #[test]
+    fn a_character_the_benchmark_does_not_define_is_an_error() {
+        let e = parse_map("type octile\nheight 1\nwidth 3\nmap\n.#.\n").unwrap_err();
+        assert_eq!(
+            e,
+            "map row 0, column 1: unknown character '#'; expected one of . G S (passable) or \
+             @ O T W (blocked)"
+        );
+        assert!(parse_map("type octile\nheight 1\nwidth 4\nmap\n@OTW\n").is_ok());
     }
 
     #[test]
