@@ -5,7 +5,10 @@ same figures whatever the worker count, and bad input as one-line errors."""
 from __future__ import annotations
 
 import json
+import signal
 import sqlite3
+import subprocess
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +27,7 @@ from sitgen.robustness import (
 from sitgen.run import run
 from sitgen.situation import Situation
 from sitgen.store import Store
-from tests.conftest import run_cli
+from tests.conftest import run_cli, sitgen_command
 
 
 @pytest.fixture(scope="module")
@@ -184,3 +187,34 @@ def test_a_store_of_schema_8_is_upgraded_and_keeps_its_runs(campaign: Path, tmp_
         assert store.run_count() == runs
     done = run_cli("failures", str(old), "--format", "json")
     assert all(r["robustness"] == "unmeasured" for r in json.loads(done.stdout))
+
+
+def test_a_measurement_killed_part_way_loses_nothing_and_repeats_to_the_same_figures(
+    campaign: Path, tmp_path: Path
+) -> None:
+    with Store(campaign) as store:
+        failing = [
+            str(r)
+            for (r,) in store.db.execute(
+                "SELECT id FROM runs WHERE failure_class IS NOT NULL ORDER BY id LIMIT 3"
+            )
+        ]
+        before = store.robustness()
+        runs = store.run_count()
+    killed = tmp_path / "killed.db"
+    killed.write_bytes(campaign.read_bytes())
+    args = ["robustness", str(killed), *failing, "--reruns", "200", "--workers", "1"]
+    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.DEVNULL)
+    try:
+        time.sleep(3.0)
+        assert proc.poll() is None, "killed part way, not after the end"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    # What was stored before is intact; the copies in flight are simply lost.
+    with Store(killed) as store:
+        assert store.run_count() == runs and store.robustness() == before
+    clean = tmp_path / "clean.db"
+    clean.write_bytes(campaign.read_bytes())
+    again = robustness_json(killed, *failing, "--reruns", "8")
+    assert again == robustness_json(clean, *failing, "--reruns", "8")
