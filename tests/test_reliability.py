@@ -144,6 +144,14 @@ def test_a_controllers_output_is_bounded_however_much_it_writes(
     assert "outcome error" in done.stdout and reason in done.stdout, done.stdout + done.stderr
 
 
+def test_check_controller_reports_a_program_that_ignores_end() -> None:
+    done = run_limited("check-controller", f"{MISBEHAVING} ignoreend", timeout_s=60)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "FAIL close" in done.stdout and "did not exit within 1 s of `end`" in done.stdout
+    good = run_limited("check-controller", f"{MISBEHAVING} good", timeout_s=60)
+    assert good.returncode == 0 and "shut down on `end`" in good.stdout, good.stdout
+
+
 def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
     situation: sitgen.Situation,
 ) -> None:
@@ -818,3 +826,11 @@ def test_gym_environments_refuse_what_would_exhaust_memory_or_poison_rewards() -
             env.step(action)  # type: ignore[arg-type]
     _, reward, *_ = env.step(np.array([0.3, 0.0], dtype=np.float32))
     assert np.isfinite(reward)
+
+
+def test_a_non_finite_number_is_named_by_its_field(situation_file: Path) -> None:
+    for value in ("nan", "inf"):
+        done = run_limited("run", str(situation_file), "--time-limit", value)
+        one_line_error(done, 2, f"run.time_limit_s: {float(value)!r} is not a finite number")
+    with pytest.raises(sitgen.SpecError, match=r"run\.sim\.laser\.noise_sd_m: nan"):
+        sitgen.run(str(situation_file), spec={"sim": {"laser": {"noise_sd_m": float("nan")}}})

@@ -7,6 +7,7 @@ this module only decides which of the three forms it was given.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,35 @@ def spec_source(spec: SpecLike) -> tuple[str, str]:
         if single_line and (spec.endswith(".toml") or Path(spec).is_file()):
             return "file", spec
         return "toml", spec
-    return "json", json.dumps(spec)
+    return "json", spec_json(spec)
+
+
+def spec_json(data: Mapping[str, Any], root: str = "") -> str:
+    """``data`` (a spec, a run spec) as JSON for the core. JSON has no NaN or infinity, so a
+    non-finite number anywhere in it is a SpecError naming its field (``run.time_limit_s: nan
+    is not a finite number``) rather than a parse error somewhere in the text."""
+    try:
+        return json.dumps(data, allow_nan=False)
+    except ValueError:
+        path, value = _first_non_finite(data) or ("", math.nan)
+        where = ".".join(p for p in (root, path) if p)
+        raise _core.SpecError(f"{where}: {value!r} is not a finite number") from None
+
+
+def _first_non_finite(data: Any, path: str = "") -> tuple[str, float] | None:
+    """The dotted path and value of the first NaN or infinity in ``data``, or None."""
+    if isinstance(data, float):
+        return None if math.isfinite(data) else (path, data)
+    if isinstance(data, Mapping):
+        items = [(f"{path}.{k}" if path else str(k), v) for k, v in data.items()]
+    elif isinstance(data, list | tuple):
+        items = [(f"{path}[{i}]", v) for i, v in enumerate(data)]
+    else:
+        return None
+    for inner, value in items:
+        if (found := _first_non_finite(value, inner)) is not None:
+            return found
+    return None
 
 
 def load_spec(spec: SpecLike) -> dict[str, Any]:

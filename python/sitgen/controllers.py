@@ -41,6 +41,8 @@ STEP_TIMEOUT_S = 1.0
 START_TIMEOUT_S = 10.0
 """Default wall-clock time a program has to start and answer the reset message (an
 interpreter's start-up can take seconds on a loaded machine)."""
+END_TIMEOUT_S = 1.0
+"""How long a controller program has to exit after `end` before it is killed."""
 MAX_REPLY_BYTES = 1 << 20
 """Longest line a controller program may send (a reply is a few dozen bytes; a program that
 writes more without a newline is broken, and is stopped before it costs memory)."""
@@ -80,8 +82,10 @@ class UserController:
         """Make it ready to run (start its process, load its class); ControllerError if it
         cannot be."""
 
-    def close(self) -> None:
-        """End the run; releases any process."""
+    def close(self) -> str | None:
+        """End the run; releases any process. Returns None if it shut down cleanly, else why
+        not (``check-controller`` reports it; a run's outcome is already set)."""
+        return None
 
 
 def _observation(obs: Mapping[str, Any]) -> Observation:
@@ -143,12 +147,15 @@ class PythonController(UserController):
             reason = exception_line(e)
             raise ControllerError(f"controller {self.name} raised {when}: {reason}") from e
 
-    def close(self) -> None:
+    def close(self) -> str | None:
         close = getattr(self._target, "close", None)
         if callable(close):
             # Closing is best effort: the run's outcome is already set.
-            with contextlib.suppress(Exception, SystemExit):
+            try:
                 close()
+            except (Exception, SystemExit) as e:
+                return f"close() raised: {exception_line(e)}"
+        return None
 
 
 @contextlib.contextmanager
@@ -406,16 +413,21 @@ class ProcessController(UserController):
             how = f"exited with code {code}"
         return f"controller {self.name} {how} {when}{said}"
 
-    def close(self) -> None:
+    def close(self) -> str | None:
         proc = self._proc
+        unclean = None
         if proc is not None:
             try:
                 if not self._failed and proc.poll() is None and proc.stdin is not None:
                     proc.stdin.write(b'{"type": "end"}\n')
                     proc.stdin.close()
-                    proc.wait(timeout=1.0)
-            except (OSError, ValueError, subprocess.TimeoutExpired):
-                pass
+                    code = proc.wait(timeout=END_TIMEOUT_S)
+                    if code != 0:
+                        unclean = f"exited with code {code} on `end`"
+            except subprocess.TimeoutExpired:
+                unclean = f"did not exit within {END_TIMEOUT_S:g} s of `end` and was killed"
+            except (OSError, ValueError):
+                unclean = "closed its input before `end`"
             # The whole group: the program and anything it started.
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
@@ -426,6 +438,7 @@ class ProcessController(UserController):
                     with contextlib.suppress(OSError):
                         pipe.close()
         self._proc = None
+        return unclean
 
 
 def _short(text: str) -> str:

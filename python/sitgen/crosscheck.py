@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
+from sitgen.config import spec_json
 from sitgen.situation import Situation
 
 #: Where ``integrations/stage/build.sh`` builds Stage and the plugin, from the repository root.
@@ -121,7 +122,7 @@ def crosscheck(
     """Run ``situation`` in sitgen and in Stage and compare them; the report as a dict (see
     ``sitgen_core::crosscheck::Report``). ``folder`` keeps Stage's world and log (default: a
     temporary folder, removed after)."""
-    resolved = _core.check_run_spec(json.dumps(dict(run_spec)))
+    resolved = _core.check_run_spec(spec_json(dict(run_spec), "run"))
     where = (
         nullcontext(str(folder))
         if folder is not None
@@ -138,7 +139,7 @@ def serve_controller(situation: Situation, run_spec: Mapping[str, Any], robot: i
     """Answer controller-protocol messages on stdin with robot ``robot``'s built-in controller,
     one reply line per message on stdout, until ``end`` or the end of input. A bad message
     gets ``{"error": …}`` and ends the loop."""
-    served = _core.ServedController(situation.to_json(), json.dumps(dict(run_spec)), robot)
+    served = _core.ServedController(situation.to_json(), spec_json(dict(run_spec), "run"), robot)
     out = sys.stdout
     for line in sys.stdin:
         if not line.strip():

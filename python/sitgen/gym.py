@@ -50,7 +50,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from sitgen import _core
-from sitgen.config import SpecLike
+from sitgen.config import SpecLike, spec_json
 from sitgen.situation import generate_situation
 
 ENV_ID = "sitgen/Navigate-v0"
@@ -87,7 +87,7 @@ class _Worlds:
         if isinstance(threads, bool) or not isinstance(threads, int) or not 0 <= threads <= 4096:
             raise ValueError(f"threads: {threads!r} is not a whole number in [0, 4096]")
         self.spec = spec if spec is not None else DEFAULT_SPEC
-        self.core = _core.Episodes(json.dumps(dict(run or {})), n, threads)
+        self.core = _core.Episodes(spec_json(dict(run or {}), "run"), n, threads)
         resolved = json.loads(self.core.spec_json)
         self.run = resolved
         sim = resolved["sim"]

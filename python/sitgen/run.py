@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
+from sitgen.config import spec_json
 from sitgen.controllers import (
     STEP_TIMEOUT_S,
     ControllerError,
@@ -91,7 +92,7 @@ def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dic
     """What a user controller is told at the start: its route, body, laser and limits."""
     robot = situation.robots[agent]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
-    resolved = json.loads(_core.check_run_spec(json.dumps(dict(run))))
+    resolved = json.loads(_core.check_run_spec(spec_json(dict(run), "run")))
     sim, laser = resolved["sim"], resolved["sim"]["laser"]
     controller = resolved.get("controller") or robot.controller
     n, fov = int(laser["beams"]), float(np.radians(laser["fov_deg"]))
@@ -151,7 +152,7 @@ def run(
         situation = Situation.load(situation)
     name = _controller_name(controller)
     run_spec = run_spec_with(spec, time_limit, name, params)
-    core = _core.Run(situation.to_json(), json.dumps(run_spec), seed)
+    core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
     if core.agent_is_external:
         _drive(core, controller, situation, run_spec, step_timeout_s)
     else:
@@ -283,6 +284,6 @@ def check_controller(
             )
         )
     finally:
-        user.close()
-    checks.append(Check("close", True, "shut down"))
+        unclean = user.close()
+    checks.append(Check("close", unclean is None, unclean or "shut down on `end`"))
     return checks

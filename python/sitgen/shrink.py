@@ -46,6 +46,7 @@ from scipy import ndimage
 
 from sitgen import _core
 from sitgen.campaign import check_workers
+from sitgen.config import spec_json
 from sitgen.controllers import is_user_controller
 from sitgen.situation import Situation
 
@@ -238,7 +239,7 @@ class Shrinker:
         self.original_json = original.to_json()
         self.resolution = original.grid.resolution
         self.run_spec = run_spec
-        self.run_json = json.dumps(run_spec)
+        self.run_json = spec_json(run_spec, "run")
         self.run_seed = run_seed
         self.workers = workers
         self.max_probes = max_probes

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
-from sitgen.config import SpecLike, read_utf8, spec_source
+from sitgen.config import SpecLike, read_utf8, spec_json, spec_source
 from sitgen.terrain import Grid
 
 
@@ -136,7 +136,9 @@ class Situation:
         every robot driven by its sitgen controller through ``integrations/stage``) or ROS
         map_server (``ros``) files; returns them. ``run``: the run spec (default: defaults)."""
         if format == "stage":
-            return _core.export_stage(self._json, json.dumps(dict(run or {})), Path(directory))
+            return _core.export_stage(
+                self._json, spec_json(dict(run or {}), "run"), Path(directory)
+            )
         if format == "ros":
             return _core.export_ros(self._json, Path(directory))
         raise _core.SpecError(f"format: `{format}` is not one of stage, ros")

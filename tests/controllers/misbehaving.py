@@ -4,7 +4,8 @@ an object without a command, `nan` sends NaN; `sometimes` crashes in runs whose 
 an even metre; `closeout` closes its output and runs on; `deaf` stops reading its input and
 floods its output; `spawn` starts a child that sleeps, writes its pid to the file named by the
 second argument and then hangs; `stderrflood` writes 600 MiB to stderr on reset, then a last
-line, and exits; `longline` sends a 2 MiB line with no end and hangs; `good` drives straight at
+line, and exits; `longline` sends a 2 MiB line with no end and hangs; `ignoreend` drives
+well but ignores `end`; `good` drives straight at
 0.3 m/s."""
 
 import json
@@ -17,6 +18,8 @@ mode = sys.argv[1]
 for step, line in enumerate(sys.stdin):
     message = json.loads(line)
     if message["type"] == "end":
+        if mode == "ignoreend":
+            time.sleep(600)
         break
     if message["type"] == "reset":
         if mode == "sometimes" and int(message["start"][0]) % 2 == 0:
