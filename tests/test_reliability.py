@@ -526,6 +526,8 @@ def _copy(db: Path, to: Path) -> Path:
         ("UPDATE meta SET value = 'two' WHERE key = 'schema_version'",
          "damaged store: schema_version is 'two', not a number"),
         ("DROP TABLE trajectories", "damaged store: no table trajectories"),
+        ("UPDATE runs SET score = 'abc' WHERE id = 2",
+         "damaged store: run 2's score is 'abc', not a number"),
     ],
 )  # fmt: skip
 def test_a_damaged_store_is_a_one_line_error(
@@ -536,6 +538,19 @@ def test_a_damaged_store_is_a_one_line_error(
         con.execute(damage)
     for command in ("rank", "failures", "report"):
         one_line_error(run_limited(command, str(db)), 1, f"{db}: {message}")
+    resumed = run_limited("campaign", "--n", "4", "--db", str(db))
+    one_line_error(resumed, 2, f"{db}: {message}")
+
+
+def test_a_trajectory_that_does_not_decode_is_named(small_store: Path, tmp_path: Path) -> None:
+    db = _copy(small_store, tmp_path / "damaged.db")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE trajectories SET data = x'00112233' WHERE run_id = 1")
+    message = f"{db}: damaged store: run 1's trajectory does not decode"
+    one_line_error(run_limited("report", str(db), "-o", str(tmp_path / "r")), 1, message)
+    one_line_error(
+        run_limited("show", str(db), "--run", "1", "-o", str(tmp_path / "x.png")), 1, message
+    )
 
 
 def test_runs_stored_by_an_older_sitgen_are_still_shown(small_store: Path, tmp_path: Path) -> None:

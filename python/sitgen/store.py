@@ -428,6 +428,15 @@ class Store:
         missing = [t for t in TABLES if t not in present]
         if missing:
             raise StoreError(f"{self.path}: damaged store: no table {', '.join(missing)}")
+        # Every reader ranks, sums and formats scores; one that is not a number (a row edited
+        # by hand or damaged) is named here once rather than failing each of them.
+        bad = self.db.execute(
+            "SELECT id, score FROM runs WHERE typeof(score) NOT IN ('real', 'integer') LIMIT 1"
+        ).fetchone()
+        if bad is not None:
+            raise StoreError(
+                f"{self.path}: damaged store: run {bad[0]}'s score is {bad[1]!r}, not a number"
+            )
 
     def lock_for_writing(self) -> None:
         """Hold the store for one campaign at a time (an advisory lock, released on close):
@@ -990,8 +999,14 @@ class Store:
         robots, rows, encoding, data = row
         if encoding != TRAJECTORY_ENCODING:
             raise StoreError(f"{self.path}: run {run_id}: unknown trajectory encoding {encoding}")
-        flat = np.frombuffer(zlib.decompress(data), dtype="<f4")
-        return flat.reshape(rows, robots, 3)
+        try:
+            flat = np.frombuffer(zlib.decompress(data), dtype="<f4")
+            return flat.reshape(rows, robots, 3)
+        except (zlib.error, TypeError, ValueError):
+            raise StoreError(
+                f"{self.path}: damaged store: run {run_id}'s trajectory does not decode as "
+                f"{rows} steps × {robots} robots ({TRAJECTORY_ENCODING})"
+            ) from None
 
     def rows(self, table: str) -> Iterator[dict[str, Any]]:
         """Every row of ``table`` (situations without the embedded situation JSON)."""
