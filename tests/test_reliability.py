@@ -849,3 +849,27 @@ def test_a_non_finite_number_is_named_by_its_field(situation_file: Path) -> None
         one_line_error(done, 2, f"run.time_limit_s: {float(value)!r} is not a finite number")
     with pytest.raises(sitgen.SpecError, match=r"run\.sim\.laser\.noise_sd_m: nan"):
         sitgen.run(str(situation_file), spec={"sim": {"laser": {"noise_sd_m": float("nan")}}})
+
+
+def test_judgements_imported_twice_are_stored_once_and_deep_nesting_is_named(
+    small_store: Path, tmp_path: Path
+) -> None:
+    db = _copy(small_store, tmp_path / "judged.db")
+    source = tmp_path / "j.json"
+    source.write_text(json.dumps([{"a": 0, "b": 1, "worse": "a", "at": "2026-11-25T10:00:00"}]))
+    first = run_limited("judgements", "import", str(db), str(source))
+    assert first.returncode == 0 and "imported 1 judgements" in first.stdout, first.stderr
+    again = run_limited("judgements", "import", str(db), str(source))
+    assert again.returncode == 0, again.stderr
+    assert "imported 0 judgements" in again.stdout and "1 already in the store" in again.stdout
+    with Store(db) as store:
+        assert len(store.judgements()) == 1
+    source.write_text("[" * 100_000 + "]" * 100_000)
+    one_line_error(
+        run_limited("judgements", "import", str(db), str(source)), 2, f"{source}: nested too deeply"
+    )
+
+
+def test_a_negative_top_is_refused(small_store: Path) -> None:
+    done = run_limited("rank", str(small_store), "--top", "-5")
+    assert done.returncode == 2 and "--top" in done.stderr, done.stderr

@@ -599,7 +599,7 @@ def campaign(
     workers: WorkersOption = None,
     backend: BackendOption = "local",
     address: AddressOption = None,
-    top: Annotated[int, typer.Option("--top", help="Top runs in the summary.")] = 5,
+    top: Annotated[int, typer.Option("--top", min=0, help="Top runs in the summary.")] = 5,
     shrink_top: Annotated[
         int,
         typer.Option(
@@ -881,7 +881,7 @@ def search(
     workers: WorkersOption = None,
     backend: BackendOption = "local",
     address: AddressOption = None,
-    top: Annotated[int, typer.Option("--top", help="Distinct failures in the summary.")] = 5,
+    top: Annotated[int, typer.Option("--top", min=0, help="Distinct failures in the summary.")] = 5,
     weights: WeightsOption = None,
     reruns: RerunsOption = 8,
 ) -> None:
@@ -1069,7 +1069,7 @@ def shrink(
 @app.command()
 def rank(
     db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
-    top: Annotated[int, typer.Option("--top", help="How many runs.")] = 20,
+    top: Annotated[int, typer.Option("--top", min=0, help="How many runs.")] = 20,
     format: Annotated[str, typer.Option("--format", "-f", help="table, csv or json.")] = "table",
     distinct: Annotated[
         bool,
@@ -1540,9 +1540,10 @@ def judgements_import(
         except JudgementError as e:
             raise UsageError(str(e)) from None
         read = [dataclasses.replace(j, who=j.who or who or "") for j in read]
-        added = store.add_judgements(read, f"import {source.name}")
+        added = store.add_judgements(read, f"import {source.name}", new_only=True)
         total = len(store.judgements())
-    typer.echo(f"imported {added} judgements from {source}; {total} in {db}")
+    held = f" ({len(read) - added} already in the store, skipped)" if added < len(read) else ""
+    typer.echo(f"imported {added} judgements from {source}{held}; {total} in {db}")
 
 
 @judgements_app.command("export")

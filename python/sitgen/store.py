@@ -689,10 +689,17 @@ class Store:
             out[key] = json.loads(out[key])
         return out
 
-    def add_judgements(self, judgements: Iterable[Judgement], source: str) -> int:
+    def add_judgements(
+        self, judgements: Iterable[Judgement], source: str, new_only: bool = False
+    ) -> int:
         """Store judgements (all or none, in one transaction); ``source`` says where they came
-        from (``page``, ``import FILE``). Returns how many."""
+        from (``page``, ``import FILE``). With ``new_only``, one the store already holds (the
+        same runs, verdict, judge and time: the same file imported again) is skipped. Returns
+        how many were stored."""
         rows = [(j.a, j.b, j.worse, j.who, j.at, source) for j in judgements]
+        if new_only:
+            held = set(self.db.execute("SELECT a, b, worse, who, at FROM judgements"))
+            rows = [r for r in rows if r[:5] not in held]
         with self.db:
             self.db.executemany(
                 "INSERT INTO judgements (a, b, worse, who, at, source) VALUES (?, ?, ?, ?, ?, ?)",

@@ -197,6 +197,8 @@ def read_judgements(path: Path, store: Store) -> list[Judgement]:
         data = json.loads(read_utf8(path, "judgements file"))
     except json.JSONDecodeError as e:
         raise JudgementError(f"{path}: not JSON ({e.msg}, line {e.lineno})") from None
+    except RecursionError:
+        raise JudgementError(f"{path}: nested too deeply; expected a flat list") from None
     except _core.SpecError as e:
         raise JudgementError(str(e)) from None
     expected = '{"a": RUN, "b": RUN, "worse": "a" | "b" | "equal"}'
