@@ -78,16 +78,32 @@ def test_serve_controller_answers_the_protocol(situation_file: Path) -> None:
     assert replies[0]["beams"] == 181
     # An open field ahead: the follower drives off along its route.
     assert replies[1]["v"] > 0
-    bad = subprocess.run(
-        [sys.executable, "-m", "sitgen", "serve-controller", str(situation_file), "--robot", "0"],
-        input=json.dumps({**obs, "ranges": [1.0]}) + "\n",
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    (line,) = bad.stdout.splitlines()
-    assert json.loads(line)["error"] == "robot 0: ranges: 1 values, but the laser has 181 beams"
+    reset = json.dumps({"type": "reset", "robot_id": 0}) + "\n"
+    # A bad message is answered with the reason, ends the loop and the exit code says so.
+    for given, error in [
+        (reset + json.dumps({**obs, "ranges": [1.0]}), "ranges: 1 values, but the laser has 181"),
+        (json.dumps(obs), "an observation before reset"),
+        (reset + "x" * (2 << 20), "a line longer than 1048576 bytes"),
+    ]:
+        bad = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "sitgen",
+                "serve-controller",
+                str(situation_file),
+                "--robot",
+                "0",
+            ],
+            input=given + "\n",
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+        assert bad.returncode == 1, (error, bad.stderr)
+        line = bad.stdout.splitlines()[-1]
+        assert json.loads(line)["error"].startswith(f"robot 0: {error}"), line
     r = run_cli("serve-controller", str(situation_file), "--robot", "9")
     assert r.returncode == 2 and "no robot 9" in r.stderr
 

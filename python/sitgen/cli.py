@@ -341,7 +341,11 @@ def serve_controller_command(
     commands (docs/stage.md)."""
     from sitgen.crosscheck import serve_controller
 
-    serve_controller(Situation.load(situation, allow_edited), _read_run_spec(run_spec), robot)
+    code = serve_controller(
+        Situation.load(situation, allow_edited), _read_run_spec(run_spec), robot
+    )
+    if code:
+        raise typer.Exit(code)
 
 
 @app.command()

@@ -24,6 +24,11 @@ from typing import IO, Any
 
 import numpy as np
 
+MAX_LINE_BYTES = 1 << 20
+"""Longest line of the controller protocol either side reads (a message is a few kilobytes:
+even 10,000 beams are about 200 KB); a longer one is a broken peer, refused before it costs
+memory."""
+
 
 def die_with_parent() -> None:
     """Ask Linux to kill this process when its parent dies (PR_SET_PDEATHSIG), so that a

@@ -33,7 +33,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from sitgen.controller_host import BadReply, command, exception_line
+from sitgen.controller_host import MAX_LINE_BYTES, BadReply, command, exception_line
 from sitgen.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
@@ -43,7 +43,7 @@ START_TIMEOUT_S = 10.0
 interpreter's start-up can take seconds on a loaded machine)."""
 END_TIMEOUT_S = 1.0
 """How long a controller program has to exit after `end` before it is killed."""
-MAX_REPLY_BYTES = 1 << 20
+MAX_REPLY_BYTES = MAX_LINE_BYTES
 """Longest line a controller program may send (a reply is a few dozen bytes; a program that
 writes more without a newline is broken, and is stopped before it costs memory)."""
 STDERR_TAIL_BYTES = 4096

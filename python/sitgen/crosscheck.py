@@ -24,6 +24,7 @@ from typing import Any
 
 from sitgen import _core
 from sitgen.config import spec_json
+from sitgen.controller_host import MAX_LINE_BYTES
 from sitgen.situation import Situation
 
 #: Where ``integrations/stage/build.sh`` builds Stage and the plugin, from the repository root.
@@ -135,25 +136,50 @@ def crosscheck(
     return report
 
 
-def serve_controller(situation: Situation, run_spec: Mapping[str, Any], robot: int) -> None:
+def serve_controller(situation: Situation, run_spec: Mapping[str, Any], robot: int) -> int:
     """Answer controller-protocol messages on stdin with robot ``robot``'s built-in controller,
     one reply line per message on stdout, until ``end`` or the end of input. A bad message
-    gets ``{"error": …}`` and ends the loop."""
+    (not the protocol, an observation before ``reset``, a line over
+    :data:`~sitgen.controller_host.MAX_LINE_BYTES`) gets ``{"error": …}`` and ends the loop.
+    Returns the exit code: 0 after ``end`` or the end of input, 1 after a bad message."""
     served = _core.ServedController(situation.to_json(), spec_json(dict(run_spec), "run"), robot)
     out = sys.stdout
-    for line in sys.stdin:
+    reset = False
+
+    def refuse(why: str) -> int:
+        out.write(json.dumps({"error": f"robot {robot}: {why}"}) + "\n")
+        out.flush()
+        return 1
+
+    while raw := sys.stdin.buffer.readline(MAX_LINE_BYTES + 1):
+        if len(raw) > MAX_LINE_BYTES:
+            return refuse(f"a line longer than {MAX_LINE_BYTES} bytes")
+        line = raw.decode("utf-8", "replace")
         if not line.strip():
             continue
+        kind = _message_type(line)
+        if kind == "observation" and not reset:
+            return refuse("an observation before reset")
+        reset = reset or kind == "reset"
         try:
             reply = served.answer(line)
         except ValueError as e:
-            out.write(json.dumps({"error": f"robot {robot}: {e}"}) + "\n")
-            out.flush()
-            return
+            return refuse(str(e))
         if reply is None:
-            return
+            return 0
         out.write(reply + "\n")
         out.flush()
+    return 0
+
+
+def _message_type(line: str) -> str | None:
+    """A protocol message's ``type`` (None where the line is not a JSON object: the core
+    answers it with the reason)."""
+    try:
+        message = json.loads(line)
+    except ValueError:
+        return None
+    return message.get("type") if isinstance(message, dict) else None
 
 
 def _fmt_s(t: float | None) -> str:
