@@ -873,3 +873,25 @@ def test_judgements_imported_twice_are_stored_once_and_deep_nesting_is_named(
 def test_a_negative_top_is_refused(small_store: Path) -> None:
     done = run_limited("rank", str(small_store), "--top", "-5")
     assert done.returncode == 2 and "--top" in done.stderr, done.stderr
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_hung_stage_and_everything_it_started_end_with_the_crosscheck(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    from sitgen.crosscheck import StageError, StageTool, run_stage
+
+    pids = tmp_path / "pids"
+    fake = tmp_path / "stage"
+    # Stands in for Stage: starts a controller that outlives it, then hangs.
+    fake.write_text(f"#!/bin/sh\nsleep 600 &\necho $! > {pids}\nsleep 600\n")
+    fake.chmod(0o755)
+    folder = tmp_path / "world"
+    folder.mkdir()
+    with pytest.raises(StageError, match="did not finish within 2 s"):
+        run_stage(situation, {}, StageTool(fake, tmp_path), folder, timeout_s=2.0)
+    child = int(pids.read_text())
+    deadline = time.monotonic() + 5
+    while _alive(child) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(child), "the hung Stage's child still runs"

@@ -10,9 +10,11 @@ sitgen's laser from the same poses. ``docs/stage.md`` says which differences are
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shlex
+import signal
 import subprocess
 import sys
 import tempfile
@@ -95,21 +97,29 @@ def run_stage(
             [str(tool.stage.resolve().parent.parent / "lib"), os.environ.get("LD_LIBRARY_PATH", "")]
         ),
     }
+    # Stage runs in a process group of its own, with the controllers its plugin starts: the
+    # whole group ends with the run, whether Stage finished, hung or sitgen was interrupted.
+    stage = subprocess.Popen(
+        [str(tool.stage), "-g", "situation.world"],
+        cwd=folder,
+        env=env,
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
-        done = subprocess.run(
-            [str(tool.stage), "-g", "situation.world"],
-            cwd=folder,
-            env=env,
-            stdin=subprocess.DEVNULL,
-            capture_output=True,
-            text=True,
-            timeout=timeout_s,
-        )
+        stdout, stderr = stage.communicate(timeout=timeout_s)
     except subprocess.TimeoutExpired:
         raise StageError(f"Stage did not finish within {timeout_s:g} s") from None
-    if done.returncode != 0 or not log.is_file():
-        tail = (done.stderr.strip().splitlines() or done.stdout.strip().splitlines() or [""])[-1]
-        raise StageError(f"Stage exited with code {done.returncode}: {tail}")
+    finally:
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(stage.pid, signal.SIGKILL)
+        stage.wait()
+    if stage.returncode != 0 or not log.is_file():
+        tail = (stderr.strip().splitlines() or stdout.strip().splitlines() or [""])[-1]
+        raise StageError(f"Stage exited with code {stage.returncode}: {tail}")
     return log.read_text()
 
 
