@@ -6,6 +6,7 @@ the field or file, and exit 2 (bad input) or 1 (generation or I/O failed); never
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import os
@@ -281,7 +282,8 @@ def report(
 
     require_store(db)
     learned = _weights(weights, db)
-    pages = write_report(db, output, top, learned, str(weights or ""))
+    with _writing(output, "the report"):
+        pages = write_report(db, output, top, learned, str(weights or ""))
     typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
 
@@ -314,14 +316,28 @@ def export(
             format = "parquet"
         if format not in ("parquet", "csv"):
             raise UsageError(f"--format: `{format}` is not one of parquet, csv for a campaign")
-        for path in export_tables(source, output, format):
-            typer.echo(f"wrote {path}")
+        with _writing(output, "the tables"):
+            for path in export_tables(source, output, format):
+                typer.echo(f"wrote {path}")
         return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")
     run_spec = _read_run_spec(spec)
-    for path in Situation.load(source, allow_edited).export(output, format, run=run_spec):
-        typer.echo(f"wrote {path}")
+    with _writing(output, "the export"):
+        for path in Situation.load(source, allow_edited).export(output, format, run=run_spec):
+            typer.echo(f"wrote {path}")
+
+
+@contextlib.contextmanager
+def _writing(output: Path, what: str) -> Iterator[None]:
+    """Name ``output`` in an error that names no file (a full disk fails a write, not an open,
+    and Python's error then says only "File too large")."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is not None or str(output) in str(e):
+            raise
+        raise OSError(f"{output}: cannot write {what}: {e.strerror or e}") from None
 
 
 @app.command("serve-controller")
@@ -1645,7 +1661,7 @@ def main() -> None:
     except sqlite3.Error as e:
         # A store damaged on disk, or a disk that filled up: every run committed before is
         # still there (each is its own transaction).
-        print(f"error: campaign store: {e}; the runs stored before are kept", file=sys.stderr)
+        print(f"error: {e}; the runs stored before are kept", file=sys.stderr)
         sys.exit(EXIT_FAILED)
 
 

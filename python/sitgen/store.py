@@ -8,6 +8,7 @@ runs already stored.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -284,6 +285,47 @@ PLAN_PARTS = {
 TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
 
 
+class _Connection(sqlite3.Connection):
+    """A store's connection: an error from SQLite (a full disk, a damaged page) names the
+    store's file, whichever command met it. It stays an ``sqlite3.Error`` of the same kind, so
+    whatever catches one still does."""
+
+    path = ""
+
+    def _named(self, e: sqlite3.Error) -> sqlite3.Error:
+        return type(e)(f"{self.path}: {e}")
+
+    def execute(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
+        try:
+            return super().execute(*args, **kwargs)
+        except sqlite3.Error as e:
+            raise self._named(e) from None
+
+    def executemany(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
+        try:
+            return super().executemany(*args, **kwargs)
+        except sqlite3.Error as e:
+            raise self._named(e) from None
+
+    def executescript(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
+        try:
+            return super().executescript(*args, **kwargs)
+        except sqlite3.Error as e:
+            raise self._named(e) from None
+
+    def commit(self) -> None:
+        try:
+            super().commit()
+        except sqlite3.Error as e:
+            raise self._named(e) from None
+
+    def __exit__(self, *args: Any) -> Any:
+        try:
+            return super().__exit__(*args)
+        except sqlite3.Error as e:
+            raise self._named(e) from None
+
+
 class Store:
     """An open campaign store. Reading (the default) needs an existing store; ``create``
     makes a new one where there is none."""
@@ -299,14 +341,31 @@ class Store:
                 raise StoreError(f"{self.path}: cannot create the store: no folder {folder}")
             if not os.access(folder, os.W_OK | os.X_OK):
                 raise StoreError(f"{self.path}: cannot create the store: {folder} is read-only")
+        creating = create and not self.path.exists()
         try:
-            self.db = sqlite3.connect(self.path, timeout=30.0)
+            self._open()
+        except sqlite3.Error as e:
+            if not creating:
+                raise
+            # A store that could not even be made (a full disk) is not left behind empty.
+            with contextlib.suppress(Exception):
+                self.db.close()
+            for leftover in (self.path, *(Path(f"{self.path}{x}") for x in ("-wal", "-shm"))):
+                leftover.unlink(missing_ok=True)
+            why = str(e).removeprefix(f"{self.path}: ")
+            raise StoreError(f"{self.path}: cannot create the store: {why}") from None
+
+    def _open(self) -> None:
+        try:
+            self.db = sqlite3.connect(self.path, timeout=30.0, factory=_Connection)
+            self.db.path = str(self.path)
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
             self.db.execute("PRAGMA foreign_keys=ON")
             version = self._schema_version()
         except sqlite3.DatabaseError as e:
-            raise StoreError(f"{self.path}: not a sitgen campaign store ({e})") from None
+            why = str(e).removeprefix(f"{self.path}: ")
+            raise StoreError(f"{self.path}: not a sitgen campaign store ({why})") from None
         if version is not None:
             self._check_tables()
         if version is None:
