@@ -168,7 +168,10 @@ def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: 
     for controller in (f"{PY}:Exits", f"{PY}:Segfaults", f"{PY}:Hangs"):
         spec = campaign_spec(tmp_path / "c.toml", controller, n=2)
         done = run_limited("campaign", str(spec), "--db", str(db), "--workers", "2")
-        assert done.returncode == 0, done.stdout + done.stderr
+        # Every run is stored; a campaign that tested nothing says so, and why, and fails.
+        assert done.returncode == 1, done.stdout + done.stderr
+        assert "every run is an error; the commonest:" in done.stderr
+        assert "2 runs were errors (first run 0)" in done.stdout
         with sqlite3.connect(db) as con:
             stored = con.execute("SELECT outcome, reason FROM runs").fetchall()
         assert len(stored) == 2 and all(o == "error" and "at 0.3 s" in r for o, r in stored)
@@ -180,6 +183,19 @@ def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: 
     with sqlite3.connect(db) as con:
         outcomes = [r[0] for r in con.execute("SELECT outcome FROM runs")]
     assert len(outcomes) == 6 and "error" in outcomes and set(outcomes) != {"error"}
+
+
+def test_a_campaign_whose_every_situation_fails_to_generate_says_why(tmp_path: Path) -> None:
+    spec = tmp_path / "tiny.toml"
+    spec.write_text(
+        '[situation.terrain]\npreset = "caves"\nwidth_m = 3.0\nheight_m = 3.0\n'
+        "[situation.mission]\npeers_min = 5\npeers_max = 5\n"
+    )
+    db = tmp_path / "tiny.db"
+    done = run_limited("campaign", str(spec), "--n", "4", "--db", str(db))
+    one_line_error(done, 1, f"{db}: every run is an error; the commonest: generation failed:")
+    assert "4 runs were errors (first run 0): generation failed" in done.stdout
+    assert stored_runs(db) == 4
 
 
 @pytest.mark.parametrize(

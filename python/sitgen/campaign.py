@@ -779,8 +779,8 @@ class StopOnInterrupt:
 
 
 def summary(store: Store, top: int = 5) -> dict[str, Any]:
-    """The paper's §4.2 figures (runs, mean and median score, share under 10 points, top runs)
-    and the campaign's distinct failures, best first."""
+    """The paper's §4.2 figures (runs, mean and median score, share under 10 points, top runs),
+    the commonest reasons runs were errors, and the campaign's distinct failures, best first."""
     from sitgen.failures import distinct_failures
 
     scores = store.scores()
@@ -788,12 +788,20 @@ def summary(store: Store, top: int = 5) -> dict[str, Any]:
     outcomes: dict[str, int] = {}
     for (outcome,) in store.db.execute("SELECT outcome FROM runs"):
         outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    errors = [
+        {"reason": reason, "runs": n, "first_run": first}
+        for reason, n, first in store.db.execute(
+            "SELECT reason, count(*), min(id) FROM runs WHERE outcome = 'error' "
+            "GROUP BY reason ORDER BY count(*) DESC, min(id) LIMIT 3"
+        )
+    ]
     return {
         "runs": len(scores),
         "mean_score": statistics.fmean(scores) if scores else 0.0,
         "median_score": statistics.median(scores) if scores else 0.0,
         "share_under_10": sum(s < 10 for s in scores) / len(scores) if scores else 0.0,
         "outcomes": outcomes,
+        "errors": errors,
         "top": [
             {"run": r["run"], "score": r["score"], "main_events": main_events(r["breakdown"])}
             for r in ranked

@@ -702,6 +702,8 @@ def _echo_stored(
         f"{100 * s['share_under_10']:.0f}% under 10 points; outcomes "
         + ", ".join(f"{k} {v}" for k, v in sorted(s["outcomes"].items()))
     )
+    for e in s["errors"]:
+        typer.echo(f"  {e['runs']} runs were errors (first run {e['first_run']}): {e['reason']}")
     for r in s["top"]:
         typer.echo(f"  run {r['run']:>5}  score {r['score']:>10.1f}  {r['main_events']}")
     typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
@@ -712,6 +714,13 @@ def _echo_stored(
         )
     if interrupted:
         raise typer.Exit(130)
+    if s["runs"] and s["outcomes"].get("error", 0) == s["runs"]:
+        # Nothing was tested: every run failed to be made or its controller failed.
+        print(
+            f"error: {db}: every run is an error; the commonest: {s['errors'][0]['reason']}",
+            file=sys.stderr,
+        )
+        raise typer.Exit(EXIT_FAILED)
 
 
 def _check_reruns(reruns: int) -> None:
