@@ -28,7 +28,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sitgen.campaign import campaign_from_data, parse_campaign
 from sitgen.faults import (
     FaultReport,
     FaultRow,
@@ -37,6 +36,7 @@ from sitgen.faults import (
     run_faults,
     share_killed_within,
 )
+from sitgen.jobs import campaign_from_data, parse_campaign
 from sitgen.maps import BARN_WORLDS
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -26,9 +26,9 @@ from pathlib import Path
 
 from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
-from sitgen.campaign import parse_campaign
 from sitgen.failures import distinct_failures
 from sitgen.faults import FaultReport, kill_rate_at
+from sitgen.jobs import parse_campaign
 from sitgen.search import LOW_SCORE_POINTS
 from sitgen.store import Store
 

@@ -20,8 +20,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sitgen.campaign import parse_campaign, run_campaign
+from sitgen.campaign import run_campaign
 from sitgen.failures import distinct_failures
+from sitgen.jobs import parse_campaign
 from sitgen.run import run
 from sitgen.shrink import shrink_run
 from sitgen.store import Store

@@ -25,9 +25,9 @@ from pathlib import Path
 
 from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
-from sitgen.campaign import parse_campaign
 from sitgen.coverage import stored, summarise
 from sitgen.faults import FaultReport, kill_rate_at
+from sitgen.jobs import parse_campaign
 from sitgen.store import Store
 
 ROOT = Path(__file__).resolve().parent.parent

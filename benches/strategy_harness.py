@@ -13,8 +13,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sitgen.campaign import CampaignSpec
 from sitgen.faults import FaultReport, report_from, run_faults
+from sitgen.jobs import CampaignSpec
 from sitgen.search import SearchPlan, run_search
 
 Measure = Callable[[Path, int, FaultReport], dict[str, float]]

@@ -32,8 +32,10 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import sitgen
-from sitgen.campaign import campaign_from_data, run_campaign
+from sitgen.campaign import run_campaign
 from sitgen.figure import AGENT, MARGIN_PX, PEER, TARGET_PX, draw_situation
+from sitgen.jobs import campaign_from_data
+from sitgen.recall import stored_run
 from sitgen.store import Store
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -143,7 +145,7 @@ def heading_plot(
 def figures(db: Path, example: dict[str, Any]) -> None:
     """The docs' figures of run ``example["run"]``: the encounter and the headings."""
     with Store(db) as store:
-        row = store.run_row(example["run"])
+        row = stored_run(store, example["run"])
     situation = sitgen.Situation(row["situation"])
     record = sitgen.run(situation, spec=row["run_spec"], seed=row["run_seed"])
     a, b, start, end = example["pair"]

@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sitgen.store import Store
-from sitgen.weights import Judgement, SimulatedJudge, Weights, fit, next_pair
+from sitgen.store import Judgement, Store
+from sitgen.weights import SimulatedJudge, Weights, fit, next_pair
 
 EXPERT = Weights(
     {

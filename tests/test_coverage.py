@@ -19,8 +19,8 @@ import pytest
 
 import sitgen
 from sitgen import _core
-from sitgen.campaign import parse_campaign
 from sitgen.coverage import all_cells, dimensions, split, stored, summarise, total_cells
+from sitgen.jobs import parse_campaign
 from sitgen.search import (
     BATCH,
     GUIDE_EPSILON,
@@ -263,7 +263,7 @@ def test_the_report_shows_coverage_as_a_heat_grid_with_failures_marked(
 
 
 def test_the_example_campaign_builds_jobs_in_every_terrain_and_peer_mode() -> None:
-    from sitgen.campaign import build_job
+    from sitgen.jobs import build_job
 
     text = (ROOT / "examples" / "campaigns" / "coverage.toml").read_text()
     spec = parse_campaign(text, "examples/campaigns/coverage.toml")

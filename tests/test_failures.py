@@ -272,7 +272,7 @@ def test_distinct_failures_of_an_empty_store_are_none(tmp_path: Path) -> None:
 def test_snd_turning_to_and_fro_beside_a_wall_is_an_oscillation() -> None:
     """Job 308 of the paper's campaign (seed 1, caves): SND turns left and right on the spot
     beside a wall from its first second, Player's driver faithfully locked up."""
-    from sitgen.campaign import build_job, parse_campaign
+    from sitgen.jobs import build_job, parse_campaign
 
     job = build_job(parse_campaign(None), 1, 308)
     s = sitgen.generate_situation(job.situation, seed=job.seed)

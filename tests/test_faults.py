@@ -16,8 +16,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sitgen import _core
-from sitgen.campaign import build_job, parse_campaign
 from sitgen.faults import RUN_STRIDE, fault_slot, faults_of
+from sitgen.jobs import build_job, parse_campaign
 from sitgen.kill import (
     ALPHA,
     COPIES,

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from sitgen.campaign import Keep
-from sitgen.recall import whole_run
+from sitgen.recall import stored_run, whole_run
 from sitgen.store import RunRow, Store, StoreError
 from tests.conftest import run_cli
 from tests.test_campaign import SMALL, write_spec
@@ -67,7 +67,7 @@ def test_top_k_keeps_exactly_the_k_best_runs_whole(stores: dict[str, Path]) -> N
 def test_a_summary_is_re_simulated_to_the_run_that_was_stored(stores: dict[str, Path]) -> None:
     with Store(stores["all"]) as full, Store(stores["none"]) as summary:
         for run_id in range(12):
-            a, b = full.run_row(run_id), summary.run_row(run_id)
+            a, b = stored_run(full, run_id), stored_run(summary, run_id)
             kept, again = whole_run(full, a), whole_run(summary, b)
             assert kept is not None and again is not None
             assert not kept.resimulated and again.resimulated
@@ -87,7 +87,7 @@ def test_a_summary_that_re_simulates_differently_is_refused(
     with sqlite3.connect(db) as c:
         c.execute("UPDATE runs SET score = score + 1 WHERE id = 2")
     with Store(db) as store, pytest.raises(StoreError, match=r"run 2 .* different score"):
-        whole_run(store, store.run_row(2))
+        whole_run(store, stored_run(store, 2))
 
 
 def test_show_rerun_and_report_work_on_summaries(stores: dict[str, Path], tmp_path: Path) -> None:

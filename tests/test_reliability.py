@@ -29,7 +29,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sitgen
-from sitgen.campaign import build_job, campaign_from_data, parse_campaign
+from sitgen.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
 from tests.conftest import ROOT, Result, sitgen_command
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from sitgen import _core
-from sitgen.campaign import parse_campaign
+from sitgen.jobs import parse_campaign
 from sitgen.search import (
     BATCH,
     INITIAL,

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from sitgen import _core
-from sitgen.recall import resimulate
-from sitgen.store import Store
-from sitgen.weights import Judgement, SimulatedJudge, Weights, fit, load_weights, next_pair
+from sitgen.recall import resimulate, stored_run
+from sitgen.store import Judgement, Store
+from sitgen.weights import SimulatedJudge, Weights, fit, load_weights, next_pair
 
 from .conftest import run_cli
 
@@ -115,7 +115,7 @@ def test_weights_rescore_as_the_core_scores_and_rank_uses_them(db: Path, tmp_pat
         ).fetchall()
         assert rows
         for run_id, breakdown, failure_class in rows:
-            row = store.run_row(run_id)
+            row = stored_run(store, run_id)
             row["run_spec"] = {**row["run_spec"], "scoring": table}
             _, record = resimulate(row)
             rescored = weights.score(json.loads(breakdown), failure_class)

@@ -29,7 +29,7 @@ from sitgen.store import StoreError, StoreMissing, require_store
 from sitgen.terrain import Grid, generate_terrain
 
 if TYPE_CHECKING:
-    from sitgen.campaign import CampaignSpec
+    from sitgen.jobs import CampaignSpec
     from sitgen.weights import Weights
 
 T = TypeVar("T")
@@ -249,10 +249,10 @@ def show(
         if not _is_store(source):
             raise UsageError("--run needs a campaign store (.db), not a situation file")
         require_store(source)
-        from sitgen.recall import whole_run
+        from sitgen.recall import stored_run, whole_run
 
         with Store(source) as store:
-            row = store.run_row(run_id)
+            row = stored_run(store, run_id)
             whole = whole_run(store, row)
         if whole is None:
             raise UsageError(f"run {run_id} has no situation (generation failed)")
@@ -580,7 +580,7 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
 
 def _campaign_spec(spec: Path | None) -> CampaignSpec:
     """The campaign spec in file ``spec``, or the paper's."""
-    from sitgen.campaign import parse_campaign
+    from sitgen.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     return parse_campaign(text, str(spec) if spec else "paper campaign")
@@ -684,7 +684,7 @@ def _echo_stored(
 ) -> None:
     """What a campaign or search did and what its store holds: the paper's figures, the top
     runs and the distinct failures; exits 130 if it was stopped early."""
-    from sitgen.campaign import summary
+    from sitgen.failures import summary
     from sitgen.store import Store
 
     rate = ran / wall_s if wall_s > 0 else 0.0
@@ -925,7 +925,7 @@ def search(
     parsed = _campaign_spec(spec)
     learned = _weights(weights)
     if learned is not None:
-        from sitgen.campaign import campaign_from_data
+        from sitgen.jobs import campaign_from_data
 
         # The runs are scored by the weights as they run (the objective is their score), and
         # the stored spec says so: a summary's run is rebuilt and re-simulated from it.
@@ -1414,8 +1414,9 @@ def demo(
     """The main job on built-in defaults: one situation of every preset (map PNG + ROS YAML,
     situation JSON, figure), then the paper's campaign (500 runs, seed 1: --n) into
     OUTPUT/paper.db, its HTML report in OUTPUT/report/, and its distinct failures."""
-    from sitgen.campaign import StopOnInterrupt, parse_campaign, run_campaign
+    from sitgen.campaign import StopOnInterrupt, run_campaign
     from sitgen.figure import save_situation_figure
+    from sitgen.jobs import parse_campaign
     from sitgen.report import write_report
 
     output.mkdir(parents=True, exist_ok=True)

@@ -24,6 +24,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from sitgen.sim import Observation
+
 MAX_LINE_BYTES = 1 << 20
 """Longest line of the controller protocol either side reads (a message is a few kilobytes:
 even 10,000 beams are about 200 KB); a longer one is a broken peer, refused before it costs
@@ -103,7 +105,6 @@ def command(value: Any, when: str) -> tuple[float, float]:
 
 
 def _observation(message: dict[str, Any], laser: dict[str, Any]) -> Any:
-    from sitgen.sim import Observation
 
     return Observation(
         ranges=np.asarray(message["ranges"], dtype=np.float64),

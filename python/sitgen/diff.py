@@ -32,8 +32,9 @@ from typing import Any, TextIO
 from xml.etree import ElementTree
 
 from sitgen import _core
-from sitgen.campaign import CampaignSpec, Executor, Job, _row, check_campaign, started_at
+from sitgen.campaign import Executor, _row, started_at
 from sitgen.faults import Situations, outcome_of
+from sitgen.jobs import CampaignSpec, Job, check_campaign
 from sitgen.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_result, verdict
 from sitgen.robustness import perturbed
 from sitgen.store import Store, StoreError

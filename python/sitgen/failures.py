@@ -21,9 +21,9 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
-from sitgen.rank import write_rows
 from sitgen.robustness import CANDIDATES, RERUNS, check_reruns, is_robust, measure_runs
-from sitgen.store import Store
+from sitgen.rows import write_rows
+from sitgen.store import Store, main_events
 
 BROAD_RUNS = 20
 """A class with at least this many runs is split where its runs fall into clear groups."""
@@ -383,3 +383,33 @@ FAILURE_COLUMNS = (
 def write_failures(failures: list[DistinctFailure], format: str, out: TextIO) -> None:
     """Write distinct failures as ``json`` (a list of objects) or ``csv``."""
     write_rows([f.as_dict() for f in failures], FAILURE_COLUMNS, format, out)
+
+
+def summary(store: Store, top: int = 5) -> dict[str, Any]:
+    """The paper's §4.2 figures (runs, mean and median score, share under 10 points, top runs),
+    the commonest reasons runs were errors, and the campaign's distinct failures, best first."""
+    scores = store.scores()
+    ranked = store.ranked(top)
+    outcomes: dict[str, int] = {}
+    for (outcome,) in store.db.execute("SELECT outcome FROM runs"):
+        outcomes[outcome] = outcomes.get(outcome, 0) + 1
+    errors = [
+        {"reason": reason, "runs": n, "first_run": first}
+        for reason, n, first in store.db.execute(
+            "SELECT reason, count(*), min(id) FROM runs WHERE outcome = 'error' "
+            "GROUP BY reason ORDER BY count(*) DESC, min(id) LIMIT 3"
+        )
+    ]
+    return {
+        "runs": len(scores),
+        "mean_score": statistics.fmean(scores) if scores else 0.0,
+        "median_score": statistics.median(scores) if scores else 0.0,
+        "share_under_10": sum(s < 10 for s in scores) / len(scores) if scores else 0.0,
+        "outcomes": outcomes,
+        "errors": errors,
+        "top": [
+            {"run": r["run"], "score": r["score"], "main_events": main_events(r["breakdown"])}
+            for r in ranked
+        ],
+        "distinct": [f.as_dict() for f in distinct_failures(store)],
+    }

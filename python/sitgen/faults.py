@@ -36,16 +36,14 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
-from sitgen.campaign import (
+from sitgen.campaign import Executor, _row, started_at
+from sitgen.jobs import (
     CampaignSpec,
-    Executor,
     Job,
-    _row,
     check_campaign,
     check_workers,
     controller_names,
     job_seed,
-    started_at,
     stream_jobs,
 )
 from sitgen.kill import (
@@ -66,6 +64,7 @@ from sitgen.kill import (
     verdict,
 )
 from sitgen.maps import BARN_WORLDS, BarnWorlds
+from sitgen.recall import stored_run
 from sitgen.robustness import perturbed
 from sitgen.store import KINDS, Store, StoreError
 
@@ -280,7 +279,7 @@ class Situations:
     def job(self, i: int) -> Job:
         """Situation ``i``'s job; one whose spec cannot be built carries its error."""
         if self.stored is not None:
-            row = self.stored.run_row(self.order[i])
+            row = stored_run(self.stored, self.order[i])
             # A stored situation that could not be built is not retried: it kills nothing.
             error = None if row["content_hash"] else "spec: its situation could not be built"
             seed = row["situation_seed"]

@@ -32,8 +32,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from sitgen.store import Store
-from sitgen.weights import WORSE, Judgement, next_pair
+from sitgen.report import run_page
+from sitgen.store import WORSE, Judgement, Store
+from sitgen.weights import next_pair
 
 MAX_BODY_BYTES = 16 << 10
 """Largest judgement form read (one is under 200 bytes)."""
@@ -230,7 +231,6 @@ class JudgingServer:
         self._send(request, HTTPStatus.OK, types[suffix], path.read_bytes())
 
     def _render(self, run_id: int) -> bool:
-        from sitgen.report import run_page
 
         with Store(self.db) as store:
             if not store.has_runs([run_id]):

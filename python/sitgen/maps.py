@@ -7,16 +7,13 @@ core) and BARN grids (``.npy``, here with numpy). :func:`shortest_path` is the p
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
+from sitgen.situation import Situation
 from sitgen.terrain import Grid
-
-if TYPE_CHECKING:
-    from sitgen.situation import Situation
 
 BARN_RESOLUTION_M = 0.15
 """BARN's cell size (Perille et al., 2020)."""
@@ -108,7 +105,6 @@ class BarnWorlds:
 
     def situation(self, index: int) -> Situation:
         """World ``index`` (0-299) as a situation."""
-        from sitgen.situation import Situation
 
         if not 0 <= index < BARN_WORLDS:
             raise _core.SpecError(f"index: {index} is not in [0, {BARN_WORLDS})")

@@ -4,18 +4,18 @@ run is reproduced bit for bit."""
 from __future__ import annotations
 
 import csv
-import json
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TextIO
+from typing import Any, TextIO
 
 from sitgen import _core
+from sitgen.failures import check_class, distinct_failures
+from sitgen.recall import regenerate, stored_run
 from sitgen.robustness import verdict
+from sitgen.rows import write_rows
+from sitgen.run import run
 from sitgen.store import Store, events_digest
-
-if TYPE_CHECKING:
-    from sitgen.weights import Weights
+from sitgen.weights import Weights
 
 RANK_COLUMNS = (
     "rank",
@@ -52,7 +52,6 @@ def ranked_rows(
     keeps the runs of one class; ``distinct`` puts the representative of each distinct failure
     first (best first, each marked with its ``distinct`` key), then the rest by score.
     ``weights``: rescore every run by learned weights first."""
-    from sitgen.failures import check_class, distinct_failures
 
     if failure_class is not None:
         check_class(failure_class)
@@ -89,19 +88,6 @@ def robustness_of(measured: dict[str, Any] | None) -> str:
 def write_ranking(rows: list[dict[str, Any]], format: str, out: TextIO) -> None:
     """Write the ranking as ``csv`` or ``json``."""
     write_rows(rows, RANK_COLUMNS, format, out)
-
-
-def write_rows(
-    rows: list[dict[str, Any]], columns: Sequence[str], format: str, out: TextIO
-) -> None:
-    """Write rows as ``json`` (a list of objects, every field) or ``csv`` (``columns``)."""
-    if format == "json":
-        json.dump(rows, out, indent=2)
-        out.write("\n")
-        return
-    writer = csv.DictWriter(out, fieldnames=list(columns), extrasaction="ignore")
-    writer.writeheader()
-    writer.writerows(rows)
 
 
 def export_tables(db: str | Path, directory: Path, format: str) -> list[Path]:
@@ -144,11 +130,9 @@ class Rerun:
 def rerun(db: str | Path, run_id: int) -> Rerun:
     """Regenerate run ``run_id``'s situation from its spec and seed, run it again, and compare
     the situation's content hash, the event log (bytes) and the score with what is stored."""
-    from sitgen.recall import regenerate
-    from sitgen.run import run
 
     with Store(db) as store:
-        stored = store.run_row(run_id)
+        stored = stored_run(store, run_id)
     lines = [f"run {run_id}: situation seed {stored['situation_seed']}, {stored['controller']}"]
     try:
         situation = regenerate(stored)

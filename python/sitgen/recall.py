@@ -6,7 +6,8 @@ summary (score, outcome, failure class, coverage, the event log's digest). Every
 deterministic, so a summary's run is regenerated from its spec and seed and run again, and
 the result is checked against what was stored: the situation's content hash, the event log's
 digest and the score. ``show``, ``report`` and ``shrink`` read runs through here; ``rerun``
-uses the same regeneration to confirm a stored run.
+uses the same regeneration to confirm a stored run. The store itself knows nothing of how a
+campaign builds its jobs: a summary's specs are built again here (:func:`stored_run`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
+from sitgen.jobs import build_job, campaign_from_data
 from sitgen.run import RunRecord, run
 from sitgen.situation import Situation, generate_situation
 from sitgen.store import Store, StoreError, events_digest
@@ -37,8 +39,23 @@ class WholeRun:
     """Whether it came from re-simulation rather than from the store."""
 
 
+def stored_run(store: Store, run_id: int) -> dict[str, Any]:
+    """Run ``run_id`` as stored (:meth:`Store.run_row`), with the situation and run specs of a
+    run kept as a summary built again from its campaign's job (the build is deterministic)."""
+    row = store.run_row(run_id)
+    if row["situation_spec"] is None:
+        campaign = store.campaign()
+        if campaign is None or store.kind() != "campaign":
+            raise StoreError(f"{store.path}: run {run_id} is a summary, but no campaign is stored")
+        job = build_job(campaign_from_data(campaign["spec"]), campaign["seed"], run_id)
+        # Stored specs went through JSON with sorted keys; so do these, to compare equal.
+        row["situation_spec"] = json.loads(json.dumps(job.situation, sort_keys=True))
+        row["run_spec"] = json.loads(json.dumps(job.run, sort_keys=True))
+    return row
+
+
 def regenerate(row: dict[str, Any]) -> Situation:
-    """The situation of stored run ``row`` (:meth:`Store.run_row`), made again from its spec
+    """The situation of stored run ``row`` (:func:`stored_run`), made again from its spec
     and seed (or read back, if it was given whole). Raises GenerationFailed."""
     spec = row["situation_spec"]
     if "format" in spec:  # given whole, not generated
@@ -55,7 +72,7 @@ def resimulate(row: dict[str, Any]) -> tuple[Situation, RunRecord]:
 
 
 def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
-    """Stored run ``row`` (:meth:`Store.run_row`) whole; None if its situation was never
+    """Stored run ``row`` (:func:`stored_run`) whole; None if its situation was never
     generated. Raises StoreError if re-simulation does not give back the run that was stored
     (another sitgen version)."""
     run_id = row["id"]

@@ -31,8 +31,9 @@ from sitgen.diff import summary_lines as diff_summary_lines
 from sitgen.failures import DistinctFailure, classes, distinct_failures
 from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
 from sitgen.figure import EVENT_COLOURS, save_situation_figure
-from sitgen.recall import whole_run
+from sitgen.recall import stored_run, whole_run
 from sitgen.robustness import tally, verdict
+from sitgen.run import run
 from sitgen.search import SearchReplay, elite_grid, replay
 from sitgen.situation import Situation
 from sitgen.store import KINDS, Store, main_events
@@ -796,7 +797,7 @@ def run_page(
     """The page and its data script for one run; None if the run has no situation.
     ``distinct`` is the distinct failure the run belongs to, if any. ``blind`` leaves out its
     rank, score and breakdown (for judging runs by what happened, not by what they scored)."""
-    row = store.run_row(run_id)
+    row = stored_run(store, run_id)
     # Shown as it was run, even where an older sitgen placed a robot across the map's edge; a
     # run kept as a summary is re-simulated.
     whole = whole_run(store, row)
@@ -925,7 +926,6 @@ def _minimal_section(store: Store, run_id: int, out: Path) -> str:
     shrunk = store.shrink(run_id)
     if shrunk is None:
         return ""
-    from sitgen.run import run
 
     name = f"run-{run_id}-min"
     minimal = Situation(shrunk["situation"])

@@ -21,7 +21,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from sitgen import _core
-from sitgen.campaign import Executor, Job, check_workers
+from sitgen.campaign import Executor
+from sitgen.jobs import Job, check_workers
+from sitgen.recall import stored_run
 from sitgen.store import Store, StoreError
 
 RERUNS = 8
@@ -187,7 +189,7 @@ def measure_runs(
 ) -> list[Robustness]:
     """Measure and store the robustness of stored runs ``run_ids`` (each must have failed)."""
     workers = check_workers(workers, "local")
-    rows = [store.run_row(i) for i in run_ids]
+    rows = [stored_run(store, i) for i in run_ids]
     measured = measure(rows, check_reruns(reruns), workers)
     store.record_robustness(r.as_row() for r in measured)
     return measured

@@ -48,21 +48,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.campaign import (
+from sitgen.campaign import Executor, _row, started_at
+from sitgen.failures import classes as failure_classes
+from sitgen.jobs import (
     CampaignSpec,
-    Executor,
     Job,
-    _row,
+    campaign_from_data,
     check_campaign,
     check_workers,
     controller_names,
     draw_genes,
     express_job,
     job_seed,
-    started_at,
     vary_order,
 )
-from sitgen.failures import classes as failure_classes
 from sitgen.store import KINDS, Store, StoreError, unpack_json
 
 if TYPE_CHECKING:
@@ -755,7 +754,6 @@ class SearchReplay:
 def replay(store: Store) -> SearchReplay:
     """Rebuild a stored search's archive, and its figures over budget. Raises StoreError if
     the store holds no search."""
-    from sitgen.campaign import campaign_from_data
 
     raw = store.plan("search")
     campaign = store.campaign()

@@ -45,10 +45,15 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from sitgen import _core
-from sitgen.campaign import check_workers
 from sitgen.config import spec_json
 from sitgen.controllers import is_user_controller
+from sitgen.failures import distinct_failures
+from sitgen.figure import draw_situation
+from sitgen.jobs import check_workers
+from sitgen.recall import stored_run, whole_run
+from sitgen.run import run
 from sitgen.situation import Situation
+from sitgen.store import Store
 
 MAX_PROBES = 500
 """Probes (runs) one shrink may make by default; shrinking stops where the budget ends, with
@@ -312,7 +317,6 @@ class Shrinker:
 
     def trajectory(self, c: Candidate) -> npt.NDArray[np.float64]:
         """Every robot's path in ``c``'s run: (steps + 1, robots, 3). One more run."""
-        from sitgen.run import run
 
         if c.key not in self.paths:
             self.probes += 1
@@ -584,8 +588,6 @@ def shrink_top(
     """Shrink the representatives of the campaign's top ``k`` distinct failures (those not
     shrunk already, so that a resumed campaign does not shrink them again). Returns (run,
     result) for each, None where the store already held its shrink."""
-    from sitgen.failures import distinct_failures
-    from sitgen.store import Store
 
     with Store(db) as store:
         runs = [f.representative for f in distinct_failures(store)[: max(0, k)]]
@@ -603,11 +605,9 @@ def shrink_run(
 ) -> ShrinkResult:
     """Shrink stored run ``run_id`` (its situation, run spec and seed) and keep the result in
     the store's ``shrinks`` table."""
-    from sitgen.recall import whole_run
-    from sitgen.store import Store
 
     with Store(db) as store:
-        row = store.run_row(run_id)
+        row = stored_run(store, run_id)
         if row["failure"] is None:
             raise ShrinkError(NOTHING_TO_SHRINK)
         whole = whole_run(store, row)
@@ -631,9 +631,6 @@ def save_side_by_side(result: ShrinkResult, path: str | Path) -> None:
     """A figure of the original (left) and the minimal situation (right), each with its run
     (paths driven and the agent's scored events), as PNG."""
     from PIL import Image
-
-    from sitgen.figure import draw_situation
-    from sitgen.run import run
 
     panels = []
     for s in (result.original, result.minimal):

@@ -14,16 +14,13 @@ import json
 import os
 import sqlite3
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 import numpy.typing as npt
-
-if TYPE_CHECKING:
-    from sitgen.weights import Judgement, Weights
 
 SCHEMA_VERSION = 9
 
@@ -221,6 +218,34 @@ def is_run_id(value: object) -> bool:
     a run id enters (the command line, the judging page, a judgements file) goes through the
     store's readers, which treat anything else as a run the store does not hold."""
     return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_RUN_ID
+
+
+WORSE = ("a", "b", "equal")
+"""What a judgement says: run ``a`` is more dangerous, run ``b`` is, or neither."""
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """One pairwise judgement: which of runs ``a`` and ``b`` is more dangerous (the store's
+    ``judgements`` rows; :mod:`sitgen.weights` fits penalties to them)."""
+
+    a: int
+    b: int
+    worse: str
+    who: str = ""
+    at: str = ""
+    """When, ISO 8601 UTC."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"a": self.a, "b": self.b, "worse": self.worse, "who": self.who, "at": self.at}
+
+
+class Scoring(Protocol):
+    """What rescoring a store needs of a scoring table (:class:`sitgen.weights.Weights`)."""
+
+    def score(self, stored: Mapping[str, Any], failure_class: str | None) -> float: ...
+
+    def breakdown(self, stored: Mapping[str, Any]) -> dict[str, dict[str, float]]: ...
 
 
 class StoreError(Exception):
@@ -768,8 +793,6 @@ class Store:
 
     def judgements(self) -> list[Judgement]:
         """Every stored judgement, in the order made."""
-        from sitgen.weights import Judgement
-
         return [
             Judgement(a, b, worse, who, at)
             for a, b, worse, who, at in self.db.execute(
@@ -791,7 +814,7 @@ class Store:
             )
         return found
 
-    def rescore(self, weights: Weights) -> None:
+    def rescore(self, weights: Scoring) -> None:
         """From now on, read every run's score and breakdown as ``weights`` give them, from
         each run's stored breakdown and failure class (a temporary view shadows ``runs`` for
         this connection only); the store becomes read-only, so nothing rescored is written."""
@@ -1002,8 +1025,9 @@ class Store:
 
     def run_row(self, run_id: int) -> dict[str, Any]:
         """Run ``run_id`` as stored: its situation (None if it was never generated, or the
-        run is kept as a summary: see ``kept``), specs, seeds and event log ('' for a
-        summary; ``events_sha256`` is its digest)."""
+        run is kept as a summary: see ``kept``), specs (None for a summary: its job builds
+        them again, :func:`sitgen.recall.stored_run`), seeds and event log ('' for a summary;
+        ``events_sha256`` is its digest)."""
         if not is_run_id(run_id):
             raise StoreError(f"{self.path}: no run {run_id} (a run id is 0 to 2^63 - 1)")
         row = self.db.execute(
@@ -1017,7 +1041,7 @@ class Store:
             raise StoreError(f"{self.path}: no run {run_id}")
         kept = row[12] != 0
         situation_spec, run_spec = (
-            (json.loads(row[2]), json.loads(row[5])) if kept else self._job_specs(run_id)
+            (json.loads(row[2]), json.loads(row[5])) if kept else (None, None)
         )
         return {
             "id": row[0],
@@ -1038,21 +1062,6 @@ class Store:
             # store is read with learned weights).
             "stored_score": row[14],
         }
-
-    def _job_specs(self, run_id: int) -> tuple[dict[str, Any], dict[str, Any]]:
-        """The situation and run specs of a campaign's run kept as a summary: its job, built
-        again from the campaign's spec and seed (the build is deterministic)."""
-        from sitgen.campaign import build_job, campaign_from_data
-
-        campaign = self.campaign()
-        if campaign is None or self.kind() != "campaign":
-            raise StoreError(f"{self.path}: run {run_id} is a summary, but no campaign is stored")
-        job = build_job(campaign_from_data(campaign["spec"]), campaign["seed"], run_id)
-        # Stored specs went through JSON with sorted keys; so do these, to compare equal.
-        return (
-            json.loads(json.dumps(job.situation, sort_keys=True)),
-            json.loads(json.dumps(job.run, sort_keys=True)),
-        )
 
     def trajectory(self, run_id: int) -> npt.NDArray[np.float32] | None:
         if not is_run_id(run_id):

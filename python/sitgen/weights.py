@@ -31,19 +31,15 @@ import random
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
 from sitgen.config import read_utf8
-
-if TYPE_CHECKING:
-    from sitgen.store import Store
-
-WORSE = ("a", "b", "equal")
-"""What a judgement says: run ``a`` is more dangerous, run ``b`` is, or neither."""
+from sitgen.failures import distinct_failures
+from sitgen.store import WORSE, Judgement, Store
 
 RIDGE = 1.0
 """L2 penalty on the scaled weights: keeps a weight no judgement constrains at zero."""
@@ -56,21 +52,6 @@ Array = npt.NDArray[np.float64]
 
 class JudgementError(ValueError):
     """Judgements or a weights file that cannot be used; the message names the entry."""
-
-
-@dataclass(frozen=True)
-class Judgement:
-    """One pairwise judgement: which of runs ``a`` and ``b`` is more dangerous."""
-
-    a: int
-    b: int
-    worse: str
-    who: str = ""
-    at: str = ""
-    """When, ISO 8601 UTC."""
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"a": self.a, "b": self.b, "worse": self.worse, "who": self.who, "at": self.at}
 
 
 def kinds() -> list[str]:
@@ -496,8 +477,6 @@ def pool(store: Store) -> list[int]:
     """The runs pairs are drawn from: up to ``POOL_PER_FAILURE`` of each distinct failure
     (its representative first, then runs spread over its range of scores) and one run with no
     failure (so "nothing happened" is a judged reference too)."""
-    from sitgen.failures import distinct_failures
-
     chosen: list[int] = []
     scores = dict(store.db.execute("SELECT id, score FROM main.runs").fetchall())
     for failure in distinct_failures(store):
