@@ -86,9 +86,9 @@ pub enum Fault {
     LoopIndexNotReset,
     /// SND: readings at exactly the maximum range taken as obstacles.
     MaxRangeAsObstacle,
-    /// Readings under 0.35 m reported as no return.
+    /// Readings under 0.3 m reported as no return.
     MinRangeDropout,
-    /// The tenth waypoint of a route of fourteen or more skipped.
+    /// The tenth waypoint of a route of sixteen or more skipped.
     LongRouteWaypointSkipped,
     /// The heading read through a gyro 1 % off in scale.
     GyroScaleError,
@@ -335,19 +335,19 @@ pub const CATALOGUE: [FaultInfo; 27] = [
         fault: Fault::MinRangeDropout,
         id: "min_range_dropout",
         controllers: &["snd", "snd_follow", "dwa"],
-        changes: "readings under 0.35 m are reported as no return: whatever nearly touches \
+        changes: "readings under 0.3 m are reported as no return: whatever nearly touches \
                   the robot vanishes",
         stands_for: "a driver's too-close status mapped to no return",
-        exposed_by: Some("something within 0.35 m of the laser (a peer or wall nearly touching)"),
+        exposed_by: Some("something within 0.3 m of the laser: 5 cm from a Pioneer's side"),
     },
     FaultInfo {
         fault: Fault::LongRouteWaypointSkipped,
         id: "long_route_waypoint_skipped",
         controllers: ROUTE,
-        changes: "on routes of fourteen or more waypoints the tenth is skipped: the robot cuts \
+        changes: "on routes of sixteen or more waypoints the tenth is skipped: the robot cuts \
                   from the ninth to the eleventh",
         stands_for: "an index incremented twice on one path through the code",
-        exposed_by: Some("a route of fourteen or more waypoints whose tenth matters"),
+        exposed_by: Some("a route of sixteen or more waypoints whose tenth matters"),
     },
     FaultInfo {
         fault: Fault::GyroScaleError,
@@ -460,11 +460,11 @@ const TRACK_TABLE: usize = 3;
 /// enclosing radius and a margin).
 const TRACK_CLUTTER_M: f64 = 0.5;
 /// Readings `min_range_dropout` reports as no return, metres.
-const DROPOUT_M: f64 = 0.35;
+const DROPOUT_M: f64 = 0.3;
 /// `gyro_scale_error`'s scale factor.
 const GYRO_SCALE: f64 = 1.01;
 /// Waypoints a route needs for `long_route_waypoint_skipped` to skip its tenth.
-const LONG_ROUTE: usize = 14;
+const LONG_ROUTE: usize = 16;
 
 /// Observation seam: `controller` behind [`Seeded`] if `fault` changes what it sees, or the
 /// route it is given at reset.

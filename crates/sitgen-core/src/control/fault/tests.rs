@@ -58,7 +58,7 @@ fn situation(map: &Map, robots: Vec<Robot>) -> Situation {
 ///   range `max_range_as_obstacle`);
 /// - a corridor 0.8 m wide the agent starts in (its walls inside R = 0.438 m);
 /// - a post beside the agent's laser, and one ahead of it, within `min_range_dropout`'s
-///   0.35 m;
+///   0.3 m;
 /// - a drive due west (`heading_wrap_near_pi`);
 /// - a 296 m drive that lasts past 524.288 s (`watchdog_overflow`);
 /// - four robots standing in view ahead (`track_dropped_in_crowd`);
@@ -66,7 +66,7 @@ fn situation(map: &Map, robots: Vec<Robot>) -> Situation {
 /// - a wall ahead with an opening on the right and a wall behind that (a range jump of
 ///   1.20 m at the opening's edge: `gap_band_missed`);
 /// - a `loop` route of two waypoints (`loop_index_not_reset`);
-/// - a zigzag route of fourteen waypoints (`long_route_waypoint_skipped`).
+/// - a zigzag route of sixteen waypoints (`long_route_waypoint_skipped`).
 fn situations() -> Vec<(&'static str, Situation, usize)> {
     let room = map(10.0, 6.0, 0.02, |x, y| {
         (5.0..5.2).contains(&x) && (y - 3.0).abs() > 0.4
@@ -165,6 +165,8 @@ fn situations() -> Vec<(&'static str, Situation, usize)> {
                 [16.0, 13.0],
                 [14.0, 14.0],
                 [12.0, 14.0],
+                [10.0, 15.5],
+                [8.0, 15.5],
             ],
         )],
     );
