@@ -24,6 +24,7 @@ lint:
 	$(BIN)/ruff check python tests benches examples
 	$(BIN)/ruff format --check python tests benches examples
 	$(BIN)/mypy
+	cd python && ../$(BIN)/lint-imports --config ../pyproject.toml
 
 rust-test:
 	cargo test -p sitgen-core
@@ -80,7 +81,7 @@ profile:
 bench-scale: install-test
 	$(BIN)/python benches/scale.py
 
-# Environment steps per second of sitgen.gym, one world and vectorised (about 2 minutes).
+# Environment steps per second of sitgen.controllers.gym, one world and vectorised (about 2 minutes).
 bench-gym: install-test
 	$(BIN)/python benches/gym_env.py
 

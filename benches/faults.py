@@ -8,13 +8,12 @@ situations and in runs with every perturbed copy of the kill rule's tests.
 ``random`` is the paper's campaign (its random generation, 0-5 peers, 600 s runs); ``barn``
 (opt-in: ``SITGEN_BENCH_FAULT_STRATEGIES=random,barn``) is the 300 BARN worlds from
 ``../shared/data/barn`` with no peers and the BARN challenge's 100 s limit, shuffled by the seed
-(at most 300 situations, so its 500 column is all 300). Both evaluate ``snd_follow`` against
-every one of its seeded faults and the equivalent mutants with ``sitgen faults``
-(``python/sitgen/faults.py``); one evaluation per seed at the largest budget gives every smaller
-budget, since a fault's runs to first kill does not depend on the budget. Writes
+(at most 300 situations, so its 500 column is all 300). Both evaluate ``snd_follow`` against every
+one of its seeded faults and the equivalent mutants with ``sitgen faults``
+(``python/sitgen/generation/faults.py``); one evaluation per seed at the largest budget gives every
+smaller budget, since a fault's runs to first kill does not depend on the budget. Writes
 ``benches/results/faults.json``. ``SITGEN_BENCH_FAULT_SEEDS`` (default 5) and
-``SITGEN_BENCH_FAULT_BUDGET`` (default 500) shrink it for a quick look.
-"""
+``SITGEN_BENCH_FAULT_BUDGET`` (default 500) shrink it for a quick look."""
 
 from __future__ import annotations
 
@@ -28,7 +27,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from sitgen.faults import (
+from sitgen.execution.jobs import campaign_from_data, parse_campaign
+from sitgen.generation.faults import (
     FaultReport,
     FaultRow,
     is_harder,
@@ -36,8 +36,7 @@ from sitgen.faults import (
     run_faults,
     share_killed_within,
 )
-from sitgen.jobs import campaign_from_data, parse_campaign
-from sitgen.maps import BARN_WORLDS
+from sitgen.world.maps import BARN_WORLDS
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SHARED = Path(

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from sitgen.gym import NavigateEnv, NavigateVectorEnv
+from sitgen.controllers.gym import NavigateEnv, NavigateVectorEnv
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benches" / "results"

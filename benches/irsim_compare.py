@@ -72,7 +72,7 @@ import numpy.typing as npt  # noqa: E402
 from PIL import Image  # noqa: E402
 
 import sitgen  # noqa: E402
-from sitgen.situation import Situation  # noqa: E402
+from sitgen.world.situation import Situation  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 REFERENCE_SCENE = {"terrain": {"preset": "caves"}, "mission": {"peers_min": 5, "peers_max": 5}}

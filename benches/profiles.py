@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sitgen.campaign import run_campaign
-from sitgen.jobs import parse_campaign
+from sitgen.execution.campaign import run_campaign
+from sitgen.execution.jobs import parse_campaign
 from sitgen.store import Store
 
 ROOT = Path(__file__).resolve().parent.parent

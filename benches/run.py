@@ -22,7 +22,7 @@ from typing import Any
 
 import sitgen
 from sitgen import _core
-from sitgen.config import preset_spec
+from sitgen.world.config import preset_spec
 
 RESULTS = Path(__file__).resolve().parent / "results"
 SHARED = Path(

@@ -26,7 +26,7 @@ from typing import Any
 
 import psutil
 
-from sitgen.jobs import paper_campaign_text
+from sitgen.execution.jobs import paper_campaign_text
 
 RESULTS = Path(__file__).resolve().parent / "results"
 

@@ -20,12 +20,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sitgen.campaign import run_campaign
-from sitgen.failures import distinct_failures
-from sitgen.jobs import parse_campaign
+from sitgen.execution.campaign import run_campaign
+from sitgen.execution.jobs import parse_campaign
 from sitgen.run import run
-from sitgen.shrink import shrink_run
 from sitgen.store import Store
+from sitgen.triage.failures import distinct_failures
+from sitgen.triage.shrink import shrink_run
 
 RESULTS = Path(__file__).resolve().parent / "results"
 MEASURES = ("peers", "obstacle_cells", "route_length_m", "time_to_failure_s")

@@ -25,10 +25,10 @@ from pathlib import Path
 
 from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
-from sitgen.coverage import stored, summarise
-from sitgen.faults import FaultReport, kill_rate_at
-from sitgen.jobs import parse_campaign
+from sitgen.execution.jobs import parse_campaign
+from sitgen.generation.faults import FaultReport, kill_rate_at
 from sitgen.store import Store
+from sitgen.triage.coverage import stored, summarise
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benches" / "results"

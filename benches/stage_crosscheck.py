@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
-from sitgen.crosscheck import StageError, StageTool, crosscheck
-from sitgen.situation import generate_situation
+from sitgen.controllers.stage import StageError, StageTool, crosscheck
+from sitgen.world.situation import generate_situation
 
 ROOT = Path(__file__).resolve().parent.parent
 PRESETS = ["caves", "indoor", "maze", "open_field", "rocky_desert", "urban"]

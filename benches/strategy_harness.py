@@ -13,9 +13,9 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from sitgen.faults import FaultReport, report_from, run_faults
-from sitgen.jobs import CampaignSpec
-from sitgen.search import SearchPlan, run_search
+from sitgen.execution.jobs import CampaignSpec
+from sitgen.generation.faults import FaultReport, report_from, run_faults
+from sitgen.generation.search import SearchPlan, run_search
 
 Measure = Callable[[Path, int, FaultReport], dict[str, float]]
 """A strategy's figures for the first ``budget`` runs of its store, given its fault kills."""

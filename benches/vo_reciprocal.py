@@ -32,11 +32,11 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import sitgen
-from sitgen.campaign import run_campaign
-from sitgen.figure import AGENT, MARGIN_PX, PEER, TARGET_PX, draw_situation
-from sitgen.jobs import campaign_from_data
-from sitgen.recall import stored_run
+from sitgen.execution.campaign import run_campaign
+from sitgen.execution.jobs import campaign_from_data
 from sitgen.store import Store
+from sitgen.triage.recall import stored_run
+from sitgen.world.figure import AGENT, MARGIN_PX, PEER, TARGET_PX, draw_situation
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benches" / "results"

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from sitgen.store import Judgement, Store
-from sitgen.weights import SimulatedJudge, Weights, fit, next_pair
+from sitgen.triage.weights import SimulatedJudge, Weights, fit, next_pair
 
 EXPERT = Weights(
     {

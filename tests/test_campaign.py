@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from sitgen.jobs import build_jobs, parse_campaign
+from sitgen.execution.jobs import build_jobs, parse_campaign
 from tests.conftest import ROOT, run_cli, sitgen_command
 
 SMALL = """

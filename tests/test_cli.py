@@ -10,7 +10,7 @@ import yaml
 from PIL import Image
 
 import sitgen
-from sitgen.config import preset_spec
+from sitgen.world.config import preset_spec
 
 from .conftest import ROOT, run_cli
 

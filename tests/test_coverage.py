@@ -19,9 +19,8 @@ import pytest
 
 import sitgen
 from sitgen import _core
-from sitgen.coverage import all_cells, dimensions, split, stored, summarise, total_cells
-from sitgen.jobs import parse_campaign
-from sitgen.search import (
+from sitgen.execution.jobs import parse_campaign
+from sitgen.generation.search import (
     BATCH,
     GUIDE_EPSILON,
     INITIAL,
@@ -32,6 +31,7 @@ from sitgen.search import (
     run_search,
 )
 from sitgen.store import Store
+from sitgen.triage.coverage import all_cells, dimensions, split, stored, summarise, total_cells
 from tests.conftest import ROOT, open_page, run_cli
 from tests.test_campaign import write_spec
 
@@ -263,7 +263,7 @@ def test_the_report_shows_coverage_as_a_heat_grid_with_failures_marked(
 
 
 def test_the_example_campaign_builds_jobs_in_every_terrain_and_peer_mode() -> None:
-    from sitgen.jobs import build_job
+    from sitgen.execution.jobs import build_job
 
     text = (ROOT / "examples" / "campaigns" / "coverage.toml").read_text()
     spec = parse_campaign(text, "examples/campaigns/coverage.toml")

@@ -15,7 +15,7 @@ from xml.etree import ElementTree
 
 import pytest
 
-from sitgen.diff import BOTH, FIXED, NEW, NOT_ROBUST, UNCHANGED, parse_controller
+from sitgen.generation.diff import BOTH, FIXED, NEW, NOT_ROBUST, UNCHANGED, parse_controller
 from tests.conftest import run_cli, sitgen_command
 
 N = "32"

@@ -18,9 +18,16 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from sitgen.failures import BROAD_RUNS, classes, distinct_failures, silhouette, split, ward_parts
-from sitgen.robustness import is_robust
 from sitgen.store import SCHEMA_VERSION, Store
+from sitgen.triage.failures import (
+    BROAD_RUNS,
+    classes,
+    distinct_failures,
+    silhouette,
+    split,
+    ward_parts,
+)
+from sitgen.triage.robustness import is_robust
 
 from .conftest import run_cli
 
@@ -272,7 +279,7 @@ def test_distinct_failures_of_an_empty_store_are_none(tmp_path: Path) -> None:
 def test_snd_turning_to_and_fro_beside_a_wall_is_an_oscillation() -> None:
     """Job 308 of the paper's campaign (seed 1, caves): SND turns left and right on the spot
     beside a wall from its first second, Player's driver faithfully locked up."""
-    from sitgen.jobs import build_job, parse_campaign
+    from sitgen.execution.jobs import build_job, parse_campaign
 
     job = build_job(parse_campaign(None), 1, 308)
     s = sitgen.generate_situation(job.situation, seed=job.seed)

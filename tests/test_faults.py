@@ -16,9 +16,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sitgen import _core
-from sitgen.faults import RUN_STRIDE, fault_slot, faults_of
-from sitgen.jobs import build_job, parse_campaign
-from sitgen.kill import (
+from sitgen.execution.jobs import build_job, parse_campaign
+from sitgen.generation.faults import RUN_STRIDE, fault_slot, faults_of
+from sitgen.triage.kill import (
     ALPHA,
     COPIES,
     KILL_MARGIN_POINTS,
@@ -30,7 +30,7 @@ from sitgen.kill import (
     score_margin,
     verdict,
 )
-from sitgen.kill import screen as kill
+from sitgen.triage.kill import screen as kill
 from tests.conftest import ROOT, run_cli
 from tests.test_campaign import SMALL, start_command, wait_for_runs, write_spec
 
@@ -353,7 +353,7 @@ def test_the_documented_catalogue_is_the_catalogue() -> None:
 
 
 def test_barn_worlds_are_a_strategy_of_their_own(tmp_path: Path, shared_data: Path) -> None:
-    from sitgen.maps import barn_situation
+    from sitgen.world.maps import barn_situation
 
     world = barn_situation(shared_data / "barn", 0)
     assert [r.role for r in world.robots] == ["agent"]

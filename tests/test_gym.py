@@ -15,8 +15,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import sitgen
-import sitgen.gym
-from sitgen.gym import NavigateEnv, NavigateVectorEnv
+import sitgen.controllers.gym
+from sitgen.controllers.gym import NavigateEnv, NavigateVectorEnv
 
 OPEN = {
     "terrain": {"preset": "open_field", "width_m": 25.0, "height_m": 25.0},
@@ -93,7 +93,7 @@ def test_penalties_and_events_reach_the_learner_and_the_time_limit_truncates() -
     score = sum(
         line["points"] for k, line in info["record"]["score"]["breakdown"].items() if k != "timeout"
     )
-    assert -sum(rewards) == pytest.approx(sitgen.gym.PENALTY_WEIGHT * score)
+    assert -sum(rewards) == pytest.approx(sitgen.controllers.gym.PENALTY_WEIGHT * score)
     assert info["score"] == pytest.approx(score)
 
 

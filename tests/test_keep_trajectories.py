@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sitgen.campaign import Keep
-from sitgen.recall import stored_run, whole_run
+from sitgen.execution.campaign import Keep
 from sitgen.store import RunRow, Store, StoreError
+from sitgen.triage.recall import stored_run, whole_run
 from tests.conftest import run_cli
 from tests.test_campaign import SMALL, write_spec
 

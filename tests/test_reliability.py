@@ -29,7 +29,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sitgen
-from sitgen.jobs import build_job, campaign_from_data, parse_campaign
+from sitgen.execution.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
 from tests.conftest import ROOT, Result, sitgen_command
 
@@ -778,7 +778,7 @@ def test_fuzzed_campaign_and_run_specs_parse_or_name_a_field() -> None:
 
 @pytest.fixture
 def judging(small_store: Path, tmp_path: Path) -> Iterator[Any]:
-    from sitgen.judge import JudgingServer
+    from sitgen.presentation.judge import JudgingServer
 
     server = JudgingServer(_copy(small_store, tmp_path / "judged.db"), "tester")
     thread = threading.Thread(target=server.serve_forever, daemon=True)
@@ -855,7 +855,7 @@ def test_run_ids_beyond_64_bits_are_runs_the_store_does_not_hold(
 
 
 def test_gym_environments_refuse_what_would_exhaust_memory_or_poison_rewards() -> None:
-    from sitgen.gym import MAX_ENVS, NavigateEnv, NavigateVectorEnv
+    from sitgen.controllers.gym import MAX_ENVS, NavigateEnv, NavigateVectorEnv
 
     for n in (0, MAX_ENVS + 1, 100_000, 2.5, True):
         with pytest.raises(ValueError, match="num_envs"):
@@ -908,7 +908,7 @@ def test_a_negative_top_is_refused(small_store: Path) -> None:
 def test_a_hung_stage_and_everything_it_started_end_with_the_crosscheck(
     situation: sitgen.Situation, tmp_path: Path
 ) -> None:
-    from sitgen.crosscheck import StageError, StageTool, run_stage
+    from sitgen.controllers.stage import StageError, StageTool, run_stage
 
     pids = tmp_path / "pids"
     fake = tmp_path / "stage"

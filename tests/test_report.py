@@ -14,8 +14,8 @@ from typing import Any
 
 import pytest
 
-from sitgen.failures import distinct_failures
 from sitgen.store import Store
+from sitgen.triage.failures import distinct_failures
 from tests.conftest import ROOT, open_page, run_cli
 from tests.test_campaign import SMALL, write_spec
 

@@ -15,7 +15,9 @@ from typing import Any
 import pytest
 
 from sitgen import _core
-from sitgen.robustness import (
+from sitgen.run import run
+from sitgen.store import Store
+from sitgen.triage.robustness import (
     ROBUST_SHARE,
     is_robust,
     label,
@@ -24,9 +26,7 @@ from sitgen.robustness import (
     tally,
     verdict,
 )
-from sitgen.run import run
-from sitgen.situation import Situation
-from sitgen.store import Store
+from sitgen.world.situation import Situation
 from tests.conftest import run_cli, sitgen_command
 
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from sitgen import _core
-from sitgen.jobs import parse_campaign
-from sitgen.search import (
+from sitgen.execution.jobs import parse_campaign
+from sitgen.generation.search import (
     BATCH,
     INITIAL,
     OPERATORS,

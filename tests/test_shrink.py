@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from sitgen.shrink import ShrinkResult, ddmin, shrink
-from sitgen.situation import Situation
+from sitgen.triage.shrink import ShrinkResult, ddmin, shrink
+from sitgen.world.situation import Situation
 from tests.conftest import run_cli
 from tests.test_campaign import write_spec
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import sitgen
-from sitgen.config import preset_spec
+from sitgen.world.config import preset_spec
 
 
 def _situation() -> sitgen.Situation:

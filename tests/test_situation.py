@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 import sitgen
-from sitgen.config import preset_spec
+from sitgen.world.config import preset_spec
 
 
 def _footprint_points(robot: sitgen.Robot, n: int = 12) -> np.ndarray:
@@ -197,7 +197,7 @@ def test_ros_export_round_trips_through_load_map(tmp_path: Path) -> None:
 
 
 def test_the_figure_is_drawn_in_the_papers_style(tmp_path: Path) -> None:
-    from sitgen.figure import AGENT, PEER, ROUTE, save_situation_figure
+    from sitgen.world.figure import AGENT, PEER, ROUTE, save_situation_figure
 
     s = sitgen.generate_situation(
         {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 2}}

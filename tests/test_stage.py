@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 
 import sitgen
-from sitgen.crosscheck import StageTool, crosscheck, report_text
+from sitgen.controllers.stage import StageTool, crosscheck, report_text
 from tests.conftest import ROOT, run_cli
 
 STAGE_BUILD = ROOT / "target" / "stage" / "prefix" / "bin" / "stage"

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import sitgen
-from sitgen.config import preset_spec
+from sitgen.world.config import preset_spec
 
 
 def _coverage_target(grid: sitgen.Grid) -> tuple[float, float]:

@@ -13,7 +13,7 @@ import zlib
 from typing import Any
 
 from sitgen import _core
-from sitgen.jobs import build_job, parse_campaign
+from sitgen.execution.jobs import build_job, parse_campaign
 from tests.conftest import ROOT
 
 DIGESTS = ROOT / "tests" / "data" / "reference_runs.json"

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from sitgen import _core
-from sitgen.recall import resimulate, stored_run
 from sitgen.store import Judgement, Store
-from sitgen.weights import SimulatedJudge, Weights, fit, load_weights, next_pair
+from sitgen.triage.recall import resimulate, stored_run
+from sitgen.triage.weights import SimulatedJudge, Weights, fit, load_weights, next_pair
 
 from .conftest import run_cli
 
@@ -101,7 +101,7 @@ def test_weights_rescore_as_the_core_scores_and_rank_uses_them(db: Path, tmp_pat
         dict(TRUE.penalties), {"struck_while_stopped_seen": 750.0, "drove_close_to_peer": 40.0}
     )
     path = tmp_path / "weights.toml"
-    from sitgen.weights import weights_toml
+    from sitgen.triage.weights import weights_toml
 
     path.write_text(weights_toml(weights, ["test weights"]))
     table = tomllib.loads(path.read_text())
@@ -235,7 +235,7 @@ def test_fitting_with_no_judgements_says_how_to_get_some(db: Path, tmp_path: Pat
 
 @pytest.fixture()
 def server(db: Path, tmp_path: Path) -> Iterator[Any]:
-    from sitgen.judge import JudgingServer
+    from sitgen.presentation.judge import JudgingServer
 
     copy = tmp_path / "judged.db"
     copy.write_bytes(db.read_bytes())
@@ -287,7 +287,7 @@ def test_a_judgement_without_the_page_token_is_refused(server: Any) -> None:
 
 
 def test_search_scores_its_runs_by_the_weights(tmp_path: Path) -> None:
-    from sitgen.weights import weights_toml
+    from sitgen.triage.weights import weights_toml
 
     weights = Weights(dict(TRUE.penalties), {"route_not_completed": 5.0})
     path = tmp_path / "weights.toml"

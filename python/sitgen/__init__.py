@@ -14,12 +14,12 @@ Public API (see ARCHITECTURE.md for the pipeline):
 """
 
 from sitgen._core import GenerationFailed, SpecError, __version__, perlin
-from sitgen.config import load_spec, preset_names
-from sitgen.maps import load_map, shortest_path
 from sitgen.run import RunRecord, run
-from sitgen.sim import Observation, World
-from sitgen.situation import Pose, Robot, Situation, generate_situation
-from sitgen.terrain import Grid, Stage, generate_terrain
+from sitgen.world.config import load_spec, preset_names
+from sitgen.world.maps import load_map, shortest_path
+from sitgen.world.sim import Observation, World
+from sitgen.world.situation import Pose, Robot, Situation, generate_situation
+from sitgen.world.terrain import Grid, Stage, generate_terrain
 
 __all__ = [
     "GenerationFailed",

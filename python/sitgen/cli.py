@@ -23,14 +23,14 @@ from rich.console import Console
 from rich.table import Table
 
 from sitgen import _core
-from sitgen.config import preset_names, preset_spec, read_utf8
-from sitgen.situation import Situation, generate_situation
 from sitgen.store import StoreError, StoreMissing, require_store
-from sitgen.terrain import Grid, generate_terrain
+from sitgen.world.config import preset_names, preset_spec, read_utf8
+from sitgen.world.situation import Situation, generate_situation
+from sitgen.world.terrain import Grid, generate_terrain
 
 if TYPE_CHECKING:
-    from sitgen.jobs import CampaignSpec
-    from sitgen.weights import Weights
+    from sitgen.execution.jobs import CampaignSpec
+    from sitgen.triage.weights import Weights
 
 T = TypeVar("T")
 
@@ -115,7 +115,7 @@ def _weights(path: Path | None, db: Path | None = None) -> Weights | None:
     if path is None:
         return None
     from sitgen.store import Store
-    from sitgen.weights import JudgementError, check_rescorable, load_weights
+    from sitgen.triage.weights import JudgementError, check_rescorable, load_weights
 
     try:
         weights = load_weights(path)
@@ -236,7 +236,7 @@ def show(
 ) -> None:
     """Draw a situation in the paper's style: map, routes, starts and goals, scale bar; with
     --run, also the paths driven and where the agent's scored events began."""
-    from sitgen.figure import save_situation_figure
+    from sitgen.world.figure import save_situation_figure
 
     output.parent.mkdir(parents=True, exist_ok=True)
     if run_id is None:
@@ -249,7 +249,7 @@ def show(
         if not _is_store(source):
             raise UsageError("--run needs a campaign store (.db), not a situation file")
         require_store(source)
-        from sitgen.recall import stored_run, whole_run
+        from sitgen.triage.recall import stored_run, whole_run
 
         with Store(source) as store:
             row = stored_run(store, run_id)
@@ -278,7 +278,7 @@ def report(
     """Write an HTML triage report of a campaign: distinct failures first, ranked runs, score
     distribution, and for the top runs and each distinct failure's representative a page with
     the figure, failure class, timeline, score breakdown and a replay. Opens from disk."""
-    from sitgen.report import write_report
+    from sitgen.presentation.report import write_report
 
     require_store(db)
     learned = _weights(weights, db)
@@ -309,7 +309,7 @@ def export(
     every robot driven by its sitgen controller, docs/stage.md) or ROS, or a campaign's tables
     for analysis (pandas, polars, DuckDB)."""
     if _is_store(source):
-        from sitgen.rank import export_tables
+        from sitgen.triage.rank import export_tables
 
         require_store(source)
         if format == "stage":
@@ -355,7 +355,7 @@ def serve_controller_command(
     """Answer the controller protocol on stdin/stdout with one robot's built-in controller:
     another simulator (Stage, through integrations/stage) sends observations, sitgen the
     commands (docs/stage.md)."""
-    from sitgen.crosscheck import serve_controller
+    from sitgen.controllers.stage import serve_controller
 
     code = serve_controller(
         Situation.load(situation, allow_edited), _read_run_spec(run_spec), robot
@@ -388,7 +388,7 @@ def crosscheck(
     """Run a situation in sitgen and in the real Stage and compare them: pose divergence per
     robot, first stalls, both event logs from sitgen's monitor, and Stage's scans against
     sitgen's laser from the same poses (docs/stage.md says which differences are design)."""
-    from sitgen.crosscheck import StageError, StageTool, crosscheck, report_text
+    from sitgen.controllers.stage import StageError, StageTool, crosscheck, report_text
     from sitgen.run import run_spec_with
 
     try:
@@ -580,7 +580,7 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
 
 def _campaign_spec(spec: Path | None) -> CampaignSpec:
     """The campaign spec in file ``spec``, or the paper's."""
-    from sitgen.jobs import parse_campaign
+    from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     return parse_campaign(text, str(spec) if spec else "paper campaign")
@@ -594,7 +594,7 @@ def _stored(
 ) -> T:
     """``work(on_progress, stop)`` with a progress bar and Ctrl-C asking it to stop; a store
     it cannot use is bad input."""
-    from sitgen.campaign import StopOnInterrupt
+    from sitgen.execution.campaign import StopOnInterrupt
 
     with _progress(label, total, unit) as on_progress, StopOnInterrupt() as stop:
         try:
@@ -643,7 +643,7 @@ def campaign(
     """Generate N randomised situations, run them all, store them, rank the runs, and measure
     the robustness of each distinct failure. Ctrl-C stops after the runs in flight; the same
     command again resumes."""
-    from sitgen.campaign import DEFAULT_KEEP, run_campaign
+    from sitgen.execution.campaign import DEFAULT_KEEP, run_campaign
 
     _check_reruns(reruns)
     parsed = _campaign_spec(spec)
@@ -684,8 +684,8 @@ def _echo_stored(
 ) -> None:
     """What a campaign or search did and what its store holds: the paper's figures, the top
     runs and the distinct failures; exits 130 if it was stopped early."""
-    from sitgen.failures import summary
     from sitgen.store import Store
+    from sitgen.triage.failures import summary
 
     rate = ran / wall_s if wall_s > 0 else 0.0
     typer.echo(
@@ -725,7 +725,7 @@ def _echo_stored(
 
 def _check_reruns(reruns: int) -> None:
     """``--reruns``: 0 (measure nothing) or a number of copies, checked before any run."""
-    from sitgen.robustness import check_reruns
+    from sitgen.triage.robustness import check_reruns
 
     if reruns != 0:
         check_reruns(reruns)
@@ -734,8 +734,8 @@ def _check_reruns(reruns: int) -> None:
 def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
     """Measure the robustness of the store's distinct failures with ``reruns`` copies each
     (none if 0) and say what it cost."""
-    from sitgen.failures import measure_robustness
     from sitgen.store import Store
+    from sitgen.triage.failures import measure_robustness
 
     if reruns == 0:
         return
@@ -751,7 +751,7 @@ def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
 
 def _shrink_top(db: Path, k: int, workers: int | None) -> None:
     """Shrink the top ``k`` distinct failures' representatives and print what shrank."""
-    from sitgen.shrink import shrink_top
+    from sitgen.triage.shrink import shrink_top
 
     typer.echo(f"shrinking the top {k} distinct failures (sitgen shrink {db} RUN):")
     for run_id, r in shrink_top(db, k, workers):
@@ -809,7 +809,7 @@ def faults(
     """Measure fault-finding power: run the agent's controller and each of its seeded faults
     (docs/faults.md) on the same situations, and report which faults were killed, after how
     many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
-    from sitgen.faults import (
+    from sitgen.generation.faults import (
         fault_status,
         report_from,
         run_faults,
@@ -919,13 +919,13 @@ def search(
     highest-scoring run; or (--strategy coverage) generation steered toward situation coverage.
     Writes a store like a campaign's (rank, failures, report, rerun, shrink, coverage work on
     it). Ctrl-C stops after the runs in flight; the same command resumes."""
-    from sitgen.search import SearchPlan, SearchProgress, SearchResult, run_search
+    from sitgen.generation.search import SearchPlan, SearchProgress, SearchResult, run_search
 
     _check_reruns(reruns)
     parsed = _campaign_spec(spec)
     learned = _weights(weights)
     if learned is not None:
-        from sitgen.jobs import campaign_from_data
+        from sitgen.execution.jobs import campaign_from_data
 
         # The runs are scored by the weights as they run (the objective is their score), and
         # the stored spec says so: a summary's run is rebuilt and re-simulated from it.
@@ -1010,10 +1010,10 @@ def shrink(
     spec and a figure of the original beside it, and print what shrank. With a campaign store
     the result is also kept in the store (its report shows it). --controller, --time-limit,
     --spec and --seed are for a situation file: a stored run keeps its own."""
-    from sitgen.failures import FailureFilterError, check_class
     from sitgen.run import run_spec_with
-    from sitgen.shrink import ShrinkError, save_side_by_side, shrink_run
-    from sitgen.shrink import shrink as shrink_situation
+    from sitgen.triage.failures import FailureFilterError, check_class
+    from sitgen.triage.shrink import ShrinkError, save_side_by_side, shrink_run
+    from sitgen.triage.shrink import shrink as shrink_situation
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
@@ -1113,8 +1113,8 @@ def rank(
     weights: WeightsOption = None,
 ) -> None:
     """The runs of a campaign, most dangerous first."""
-    from sitgen.failures import FailureFilterError
-    from sitgen.rank import ranked_rows, write_ranking
+    from sitgen.triage.failures import FailureFilterError
+    from sitgen.triage.rank import ranked_rows, write_ranking
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, csv, json")
@@ -1153,8 +1153,8 @@ def failures(
 ) -> None:
     """One row per distinct failure of a campaign, the most dangerous (best score) first: its
     class, sentence, runs, share of runs, best score, representative run and median duration."""
-    from sitgen.failures import distinct_failures, write_failures
     from sitgen.store import Store
+    from sitgen.triage.failures import distinct_failures, write_failures
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json, csv")
@@ -1190,8 +1190,8 @@ def coverage_command(
     type × clearance × terrain context × agent speed) its runs exercised, each dimension's
     marginals, pairwise coverage of the dimensions, and which failures began in which cells
     (docs/coverage.md)."""
-    from sitgen.coverage import coverage_report
     from sitgen.store import Store
+    from sitgen.triage.coverage import coverage_report
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
@@ -1246,7 +1246,7 @@ def rerun(
 ) -> None:
     """Regenerate a run's situation from its spec and seed, run it again, and confirm the
     identical situation, event log and score. Exits 1 if anything differs."""
-    from sitgen.rank import rerun as rerun_run
+    from sitgen.triage.rank import rerun as rerun_run
 
     require_store(db)
     check = rerun_run(db, run_id)
@@ -1292,8 +1292,14 @@ def diff_command(
     and judge each difference in failure on perturbed copies of both (docs/failures.md):
     each distinct failure robustly new in B, robustly fixed, unchanged, or not robust either
     way. Exits 1 when B has robust new failures. Ctrl-C stops; the same command resumes."""
-    from sitgen.diff import DiffPlan, diff_report, parse_controller, run_diff, summary_lines
-    from sitgen.diff import write_junit as write_diff_junit
+    from sitgen.generation.diff import (
+        DiffPlan,
+        diff_report,
+        parse_controller,
+        run_diff,
+        summary_lines,
+    )
+    from sitgen.generation.diff import write_junit as write_diff_junit
     from sitgen.store import Store
 
     if format not in ("table", "json"):
@@ -1366,9 +1372,9 @@ def robustness(
     the LMS200's level, starts jittered by a centimetre and half a degree) and say in how
     many copies each one's failure class recurs: robust or knife-edge (docs/failures.md).
     Stored; `failures`, `rank` and `report` show it."""
-    from sitgen.failures import distinct_failures, measure_robustness
-    from sitgen.robustness import check_reruns, measure_runs, tally, verdict
     from sitgen.store import Store
+    from sitgen.triage.failures import distinct_failures, measure_robustness
+    from sitgen.triage.robustness import check_reruns, measure_runs, tally, verdict
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")
@@ -1414,10 +1420,10 @@ def demo(
     """The main job on built-in defaults: one situation of every preset (map PNG + ROS YAML,
     situation JSON, figure), then the paper's campaign (500 runs, seed 1: --n) into
     OUTPUT/paper.db, its HTML report in OUTPUT/report/, and its distinct failures."""
-    from sitgen.campaign import StopOnInterrupt, run_campaign
-    from sitgen.figure import save_situation_figure
-    from sitgen.jobs import parse_campaign
-    from sitgen.report import write_report
+    from sitgen.execution.campaign import StopOnInterrupt, run_campaign
+    from sitgen.execution.jobs import parse_campaign
+    from sitgen.presentation.report import write_report
+    from sitgen.world.figure import save_situation_figure
 
     output.mkdir(parents=True, exist_ok=True)
     table = Table(title=f"sitgen presets, seed {seed}")
@@ -1516,7 +1522,7 @@ def judge(
     import getpass
     import webbrowser
 
-    from sitgen.judge import JudgingServer
+    from sitgen.presentation.judge import JudgingServer
     from sitgen.store import Store
 
     require_store(db)
@@ -1561,7 +1567,7 @@ def judgements_import(
     import dataclasses
 
     from sitgen.store import Store
-    from sitgen.weights import JudgementError, read_judgements
+    from sitgen.triage.weights import JudgementError, read_judgements
 
     require_store(db)
     with Store(db) as store:
@@ -1585,7 +1591,7 @@ def judgements_export(
 ) -> None:
     """Write the store's judgements as JSON (with who made each and when)."""
     from sitgen.store import Store
-    from sitgen.weights import write_judgements
+    from sitgen.triage.weights import write_judgements
 
     require_store(db)
     with Store(db) as store:
@@ -1616,7 +1622,7 @@ def weights_fit(
     scores. The file is a scoring table: `--weights` for rank, report, failures and search,
     or paste it under a run spec's [scoring]."""
     from sitgen.store import Store
-    from sitgen.weights import JudgementError, fit, read_judgements, weights_toml
+    from sitgen.triage.weights import JudgementError, fit, read_judgements, weights_toml
 
     require_store(db)
     with Store(db) as store:

@@ -19,14 +19,14 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.config import spec_json
-from sitgen.controllers import (
+from sitgen.controllers.external import (
     STEP_TIMEOUT_S,
     ControllerError,
     is_user_controller,
     load_controller,
 )
-from sitgen.situation import Situation
+from sitgen.world.config import spec_json
+from sitgen.world.situation import Situation
 
 
 @dataclass(frozen=True)

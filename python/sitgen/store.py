@@ -22,6 +22,8 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from sitgen import _core
+
 SCHEMA_VERSION = 9
 
 SCHEMA = """
@@ -227,7 +229,7 @@ WORSE = ("a", "b", "equal")
 @dataclass(frozen=True)
 class Judgement:
     """One pairwise judgement: which of runs ``a`` and ``b`` is more dangerous (the store's
-    ``judgements`` rows; :mod:`sitgen.weights` fits penalties to them)."""
+    ``judgements`` rows; :mod:`sitgen.triage.weights` fits penalties to them)."""
 
     a: int
     b: int
@@ -241,7 +243,7 @@ class Judgement:
 
 
 class Scoring(Protocol):
-    """What rescoring a store needs of a scoring table (:class:`sitgen.weights.Weights`)."""
+    """What rescoring a store needs of a scoring table (:class:`sitgen.triage.weights.Weights`)."""
 
     def score(self, stored: Mapping[str, Any], failure_class: str | None) -> float: ...
 
@@ -291,7 +293,7 @@ class RunRow:
     keep: bool = True
     """Store the run whole (its situation, specs, event log and trajectory), or only its
     summary (a campaign's run: its specs follow from the campaign, and the rest comes back by
-    re-simulation, :mod:`sitgen.recall`)."""
+    re-simulation, :mod:`sitgen.triage.recall`)."""
 
 
 KINDS = {
@@ -420,8 +422,6 @@ class Store:
     def _upgrade(self, version: int) -> None:
         """Bring a store written by an older sitgen up to this schema in one transaction:
         columns are added, never dropped, so nothing stored is lost."""
-        from sitgen import _core
-
         with self.db:
             if version < 2:
                 # Version 2 adds each run's failure class, classified from its stored log (logs
@@ -1026,7 +1026,7 @@ class Store:
     def run_row(self, run_id: int) -> dict[str, Any]:
         """Run ``run_id`` as stored: its situation (None if it was never generated, or the
         run is kept as a summary: see ``kept``), specs (None for a summary: its job builds
-        them again, :func:`sitgen.recall.stored_run`), seeds and event log ('' for a summary;
+        them again, :func:`sitgen.triage.recall.stored_run`), seeds and event log ('' for a summary;
         ``events_sha256`` is its digest)."""
         if not is_run_id(run_id):
             raise StoreError(f"{self.path}: no run {run_id} (a run id is 0 to 2^63 - 1)")

@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 from PIL import Image, ImageDraw, ImageFont
 
-from sitgen.situation import Situation
+from sitgen.world.situation import Situation
 
 TARGET_PX = 900
 """Length of the longer side of the figure's map area, pixels (before the margin)."""

@@ -1,17 +1,16 @@
 """Campaigns: N randomised situations generated, run, stored and ranked (the paper's §4.2).
 
-What a campaign runs is its spec's jobs (:mod:`sitgen.jobs`: job ``i`` is a pure function of
-the spec, the seed and ``i``); this module runs them and stores the results.
+What a campaign runs is its spec's jobs (:mod:`sitgen.execution.jobs`: job ``i`` is a pure function
+of the spec, the seed and ``i``); this module runs them and stores the results.
 
-Built-in controllers run in Rust across threads (the GIL released); Python and external
-controllers run in a process pool; ``backend="ray"`` sends the same batches to a Ray cluster.
-Every job the spec can make and every controller it can name is checked before any run
-(:func:`sitgen.jobs.check_campaign`). Jobs are then built as they are needed, a few per worker
-ahead, so a campaign of any size holds only the runs in flight; a later job whose draws make a
-bad spec is stored as that run's ``error``. A worker process that dies takes no campaign down:
+Built-in controllers run in Rust across threads (the GIL released); Python and external controllers
+run in a process pool; ``backend="ray"`` sends the same batches to a Ray cluster. Every job the
+spec can make and every controller it can name is checked before any run
+(:func:`sitgen.execution.jobs.check_campaign`). Jobs are then built as they are needed, a few per
+worker ahead, so a campaign of any size holds only the runs in flight; a later job whose draws make
+a bad spec is stored as that run's ``error``. A worker process that dies takes no campaign down:
 its runs are retried one at a time, and a run that kills its worker again is stored as an
-``error``.
-"""
+``error``."""
 
 from __future__ import annotations
 
@@ -32,8 +31,8 @@ from typing import Any
 
 from sitgen import _core
 from sitgen import _core as core
-from sitgen.controller_host import die_with_parent
-from sitgen.jobs import (
+from sitgen.controllers.host import die_with_parent
+from sitgen.execution.jobs import (
     MAX_RUNS,
     CampaignSpec,
     Job,
@@ -43,8 +42,8 @@ from sitgen.jobs import (
     stream_jobs,
 )
 from sitgen.run import run
-from sitgen.situation import Situation, generate_situation
 from sitgen.store import RunRow, Store
+from sitgen.world.situation import Situation, generate_situation
 
 PACK_ALL = (-math.inf, False)
 """The pack rule that packs every run's trajectory (see ``_core.run_jobs``)."""
@@ -58,7 +57,7 @@ class Keep:
     ``--keep-trajectories`` says: ``all``, ``failures`` (runs with a failure class),
     ``top:K`` (the K highest-scoring so far; a run pushed out is reduced to its summary) or
     ``none``. The rest keep their summary and are re-simulated on demand
-    (:mod:`sitgen.recall`). A run that could not be run is always kept whole."""
+    (:mod:`sitgen.triage.recall`). A run that could not be run is always kept whole."""
 
     def __init__(self, text: str) -> None:
         mode, _, count = text.partition(":")

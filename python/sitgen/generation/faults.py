@@ -3,15 +3,15 @@ within a budget (the paper's §6, after Nguyen et al.: the proportion of known f
 rather than run scores or fitness).
 
 An evaluation takes a campaign spec whose agent has one built-in controller and a list of that
-controller's seeded faults (``docs/faults.md``). Situation ``i`` is the campaign's job ``i``
-(same spec, same seed, so the same situation and run seed a campaign would give it); on it the
-correct controller runs, and so does every fault not yet killed, and every equivalent mutant
-(:data:`sitgen.kill.MUTANTS`) not yet killed. A fault is *killed* at the first situation where
-its run passes :func:`sitgen.kill.screen` and its perturbed copies then show the failure
-significantly more often than the correct controller's (:mod:`sitgen.kill`). The budget is the
-number of situations; a fault's *runs to first kill* is the number of situations it took
-(1-based), ``runs_with_reruns`` the runs with every perturbed copy counted, and the kill rate at
-budget ``b`` is the share of faults killed within ``b``.
+controller's seeded faults (``docs/faults.md``). Situation ``i`` is the campaign's job ``i`` (same
+spec, same seed, so the same situation and run seed a campaign would give it); on it the correct
+controller runs, and so does every fault not yet killed, and every equivalent mutant
+(:data:`sitgen.triage.kill.MUTANTS`) not yet killed. A fault is *killed* at the first situation
+where its run passes :func:`sitgen.triage.kill.screen` and its perturbed copies then show the
+failure significantly more often than the correct controller's (:mod:`sitgen.triage.kill`). The
+budget is the number of situations; a fault's *runs to first kill* is the number of situations it
+took (1-based), ``runs_with_reruns`` the runs with every perturbed copy counted, and the kill rate
+at budget ``b`` is the share of faults killed within ``b``.
 
 Situations go in chunks of :data:`CHUNK`: a fault killed in one chunk is not run in the next.
 Chunks do not depend on the worker count, so neither does anything stored; each chunk's runs
@@ -36,8 +36,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
-from sitgen.campaign import Executor, _row, started_at
-from sitgen.jobs import (
+from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.jobs import (
     CampaignSpec,
     Job,
     check_campaign,
@@ -46,7 +46,8 @@ from sitgen.jobs import (
     job_seed,
     stream_jobs,
 )
-from sitgen.kill import (
+from sitgen.store import KINDS, Store, StoreError
+from sitgen.triage.kill import (
     ALPHA,
     COPIES,
     KILL_MARGIN_POINTS,
@@ -63,10 +64,9 @@ from sitgen.kill import (
     screen,
     verdict,
 )
-from sitgen.maps import BARN_WORLDS, BarnWorlds
-from sitgen.recall import stored_run
-from sitgen.robustness import perturbed
-from sitgen.store import KINDS, Store, StoreError
+from sitgen.triage.recall import stored_run
+from sitgen.triage.robustness import perturbed
+from sitgen.world.maps import BARN_WORLDS, BarnWorlds
 
 POSSIBLY_EQUIVALENT_AFTER = 200
 """A fault still alive after this many situations is reported as possibly equivalent."""
@@ -113,7 +113,7 @@ def faults_of(controller: str) -> list[str]:
     return [f["id"] for f in catalogue() if controller in f["controllers"]]
 
 
-# The kill rule (sitgen.kill) on stored runs.
+# The kill rule (sitgen.triage.kill) on stored runs.
 
 
 def outcome_of(store: Store, run_id: int) -> Outcome | None:
@@ -142,7 +142,7 @@ class FaultPlan:
     situations: str | None = None
     """The store the situations come from (strategy ``stored``)."""
     mutants: tuple[str, ...] = ()
-    """Ids of the equivalent mutants run beside the faults (:data:`sitgen.kill.MUTANTS`)."""
+    """Ids of the equivalent mutants run beside the faults (:data:`sitgen.triage.kill.MUTANTS`)."""
 
     @property
     def arms(self) -> tuple[str, ...]:

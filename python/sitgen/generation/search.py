@@ -48,9 +48,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.campaign import Executor, _row, started_at
-from sitgen.failures import classes as failure_classes
-from sitgen.jobs import (
+from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.jobs import (
     CampaignSpec,
     Job,
     campaign_from_data,
@@ -63,6 +62,7 @@ from sitgen.jobs import (
     vary_order,
 )
 from sitgen.store import KINDS, Store, StoreError, unpack_json
+from sitgen.triage.failures import classes as failure_classes
 
 if TYPE_CHECKING:
     from ribs.archives import GridArchive

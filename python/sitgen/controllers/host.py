@@ -4,7 +4,7 @@ A Python controller runs in a child process of its own, spoken to over the JSON-
 controller protocol (docs/controller-protocol.md) exactly like a ``cmd:`` program, so that
 whatever it does — loop forever, call ``sys.exit``, ``os._exit``, crash the interpreter,
 exhaust memory — ends only its own run, with the same per-step timeout as a program and
-nothing left behind. ``python -c "from sitgen.controller_host import main; main()" MODULE:CLASS``.
+nothing left behind. ``python -c "from sitgen.controllers.host import main; main()" MODULE:CLASS``.
 
 Failures the host can see (the class does not load, ``reset`` or ``act`` raises, ``act``
 returns something that is not a pair of numbers, ``sys.exit`` is called) are answered with
@@ -24,7 +24,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from sitgen.sim import Observation
+from sitgen.world.sim import Observation
 
 MAX_LINE_BYTES = 1 << 20
 """Longest line of the controller protocol either side reads (a message is a few kilobytes:

@@ -13,7 +13,7 @@ Job ``i`` of a campaign with seed ``S`` draws its values from its own stream (nu
 seeded with (S, i)) and uses situation seed = run seed = 63 bits of sha256("S:i"): every job
 is a pure function of (spec, S, i), so the results do not depend on the worker count, the
 backend, the order of completion or on interruptions; a run kept as a summary is made whole
-again from its job (:mod:`sitgen.recall`).
+again from its job (:mod:`sitgen.triage.recall`).
 
 Before any run, the first :data:`CHECKED_JOBS` jobs are built and checked and every controller
 the spec can name is checked (a built-in name, a ``cmd:`` program that exists, a ``python:``
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.config import load_spec, spec_json
-from sitgen.controllers import ControllerError, check_controller_name
+from sitgen.controllers.external import ControllerError, check_controller_name
+from sitgen.world.config import load_spec, spec_json
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
 SECTIONS = ("n", "situation", "run", "vary")
@@ -188,7 +188,7 @@ class Job:
     """Why the job could not be built (its draws made a bad spec); it is stored, not run."""
     run_seed: int | None = None
     """The run's sensor-noise seed, where it is not the situation's seed (a stored run's
-    perturbed copies, :mod:`sitgen.robustness`)."""
+    perturbed copies, :mod:`sitgen.triage.robustness`)."""
 
     @property
     def noise_seed(self) -> int:

@@ -3,7 +3,7 @@ which one an expert finds more dangerous (``sitgen judge campaign.db``).
 
 Each run shows as its report page without rank, score or breakdown (so a run is judged by what
 happened, not by what it scored): failure class, replay, event timeline, situation figure and
-event log. The pair is the most informative one left (:func:`sitgen.weights.next_pair`);
+event log. The pair is the most informative one left (:func:`sitgen.triage.weights.next_pair`);
 a judgement goes into the store's ``judgements`` table with who made it and when, and the next
 pair is chosen with it. Run pages are rendered on first request into a temporary folder (a
 run kept as a summary is re-simulated then).
@@ -32,9 +32,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from sitgen.report import run_page
+from sitgen.presentation.report import run_page
 from sitgen.store import WORSE, Judgement, Store
-from sitgen.weights import next_pair
+from sitgen.triage.weights import next_pair
 
 MAX_BODY_BYTES = 16 << 10
 """Largest judgement form read (one is under 200 bytes)."""

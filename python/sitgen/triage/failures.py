@@ -21,9 +21,9 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
-from sitgen.robustness import CANDIDATES, RERUNS, check_reruns, is_robust, measure_runs
-from sitgen.rows import write_rows
 from sitgen.store import Store, main_events
+from sitgen.triage.robustness import CANDIDATES, RERUNS, check_reruns, is_robust, measure_runs
+from sitgen.triage.rows import write_rows
 
 BROAD_RUNS = 20
 """A class with at least this many runs is split where its runs fall into clear groups."""

@@ -45,15 +45,15 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from sitgen import _core
-from sitgen.config import spec_json
-from sitgen.controllers import is_user_controller
-from sitgen.failures import distinct_failures
-from sitgen.figure import draw_situation
-from sitgen.jobs import check_workers
-from sitgen.recall import stored_run, whole_run
+from sitgen.controllers.external import is_user_controller
+from sitgen.execution.jobs import check_workers
 from sitgen.run import run
-from sitgen.situation import Situation
 from sitgen.store import Store
+from sitgen.triage.failures import distinct_failures
+from sitgen.triage.recall import stored_run, whole_run
+from sitgen.world.config import spec_json
+from sitgen.world.figure import draw_situation
+from sitgen.world.situation import Situation
 
 MAX_PROBES = 500
 """Probes (runs) one shrink may make by default; shrinking stops where the budget ends, with

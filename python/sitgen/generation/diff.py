@@ -2,13 +2,13 @@
 and controller B, each difference in failure judged on perturbed copies.
 
 Situation ``i`` is a campaign's job ``i`` (``strategy = random``: its spec and seed) or the
-``i``-th run of a stored campaign or search (``stored``: its situation, run spec and seed). On
-it A and B run unperturbed. Where both fail with the same class, or neither fails, the
-situation is *unchanged*. Where they differ, each class C that either shows is judged on the
-same :data:`sitgen.kill.COPIES` perturbed copies of both (:mod:`sitgen.robustness`): C is
-*robustly new in B* on that situation when B's copies fail with C significantly more often
-than A's (the kill rule's one-sided Fisher exact test, at its level, stopped early the same
-way), *robustly fixed in B* when A's do, and *not robust either way* otherwise.
+``i``-th run of a stored campaign or search (``stored``: its situation, run spec and seed). On it A
+and B run unperturbed. Where both fail with the same class, or neither fails, the situation is
+*unchanged*. Where they differ, each class C that either shows is judged on the same
+:data:`sitgen.triage.kill.COPIES` perturbed copies of both (:mod:`sitgen.triage.robustness`): C is
+*robustly new in B* on that situation when B's copies fail with C significantly more often than A's
+(the kill rule's one-sided Fisher exact test, at its level, stopped early the same way), *robustly
+fixed in B* when A's do, and *not robust either way* otherwise.
 
 A distinct failure here is a base failure class. Its verdict sums its situations: new in B
 where it is robustly new somewhere and fixed nowhere, fixed where the reverse, ``new and
@@ -32,12 +32,12 @@ from typing import Any, TextIO
 from xml.etree import ElementTree
 
 from sitgen import _core
-from sitgen.campaign import Executor, _row, started_at
-from sitgen.faults import Situations, outcome_of
-from sitgen.jobs import CampaignSpec, Job, check_campaign
-from sitgen.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_result, verdict
-from sitgen.robustness import perturbed
+from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
+from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
+from sitgen.triage.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_result, verdict
+from sitgen.triage.robustness import perturbed
 
 CHUNK = 16
 """Situations run between two rounds of perturbed copies."""
@@ -439,7 +439,7 @@ def write_junit(report: DiffReport, out: TextIO) -> None:
     )
     for c in report.classes:
         case = ElementTree.SubElement(
-            suite, "testcase", classname="sitgen.diff", name=c.failure_class
+            suite, "testcase", classname="sitgen.generation.diff", name=c.failure_class
         )
         if c.new:
             failure = ElementTree.SubElement(

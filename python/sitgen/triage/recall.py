@@ -20,10 +20,10 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.jobs import build_job, campaign_from_data
+from sitgen.execution.jobs import build_job, campaign_from_data
 from sitgen.run import RunRecord, run
-from sitgen.situation import Situation, generate_situation
 from sitgen.store import Store, StoreError, events_digest
+from sitgen.world.situation import Situation, generate_situation
 
 
 @dataclass(frozen=True)

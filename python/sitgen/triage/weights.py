@@ -37,9 +37,9 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.config import read_utf8
-from sitgen.failures import distinct_failures
 from sitgen.store import WORSE, Judgement, Store
+from sitgen.triage.failures import distinct_failures
+from sitgen.world.config import read_utf8
 
 RIDGE = 1.0
 """L2 penalty on the scaled weights: keeps a weight no judgement constrains at zero."""

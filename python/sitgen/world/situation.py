@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
-from sitgen.config import SpecLike, read_utf8, spec_json, spec_source
-from sitgen.terrain import Grid
+from sitgen.world.config import SpecLike, read_utf8, spec_json, spec_source
+from sitgen.world.terrain import Grid
 
 
 @dataclass(frozen=True)

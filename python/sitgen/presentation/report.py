@@ -25,19 +25,25 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.coverage import RunCoverage, dimensions, stored, summarise
-from sitgen.diff import NEW, DiffReport, Pair, controller_label, diff_report
-from sitgen.diff import summary_lines as diff_summary_lines
-from sitgen.failures import DistinctFailure, classes, distinct_failures
-from sitgen.faults import FaultReport, evaluation, fault_report, fault_status, summary_lines
-from sitgen.figure import EVENT_COLOURS, save_situation_figure
-from sitgen.recall import stored_run, whole_run
-from sitgen.robustness import tally, verdict
+from sitgen.generation.diff import NEW, DiffReport, Pair, controller_label, diff_report
+from sitgen.generation.diff import summary_lines as diff_summary_lines
+from sitgen.generation.faults import (
+    FaultReport,
+    evaluation,
+    fault_report,
+    fault_status,
+    summary_lines,
+)
+from sitgen.generation.search import SearchReplay, elite_grid, replay
 from sitgen.run import run
-from sitgen.search import SearchReplay, elite_grid, replay
-from sitgen.situation import Situation
 from sitgen.store import KINDS, Store, main_events
-from sitgen.weights import Weights
+from sitgen.triage.coverage import RunCoverage, dimensions, stored, summarise
+from sitgen.triage.failures import DistinctFailure, classes, distinct_failures
+from sitgen.triage.recall import stored_run, whole_run
+from sitgen.triage.robustness import tally, verdict
+from sitgen.triage.weights import Weights
+from sitgen.world.figure import EVENT_COLOURS, save_situation_figure
+from sitgen.world.situation import Situation
 
 STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; color: #222; max-width: 1200px; }

@@ -9,13 +9,13 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from sitgen import _core
-from sitgen.failures import check_class, distinct_failures
-from sitgen.recall import regenerate, stored_run
-from sitgen.robustness import verdict
-from sitgen.rows import write_rows
 from sitgen.run import run
 from sitgen.store import Store, events_digest
-from sitgen.weights import Weights
+from sitgen.triage.failures import check_class, distinct_failures
+from sitgen.triage.recall import regenerate, stored_run
+from sitgen.triage.robustness import verdict
+from sitgen.triage.rows import write_rows
+from sitgen.triage.weights import Weights
 
 RANK_COLUMNS = (
     "rank",

@@ -4,7 +4,7 @@ robustly.
 A run is chaotic: a controller nudged by a rounding error can fail with another class on a few
 situations of a hundred, so one faulty run failing where the correct one did not proves
 nothing. A situation kills a fault only when, over the same perturbed copies of the situation
-(:mod:`sitgen.robustness`: laser noise and jittered starts), the faulty controller shows the
+(:mod:`sitgen.triage.robustness`: laser noise and jittered starts), the faulty controller shows the
 failure significantly more often than the correct one:
 
 1. **Screen.** The unperturbed pair must differ as :func:`screen` says: the faulty run fails

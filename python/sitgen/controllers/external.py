@@ -4,7 +4,7 @@ Both plug in as the agent's controller, named like the built-in ones:
 
 - ``python:module:Class`` (``module`` importable from the current directory or a path to a
   ``.py`` file): an object with ``reset(info)`` and ``act(obs) -> (v, omega)``, run in a
-  process of its own (:mod:`sitgen.controller_host`);
+  process of its own (:mod:`sitgen.controllers.host`);
 - ``cmd:program args…``: a program started without a shell, spoken to in lockstep, one JSON
   object per line each way (docs/controller-protocol.md).
 
@@ -33,8 +33,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from sitgen.controller_host import MAX_LINE_BYTES, BadReply, command, exception_line
-from sitgen.sim import Observation
+from sitgen.controllers.host import MAX_LINE_BYTES, BadReply, command, exception_line
+from sitgen.world.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
 """Default wall-clock time a program has to answer one observation."""
@@ -453,7 +453,7 @@ def load_controller(name: str | Any, step_timeout_s: float = STEP_TIMEOUT_S) -> 
     if name.startswith("python:"):
         # Not `-m`: the package imports the host module, and runpy would warn that it ran a
         # module already imported.
-        start = "from sitgen.controller_host import main; main()"
+        start = "from sitgen.controllers.host import main; main()"
         host = [sys.executable, "-c", start, name.removeprefix("python:")]
         return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
     if name.startswith("cmd:"):

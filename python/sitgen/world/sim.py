@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.situation import Situation
+from sitgen.world.situation import Situation
 
 
 @dataclass(frozen=True)

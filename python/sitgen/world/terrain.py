@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.config import SpecLike, spec_source
+from sitgen.world.config import SpecLike, spec_source
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.situation import Situation
-from sitgen.terrain import Grid
+from sitgen.world.situation import Situation
+from sitgen.world.terrain import Grid
 
 BARN_RESOLUTION_M = 0.15
 """BARN's cell size (Perille et al., 2020)."""

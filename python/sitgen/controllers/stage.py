@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
-from sitgen.config import spec_json
-from sitgen.controller_host import MAX_LINE_BYTES
-from sitgen.situation import Situation
+from sitgen.controllers.host import MAX_LINE_BYTES
+from sitgen.world.config import spec_json
+from sitgen.world.situation import Situation
 
 #: Where ``integrations/stage/build.sh`` builds Stage and the plugin, from the repository root.
 DEFAULT_BUILD = Path("target") / "stage"
@@ -150,7 +150,7 @@ def serve_controller(situation: Situation, run_spec: Mapping[str, Any], robot: i
     """Answer controller-protocol messages on stdin with robot ``robot``'s built-in controller,
     one reply line per message on stdout, until ``end`` or the end of input. A bad message
     (not the protocol, an observation before ``reset``, a line over
-    :data:`~sitgen.controller_host.MAX_LINE_BYTES`) gets ``{"error": …}`` and ends the loop.
+    :data:`~sitgen.controllers.host.MAX_LINE_BYTES`) gets ``{"error": …}`` and ends the loop.
     Returns the exit code: 0 after ``end`` or the end of input, 1 after a bad message."""
     served = _core.ServedController(situation.to_json(), spec_json(dict(run_spec), "run"), robot)
     out = sys.stdout

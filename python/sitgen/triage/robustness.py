@@ -21,10 +21,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from sitgen import _core
-from sitgen.campaign import Executor
-from sitgen.jobs import Job, check_workers
-from sitgen.recall import stored_run
+from sitgen.execution.campaign import Executor
+from sitgen.execution.jobs import Job, check_workers
 from sitgen.store import Store, StoreError
+from sitgen.triage.recall import stored_run
 
 RERUNS = 8
 """Perturbed copies of a run, by default: enough to tell 8/8 from 4/8, few enough that the
