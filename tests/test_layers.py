@@ -74,7 +74,11 @@ def test_no_python_module_imports_itself_round_a_cycle() -> None:
             if target is None or target == name:
                 continue
             edges.setdefault(name, set()).add(target)
-            if node.col_offset > 0 and id(node) not in guarded and name != "sitgen.cli":
+            if (
+                node.col_offset > 0
+                and id(node) not in guarded
+                and not name.startswith("sitgen.cli")
+            ):
                 lazy.append(f"{name}:{node.lineno} imports {target}")
     assert _cycles(edges) == []
     # The CLI imports each command's modules when the command runs, to start fast.

@@ -1,0 +1,5 @@
+"""``python -m sitgen.cli``: the ``sitgen`` command."""
+
+from sitgen.cli import main
+
+main()

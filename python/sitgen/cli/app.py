@@ -1,0 +1,269 @@
+"""The ``sitgen`` command's frame: the typer app, the options every command group shares,
+reading specs and stores, progress, and :func:`main`, which turns expected errors into one
+line and an exit code: ``error: …`` naming the field or file, exit 2 (bad input) or 1
+(generation or I/O failed); never a traceback."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import sqlite3
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, Protocol, TypeVar
+
+import typer
+
+from sitgen import _core
+from sitgen.store import StoreError, StoreMissing, require_store
+from sitgen.world.config import read_utf8
+
+if TYPE_CHECKING:
+    from sitgen.triage.weights import Weights
+
+
+T = TypeVar("T")
+
+
+app = typer.Typer(
+    name="sitgen",
+    help="Procedurally generated situations for testing robot navigation software.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+EXIT_BAD_INPUT = 2
+
+
+EXIT_FAILED = 1
+
+
+DEFAULT_PRESET = "rocky_desert"
+
+
+"""The preset used when a command gets neither a spec nor --preset."""
+
+
+SeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**64 - 1, help="Master seed.")]
+
+
+CampaignSeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, max=2**63 - 1)]
+
+
+WorkersOption = Annotated[
+    int | None, typer.Option("--workers", "-w", min=1, help="Parallel runs (default: cores).")
+]
+
+
+BackendOption = Annotated[str, typer.Option("--backend", help="local or ray.")]
+
+
+RerunsOption = Annotated[
+    int,
+    typer.Option(
+        "--reruns",
+        help="Perturbed copies of each distinct failure's representative run at the end, to "
+        "tell robust failures from knife-edge ones (docs/failures.md); 0: none.",
+    ),
+]
+
+
+AddressOption = Annotated[
+    str | None, typer.Option("--address", help="Ray cluster address (with --backend ray).")
+]
+
+
+ControllerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--controller",
+        "-c",
+        help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS or "
+        "'cmd:PROGRAM ARGS'. Default: the situation's.",
+    ),
+]
+
+
+TimeLimitOption = Annotated[
+    float | None,
+    typer.Option("--time-limit", help="Simulated seconds before a timeout (default 600)."),
+]
+
+
+SensorSeedOption = Annotated[int, typer.Option("--seed", "-s", min=0, help="Sensor-noise seed.")]
+
+
+RunSpecOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--spec",
+        help="Run spec (TOML, or JSON as sitgen shrink writes): time_limit_s and the sim, "
+        "monitor and scoring tables.",
+    ),
+]
+
+
+AllowEditedOption = Annotated[
+    bool,
+    typer.Option(
+        "--allow-edited",
+        help="Read a situation file edited by hand after it was generated (its content hash "
+        "no longer matches).",
+    ),
+]
+
+
+class UsageError(Exception):
+    """Bad command-line input that is not a spec field (exit 2)."""
+
+
+WeightsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--weights",
+        help="Learned weights (TOML, from `sitgen weights fit`): score runs by them.",
+    ),
+]
+
+
+def _weights(path: Path | None, db: Path | None = None) -> Weights | None:
+    """The weights file ``path`` (None if not given), checked; with ``db``, checked to rescore
+    its stored runs."""
+    if path is None:
+        return None
+    from sitgen.store import Store
+    from sitgen.triage.weights import JudgementError, check_rescorable, load_weights
+
+    try:
+        weights = load_weights(path)
+        if db is not None:
+            require_store(db)
+            with Store(db) as store:
+                check_rescorable(store, weights, str(path))
+    except JudgementError as e:
+        raise UsageError(str(e)) from None
+    return weights
+
+
+@contextlib.contextmanager
+def _writing(output: Path, what: str) -> Iterator[None]:
+    """Name ``output`` in an error that names no file (a full disk fails a write, not an open,
+    and Python's error then says only "File too large")."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is not None or str(output) in str(e):
+            raise
+        raise OSError(f"{output}: cannot write {what}: {e.strerror or e}") from None
+
+
+def _is_store(path: Path) -> bool:
+    """Whether ``path`` is an SQLite file (a campaign store) rather than a situation."""
+    if path.suffix == ".db":
+        return True
+    try:
+        with path.open("rb") as f:
+            return f.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
+
+
+def _read_text(path: Path, what: str) -> str:
+    """A spec file's text, or a one-line error naming the file."""
+    try:
+        return read_utf8(path, what)
+    except OSError as e:
+        raise UsageError(f"{path}: cannot read the {what}: {e.strerror}") from None
+
+
+def _read_run_spec(path: Path | None) -> dict[str, Any]:
+    """A run spec file: TOML, or JSON (``.json``, as ``sitgen shrink`` writes beside a shrunk
+    situation)."""
+    if path is None:
+        return {}
+    import tomllib
+
+    text = _read_text(path, "run spec")
+    if path.suffix == ".json":
+        try:
+            spec = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise _core.SpecError(f"{path}: JSON syntax error: {e}") from None
+        if not isinstance(spec, dict):
+            raise _core.SpecError(f"{path}: a run spec is a JSON object, not {type(spec).__name__}")
+        return spec
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise _core.SpecError(f"{path}: TOML syntax error: {e}") from None
+
+
+class OnProgress(Protocol):
+    """A progress bar's update: work done of total, and a line of what it found so far."""
+
+    def __call__(self, done: int, total: int, status: str = "") -> None: ...
+
+
+@contextmanager
+def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
+    """A progress bar on a terminal (or with SITGEN_PROGRESS set): yields the
+    ``on_progress(done, total, status)`` to call, which also shows the rate of this call's
+    work."""
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    started = time.perf_counter()
+    with Progress(
+        TextColumn(f"[bold]{label}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        TextColumn("{task.fields[status]}"),
+        disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
+    ) as progress:
+        task = progress.add_task(unit, total=total, rate="", status="")
+        first: list[int] = []
+
+        def on_progress(done: int, total: int, status: str = "") -> None:
+            if not first:
+                first.append(done)
+            elapsed = time.perf_counter() - started
+            rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
+            progress.update(
+                task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s", status=status
+            )
+
+        yield on_progress
+
+
+def main() -> None:
+    """Entry point: run the command, turning expected errors into one line and an exit code."""
+    try:
+        app()
+    except (_core.SpecError, UsageError, StoreMissing) as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except (_core.GenerationFailed, OSError, StoreError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(EXIT_FAILED)
+    except sqlite3.Error as e:
+        # A store damaged on disk, or a disk that filled up: every run committed before is
+        # still there (each is its own transaction).
+        print(f"error: {e}; the runs stored before are kept", file=sys.stderr)
+        sys.exit(EXIT_FAILED)

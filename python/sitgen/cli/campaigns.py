@@ -1,0 +1,644 @@
+"""Commands that run many situations: campaign, faults, search, diff, robustness, demo."""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from sitgen.store import StoreError, require_store
+from sitgen.world.config import preset_names, preset_spec
+from sitgen.world.situation import generate_situation
+
+if TYPE_CHECKING:
+    from sitgen.execution.jobs import CampaignSpec
+from sitgen.cli.app import (
+    EXIT_FAILED,
+    AddressOption,
+    BackendOption,
+    CampaignSeedOption,
+    OnProgress,
+    RerunsOption,
+    SeedOption,
+    T,
+    UsageError,
+    WeightsOption,
+    WorkersOption,
+    _progress,
+    _read_text,
+    _weights,
+    app,
+)
+from sitgen.cli.triage import failures
+from sitgen.cli.world import _coverage_target
+
+
+def _campaign_spec(spec: Path | None) -> CampaignSpec:
+    """The campaign spec in file ``spec``, or the paper's."""
+    from sitgen.execution.jobs import parse_campaign
+
+    text = None if spec is None else _read_text(spec, "campaign spec")
+    return parse_campaign(text, str(spec) if spec else "paper campaign")
+
+
+def _stored(
+    label: str,
+    total: int,
+    unit: str,
+    work: Callable[[OnProgress, Callable[[], bool]], T],
+) -> T:
+    """``work(on_progress, stop)`` with a progress bar and Ctrl-C asking it to stop; a store
+    it cannot use is bad input."""
+    from sitgen.execution.campaign import StopOnInterrupt
+
+    with _progress(label, total, unit) as on_progress, StopOnInterrupt() as stop:
+        try:
+            return work(on_progress, stop)
+        except StoreError as e:
+            raise UsageError(str(e)) from None
+
+
+@app.command()
+def campaign(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML). Omit for the paper's experiment."),
+    ] = None,
+    n: Annotated[
+        int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
+    ] = None,
+    seed: CampaignSeedOption = 0,
+    db: Annotated[Path, typer.Option("--db", help="Campaign store (SQLite).")] = Path(
+        "campaign.db"
+    ),
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
+    top: Annotated[int, typer.Option("--top", min=0, help="Top runs in the summary.")] = 5,
+    shrink_top: Annotated[
+        int,
+        typer.Option(
+            "--shrink-top",
+            min=0,
+            help="At the end, shrink the representatives of the top K distinct failures "
+            "(sitgen shrink; kept in the store).",
+        ),
+    ] = 0,
+    keep_trajectories: Annotated[
+        str | None,
+        typer.Option(
+            "--keep-trajectories",
+            help="Runs stored whole (situation, event log, trajectory): all, failures, top:K "
+            "or none; the rest keep a summary (under 1 KB) and are re-simulated when shown. "
+            "Default top:50, the runs the report shows.",
+        ),
+    ] = None,
+    reruns: RerunsOption = 8,
+) -> None:
+    """Generate N randomised situations, run them all, store them, rank the runs, and measure
+    the robustness of each distinct failure. Ctrl-C stops after the runs in flight; the same
+    command again resumes."""
+    from sitgen.execution.campaign import DEFAULT_KEEP, run_campaign
+
+    _check_reruns(reruns)
+    parsed = _campaign_spec(spec)
+    total_n = parsed.n if n is None else n
+    result = _stored(
+        "campaign",
+        total_n,
+        "runs",
+        lambda on_progress, stop: run_campaign(
+            parsed,
+            db,
+            seed=seed,
+            n=n,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=on_progress,
+            stop=stop,
+            keep_trajectories=keep_trajectories or DEFAULT_KEEP,
+        ),
+    )
+    if not result.interrupted:
+        _measure_robustness(db, reruns, workers)
+    _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
+    if shrink_top:
+        _shrink_top(db, shrink_top, workers)
+
+
+def _echo_stored(
+    db: Path,
+    ran: int,
+    wall_s: float,
+    total: int,
+    asked: int,
+    interrupted: bool,
+    top: int,
+    extra: str = "",
+) -> None:
+    """What a campaign or search did and what its store holds: the paper's figures, the top
+    runs and the distinct failures; exits 130 if it was stopped early."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import summary
+
+    rate = ran / wall_s if wall_s > 0 else 0.0
+    typer.echo(
+        f"{db}: {ran} runs in {wall_s:.1f} s ({rate:.1f} runs/s), {total} of {asked} stored{extra}"
+    )
+    if interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        if not db.exists():
+            raise typer.Exit(130)
+    with Store(db) as store:
+        s = summary(store, top)
+    typer.echo(
+        f"runs {s['runs']}, mean score {s['mean_score']:.1f}, median {s['median_score']:.1f}, "
+        f"{100 * s['share_under_10']:.0f}% under 10 points; outcomes "
+        + ", ".join(f"{k} {v}" for k, v in sorted(s["outcomes"].items()))
+    )
+    for e in s["errors"]:
+        typer.echo(f"  {e['runs']} runs were errors (first run {e['first_run']}): {e['reason']}")
+    for r in s["top"]:
+        typer.echo(f"  run {r['run']:>5}  score {r['score']:>10.1f}  {r['main_events']}")
+    typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
+    for f in s["distinct"][:top]:
+        typer.echo(
+            f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
+            f"{f['robustness']:<17}  {f['description']}"
+        )
+    if interrupted:
+        raise typer.Exit(130)
+    if s["runs"] and s["outcomes"].get("error", 0) == s["runs"]:
+        # Nothing was tested: every run failed to be made or its controller failed.
+        print(
+            f"error: {db}: every run is an error; the commonest: {s['errors'][0]['reason']}",
+            file=sys.stderr,
+        )
+        raise typer.Exit(EXIT_FAILED)
+
+
+def _check_reruns(reruns: int) -> None:
+    """``--reruns``: 0 (measure nothing) or a number of copies, checked before any run."""
+    from sitgen.triage.robustness import check_reruns
+
+    if reruns != 0:
+        check_reruns(reruns)
+
+
+def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
+    """Measure the robustness of the store's distinct failures with ``reruns`` copies each
+    (none if 0) and say what it cost."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import measure_robustness
+
+    if reruns == 0:
+        return
+    started = time.perf_counter()
+    with Store(db) as store:
+        ran = measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+    if ran:
+        typer.echo(
+            f"robustness: {ran} perturbed copies of distinct failures' runs in "
+            f"{time.perf_counter() - started:.1f} s"
+        )
+
+
+def _shrink_top(db: Path, k: int, workers: int | None) -> None:
+    """Shrink the top ``k`` distinct failures' representatives and print what shrank."""
+    from sitgen.triage.shrink import shrink_top
+
+    typer.echo(f"shrinking the top {k} distinct failures (sitgen shrink {db} RUN):")
+    for run_id, r in shrink_top(db, k, workers):
+        if r is None:
+            typer.echo(f"  run {run_id:>5}  already shrunk")
+            continue
+        a, b = r.before, r.after
+        typer.echo(
+            f"  run {run_id:>5}  shrunk {r.failure_class}: peers {a.peers} → {b.peers}, "
+            f"obstacle cells {a.obstacle_cells} → {b.obstacle_cells}, failure after "
+            f"{a.time_to_failure_s:.1f} → {b.time_to_failure_s:.1f} s ({r.probes} probes, "
+            f"{r.wall_s:.1f} s)"
+        )
+
+
+@app.command()
+def faults(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    budget: Annotated[
+        int, typer.Option("--budget", "-n", min=1, help="Situations to generate and run.")
+    ] = 100,
+    seed: CampaignSeedOption = 0,
+    db: Annotated[Path, typer.Option("--db", help="Evaluation store (SQLite).")] = Path(
+        "faults.db"
+    ),
+    strategy: Annotated[
+        str,
+        typer.Option(
+            "--strategy",
+            help="How situations are drawn: random (the campaign's generation), barn (the 300 "
+            "BARN worlds, shuffled by the seed) or stored (a campaign's or search's situations, "
+            "in the order it ran them: --situations).",
+        ),
+    ] = "random",
+    barn_dir: Annotated[
+        Path | None,
+        typer.Option("--barn-dir", help="The BARN data folder (with --strategy barn)."),
+    ] = None,
+    situations: Annotated[
+        Path | None,
+        typer.Option("--situations", help="A campaign or search store (with --strategy stored)."),
+    ] = None,
+    fault_ids: Annotated[
+        str | None,
+        typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
+) -> None:
+    """Measure fault-finding power: run the agent's controller and each of its seeded faults
+    (docs/faults.md) on the same situations, and report which faults were killed, after how
+    many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
+    from sitgen.generation.faults import (
+        fault_status,
+        report_from,
+        run_faults,
+        summary_lines,
+        write_fault_report,
+    )
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    chosen = None if fault_ids is None else [f.strip() for f in fault_ids.split(",") if f.strip()]
+    result = _stored(
+        "faults",
+        budget,
+        "situations",
+        lambda on_progress, stop: run_faults(
+            _campaign_spec(spec),
+            db,
+            seed=seed,
+            budget=budget,
+            faults=chosen,
+            strategy=strategy,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=on_progress,
+            stop=stop,
+            barn_dir=barn_dir,
+            situations_db=situations,
+        ),
+    )
+    if result.interrupted:
+        typer.echo(
+            f"stopped early after {result.situations} of {budget} situations: run the same "
+            "command again to finish",
+            err=True,
+        )
+        if not db.exists():
+            raise typer.Exit(130)
+    report = report_from(db)
+    if format == "json":
+        write_fault_report(report, sys.stdout)
+    else:
+        table = Table(title=f"{db}: seeded faults of {report.controller}")
+        for column in ("fault", "result", "killing run", "stands for"):
+            table.add_column(column)
+        for row in report.faults:
+            table.add_row(
+                row.id,
+                fault_status(row, report.situations),
+                "" if row.run is None else f"{row.run} (correct: {row.correct_run})",
+                row.stands_for,
+            )
+        Console(width=200).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
+    if result.interrupted:
+        raise typer.Exit(130)
+
+
+@app.command()
+def search(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Campaign spec (TOML) whose varied fields to search. Omit for the paper's."
+        ),
+    ] = None,
+    budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
+    seed: CampaignSeedOption = 0,
+    db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
+    strategy: Annotated[
+        str,
+        typer.Option(
+            "--strategy",
+            help="map-elites (quality diversity), random (the campaign's generation) or "
+            "coverage (fields drawn toward uncovered cells of the interaction space).",
+        ),
+    ] = "map-elites",
+    measures: Annotated[
+        str,
+        typer.Option(
+            "--measures",
+            help="The archive's one or two descriptors, comma-separated: failure_class, terrain, "
+            "peers, min_clearance, approach_side.",
+        ),
+    ] = "failure_class,terrain",
+    objective: Annotated[
+        str,
+        typer.Option(
+            "--objective",
+            help="score (the most dangerous run per cell) or threshold (the paper's: fewer runs "
+            "under --threshold points).",
+        ),
+    ] = "score",
+    threshold: Annotated[
+        float, typer.Option("--threshold", help="Low-score threshold (points).")
+    ] = 10.0,
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
+    top: Annotated[int, typer.Option("--top", min=0, help="Distinct failures in the summary.")] = 5,
+    weights: WeightsOption = None,
+    reruns: RerunsOption = 8,
+) -> None:
+    """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
+    situation seed, each cell of the archive (failure class × terrain by default) holding its
+    highest-scoring run; or (--strategy coverage) generation steered toward situation coverage.
+    Writes a store like a campaign's (rank, failures, report, rerun, shrink, coverage work on
+    it). Ctrl-C stops after the runs in flight; the same command resumes."""
+    from sitgen.generation.search import SearchPlan, SearchProgress, SearchResult, run_search
+
+    _check_reruns(reruns)
+    parsed = _campaign_spec(spec)
+    learned = _weights(weights)
+    if learned is not None:
+        from sitgen.execution.jobs import campaign_from_data
+
+        # The runs are scored by the weights as they run (the objective is their score), and
+        # the stored spec says so: a summary's run is rebuilt and re-simulated from it.
+        source = copy.deepcopy(parsed.source)
+        source.setdefault("run", {})["scoring"] = learned.table()
+        parsed = campaign_from_data(source)
+    names = tuple(m.strip() for m in measures.split(",") if m.strip())
+    plan = SearchPlan(strategy, names, objective, threshold)
+
+    def work(on_progress: OnProgress, stop: Callable[[], bool]) -> SearchResult:
+        def show(p: SearchProgress) -> None:
+            on_progress(
+                p.runs,
+                p.budget,
+                f"cells {p.cells}  failure classes {p.classes}  best {p.best:,.0f}",
+            )
+
+        return run_search(
+            parsed,
+            db,
+            seed=seed,
+            budget=budget,
+            plan=plan,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=show,
+            stop=stop,
+        )
+
+    result = _stored("search", budget, "runs", work)
+    if not result.interrupted:
+        _measure_robustness(db, reruns, workers)
+    _echo_stored(
+        db,
+        result.ran,
+        result.wall_s,
+        result.total,
+        budget,
+        result.interrupted,
+        top,
+        f"; archive {result.cells} cells, QD score {result.qd_score:,.0f}",
+    )
+
+
+@app.command("diff")
+def diff_command(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    a: Annotated[
+        str,
+        typer.Option(
+            "--a",
+            help="Controller A (the old version): a name, NAME+FAULT, python:MODULE:CLASS, "
+            "'cmd:PROGRAM ARGS', or a JSON controller table with params.",
+        ),
+    ] = "snd_follow",
+    b: Annotated[str, typer.Option("--b", help="Controller B (the new version), as --a.")] = "",
+    n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
+    seed: CampaignSeedOption = 0,
+    situations: Annotated[
+        Path | None,
+        typer.Option(
+            "--situations",
+            help="Use a stored campaign's or search's situations (its first N runs) instead of "
+            "generating them.",
+        ),
+    ] = None,
+    db: Annotated[Path, typer.Option("--db", help="Diff store (SQLite).")] = Path("diff.db"),
+    junit: Annotated[
+        Path | None, typer.Option("--junit", help="Write the verdict as JUnit XML here.")
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: WorkersOption = None,
+) -> None:
+    """What a controller change fixed and what it broke: run the same situations with A and B
+    and judge each difference in failure on perturbed copies of both (docs/failures.md):
+    each distinct failure robustly new in B, robustly fixed, unchanged, or not robust either
+    way. Exits 1 when B has robust new failures. Ctrl-C stops; the same command resumes."""
+    from sitgen.generation.diff import (
+        DiffPlan,
+        diff_report,
+        parse_controller,
+        run_diff,
+        summary_lines,
+    )
+    from sitgen.generation.diff import write_junit as write_diff_junit
+    from sitgen.store import Store
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    if not b:
+        raise UsageError("--b: the controller to compare with A is required")
+    plan = DiffPlan(
+        parse_controller(a, "--a"),
+        parse_controller(b, "--b"),
+        "stored" if situations else "random",
+        str(situations) if situations else None,
+    )
+    parsed = _campaign_spec(spec)
+    result = _stored(
+        "diff",
+        n,
+        "situations",
+        lambda on_progress, stop: run_diff(
+            parsed,
+            db,
+            plan,
+            seed=seed,
+            n=n,
+            workers=workers or os.cpu_count() or 1,
+            on_progress=on_progress,
+            stop=stop,
+            situations_db=situations,
+        ),
+    )
+    with Store(db) as store:
+        report = diff_report(store)
+    if junit is not None:
+        junit.parent.mkdir(parents=True, exist_ok=True)
+        with junit.open("w") as out:
+            write_diff_junit(report, out)
+    if format == "json":
+        json.dump(report.as_dict(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        table = Table(title=f"{db}: distinct failures, A against B")
+        for column in ("class", "verdict", "new in B", "fixed", "unchanged", "not robust"):
+            table.add_column(column, justify="left" if column in ("class", "verdict") else "right")
+        for c in report.classes:
+            table.add_row(
+                c.failure_class, c.verdict, str(len(c.new)), str(len(c.fixed)),
+                str(len(c.unchanged)), str(len(c.not_robust)),
+            )  # fmt: skip
+        Console(width=160).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        raise typer.Exit(130)
+    if report.robust_new:
+        raise typer.Exit(EXIT_FAILED)
+
+
+@app.command()
+def robustness(
+    db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],
+    run_ids: Annotated[
+        list[int] | None,
+        typer.Argument(help="Failing runs to measure (default: every distinct failure's)."),
+    ] = None,
+    reruns: Annotated[int, typer.Option("--reruns", help="Perturbed copies of each run.")] = 8,
+    workers: WorkersOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Rerun failing runs under perturbations a real robot would not notice (laser noise at
+    the LMS200's level, starts jittered by a centimetre and half a degree) and say in how
+    many copies each one's failure class recurs: robust or knife-edge (docs/failures.md).
+    Stored; `failures`, `rank` and `report` show it."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import distinct_failures, measure_robustness
+    from sitgen.triage.robustness import check_reruns, measure_runs, tally, verdict
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    check_reruns(reruns)
+    require_store(db)
+    with Store(db) as store:
+        if run_ids:
+            for run_id in run_ids:
+                if store.run_row(run_id)["failure"] is None:
+                    raise UsageError(f"run {run_id}: it did not fail; robustness is a failure's")
+            measure_runs(store, run_ids, reruns, workers or os.cpu_count() or 1)
+            wanted = list(run_ids)
+        else:
+            measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+            wanted = [f.representative for f in distinct_failures(store)]
+        measured = store.robustness(wanted)
+    rows = [measured[r] for r in wanted if r in measured]
+    if format == "json":
+        for r in rows:
+            r["robust"] = verdict(r["recurs"], r["reruns"]) == "robust"
+        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
+    table = Table(title=f"{db}: robustness of {len(rows)} failing runs")
+    for column in ("run", "class", "recurs", "verdict", "copies' classes"):
+        table.add_column(column, justify="right" if column == "run" else "left")
+    for r in rows:
+        table.add_row(
+            str(r["run_id"]), r["failure_class"], f"{r['recurs']}/{r['reruns']}",
+            verdict(r["recurs"], r["reruns"]), tally(r["classes"]),
+        )  # fmt: skip
+    Console(width=200).print(table)
+
+
+@app.command()
+def demo(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for everything.")] = Path(
+        "demo"
+    ),
+    seed: SeedOption = 0,
+    n: Annotated[int, typer.Option("--n", min=1, help="Runs of the paper's campaign.")] = 500,
+) -> None:
+    """The main job on built-in defaults: one situation of every preset (map PNG + ROS YAML,
+    situation JSON, figure), then the paper's campaign (500 runs, seed 1: --n) into
+    OUTPUT/paper.db, its HTML report in OUTPUT/report/, and its distinct failures."""
+    from sitgen.execution.campaign import StopOnInterrupt, run_campaign
+    from sitgen.execution.jobs import parse_campaign
+    from sitgen.presentation.report import write_report
+    from sitgen.world.figure import save_situation_figure
+
+    output.mkdir(parents=True, exist_ok=True)
+    table = Table(title=f"sitgen presets, seed {seed}")
+    for column in ("preset", "size", "coverage", "target", "peers", "waypoints"):
+        table.add_column(column)
+    for name in preset_names():
+        situation = generate_situation(preset_spec(name), seed=seed)
+        grid = situation.grid
+        grid.save(output / f"{name}.png")
+        situation.save(output / f"{name}.json")
+        save_situation_figure(situation, output / f"{name}-situation.png")
+        width, height = grid.size_m
+        target = _coverage_target(situation.spec)
+        table.add_row(
+            name,
+            f"{width:g} × {height:g} m",
+            f"{grid.coverage:.4f}",
+            target.strip(" ()").removeprefix("target "),
+            str(len(situation.robots) - 1),
+            str(len(situation.agent.waypoints)),
+        )
+    Console().print(table)
+    typer.echo(
+        f"wrote {len(preset_names())} maps (PNG + ROS YAML), situations (JSON) and figures "
+        f"to {output}/"
+    )
+    db = output / "paper.db"
+    typer.echo(f"running the paper's campaign ({n} runs, seed 1) into {db} ...")
+    with StopOnInterrupt() as stop:
+        result = run_campaign(parse_campaign(None), db, seed=1, n=n, stop=stop)
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        raise typer.Exit(130)
+    typer.echo(f"{result.total} runs stored ({result.ran} run now in {result.wall_s:.1f} s)")
+    _measure_robustness(db, 8, None)
+    report_dir = output / "report"
+    write_report(db, report_dir, 50)
+    failures(db, "table")
+    typer.echo(f"report: {report_dir / 'index.html'}")
