@@ -4,312 +4,56 @@ and trajectories. The schema is versioned; docs/store.md documents every table a
 Writes happen one batch per transaction, so a process killed at any moment leaves every
 committed run intact and loses only the runs it had in flight; a resumed campaign skips the
 runs already stored.
-"""
+
+The schema is in :mod:`sitgen.store.schema`, the records the store hands out in
+:mod:`sitgen.store.records`; both are named here too, where users of the store look."""
 
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import json
 import os
 import sqlite3
 import zlib
-from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-
-SCHEMA_VERSION = 9
-
-SCHEMA = """
-CREATE TABLE IF NOT EXISTS meta (
-    key TEXT PRIMARY KEY,
-    value TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS campaign (
-    id INTEGER PRIMARY KEY CHECK (id = 1),
-    spec TEXT NOT NULL,
-    seed INTEGER NOT NULL,
-    n INTEGER NOT NULL,
-    sitgen_version TEXT NOT NULL,
-    created_at TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS situations (
-    id INTEGER PRIMARY KEY,
-    seed INTEGER NOT NULL,
-    spec TEXT NOT NULL,
-    terrain TEXT,
-    peers INTEGER,
-    content_hash TEXT,
-    situation TEXT
-);
-CREATE TABLE IF NOT EXISTS runs (
-    id INTEGER PRIMARY KEY,
-    situation_id INTEGER NOT NULL REFERENCES situations (id),
-    controller TEXT NOT NULL,
-    run_spec TEXT NOT NULL,
-    run_seed INTEGER NOT NULL,
-    outcome TEXT NOT NULL,
-    reason TEXT NOT NULL,
-    score REAL NOT NULL,
-    breakdown TEXT NOT NULL,
-    steps INTEGER NOT NULL,
-    time_s REAL NOT NULL,
-    collisions INTEGER NOT NULL,
-    min_clearance_m REAL,
-    waypoints_reached INTEGER NOT NULL,
-    waypoints INTEGER NOT NULL,
-    events_jsonl TEXT NOT NULL,
-    failure_class TEXT,
-    failure TEXT,
-    generation INTEGER,
-    parents TEXT,
-    genes TEXT,
-    coverage TEXT,
-    kept INTEGER,
-    events_sha256 TEXT
-);
-CREATE INDEX IF NOT EXISTS runs_by_score ON runs (score DESC, id);
-CREATE INDEX IF NOT EXISTS runs_by_failure_class ON runs (failure_class, score DESC, id);
-CREATE TABLE IF NOT EXISTS events (
-    run_id INTEGER NOT NULL REFERENCES runs (id),
-    seq INTEGER NOT NULL,
-    kind TEXT NOT NULL,
-    start_s REAL NOT NULL,
-    end_s REAL,
-    robot INTEGER NOT NULL,
-    other TEXT,
-    scored INTEGER NOT NULL,
-    details TEXT NOT NULL,
-    PRIMARY KEY (run_id, seq)
-);
-CREATE INDEX IF NOT EXISTS events_by_kind ON events (kind);
-CREATE TABLE IF NOT EXISTS trajectories (
-    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
-    robots INTEGER NOT NULL,
-    rows INTEGER NOT NULL,
-    encoding TEXT NOT NULL,
-    data BLOB NOT NULL
-);
-"""
-
-FAULT_SCHEMA = """
-CREATE TABLE IF NOT EXISTS fault_evaluation (
-    id INTEGER PRIMARY KEY CHECK (id = 1),
-    plan TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS fault_kills (
-    fault TEXT PRIMARY KEY,
-    situation INTEGER NOT NULL,
-    run_id INTEGER NOT NULL REFERENCES runs (id),
-    by TEXT NOT NULL,
-    classes TEXT NOT NULL,
-    score_delta REAL NOT NULL
-);
-"""
-
-KILL_TEST_SCHEMA = """
-CREATE TABLE IF NOT EXISTS fault_trials (
-    fault TEXT NOT NULL,
-    situation INTEGER NOT NULL,
-    by TEXT NOT NULL,
-    classes TEXT NOT NULL,
-    faulty_recurs INTEGER NOT NULL,
-    correct_recurs INTEGER NOT NULL,
-    copies INTEGER NOT NULL,
-    p_value REAL NOT NULL,
-    killed INTEGER NOT NULL,
-    PRIMARY KEY (fault, situation)
-);
-CREATE TABLE IF NOT EXISTS fault_chunks (
-    first INTEGER PRIMARY KEY,
-    copies INTEGER NOT NULL
-);
-"""
-KILL_TEST_COLUMNS = (
-    "faulty_recurs INTEGER",
-    "correct_recurs INTEGER",
-    "copies INTEGER",
-    "p_value REAL",
+from sitgen.store.records import (
+    MAX_RUN_ID,
+    WORSE,
+    Judgement,
+    RunRow,
+    Scoring,
+    StoreError,
+    StoreMissing,
+    events_digest,
+    is_run_id,
+    main_events,
+    pack_json,
+    require_store,
+    unpack_json,
 )
-"""Columns of ``fault_kills`` since version 9: the robust kill's test (NULL before)."""
-
-SHRINK_SCHEMA = """
-CREATE TABLE IF NOT EXISTS shrinks (
-    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
-    failure_class TEXT NOT NULL,
-    situation TEXT NOT NULL,
-    run_spec TEXT NOT NULL,
-    run_seed INTEGER NOT NULL,
-    before TEXT NOT NULL,
-    after TEXT NOT NULL,
-    reductions TEXT NOT NULL,
-    probes INTEGER NOT NULL,
-    skipped INTEGER NOT NULL,
-    wall_s REAL NOT NULL,
-    sitgen_version TEXT NOT NULL
-);
-"""
-
-SEARCH_SCHEMA = """
-CREATE TABLE IF NOT EXISTS search (
-    id INTEGER PRIMARY KEY CHECK (id = 1),
-    plan TEXT NOT NULL
-);
-"""
-
-JUDGEMENT_SCHEMA = """
-CREATE TABLE IF NOT EXISTS judgements (
-    id INTEGER PRIMARY KEY,
-    a INTEGER NOT NULL REFERENCES runs (id),
-    b INTEGER NOT NULL REFERENCES runs (id),
-    worse TEXT NOT NULL CHECK (worse IN ('a', 'b', 'equal')),
-    who TEXT NOT NULL,
-    at TEXT NOT NULL,
-    source TEXT NOT NULL
-);
-"""
-
-ROBUSTNESS_SCHEMA = """
-CREATE TABLE IF NOT EXISTS robustness (
-    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
-    failure_class TEXT NOT NULL,
-    reruns INTEGER NOT NULL,
-    recurs INTEGER NOT NULL,
-    classes TEXT NOT NULL,
-    perturbation TEXT NOT NULL,
-    sitgen_version TEXT NOT NULL
-);
-"""
-
-DIFF_SCHEMA = """
-CREATE TABLE IF NOT EXISTS diff (
-    id INTEGER PRIMARY KEY CHECK (id = 1),
-    plan TEXT NOT NULL
-);
-CREATE TABLE IF NOT EXISTS diff_results (
-    situation INTEGER NOT NULL,
-    failure_class TEXT NOT NULL,
-    a_recurs INTEGER,
-    b_recurs INTEGER,
-    copies INTEGER NOT NULL,
-    verdict TEXT NOT NULL,
-    PRIMARY KEY (situation, failure_class)
-);
-CREATE TABLE IF NOT EXISTS diff_chunks (
-    first INTEGER PRIMARY KEY,
-    copies INTEGER NOT NULL
-);
-"""
-
-TRAJECTORY_ENCODING = "f32le-zlib"
-"""Trajectories: (x, y, heading) per robot per step as little-endian float32, zlib'd."""
-
-
-MAX_RUN_ID = 2**63 - 1
-"""The largest run id (SQLite's INTEGER is a signed 64-bit number)."""
-
-
-def is_run_id(value: object) -> bool:
-    """Whether ``value`` can be a run id: an integer (not a bool) in [0, 2^63 - 1]. Every place
-    a run id enters (the command line, the judging page, a judgements file) goes through the
-    store's readers, which treat anything else as a run the store does not hold."""
-    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_RUN_ID
-
-
-WORSE = ("a", "b", "equal")
-"""What a judgement says: run ``a`` is more dangerous, run ``b`` is, or neither."""
-
-
-@dataclass(frozen=True)
-class Judgement:
-    """One pairwise judgement: which of runs ``a`` and ``b`` is more dangerous (the store's
-    ``judgements`` rows; :mod:`sitgen.triage.weights` fits penalties to them)."""
-
-    a: int
-    b: int
-    worse: str
-    who: str = ""
-    at: str = ""
-    """When, ISO 8601 UTC."""
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"a": self.a, "b": self.b, "worse": self.worse, "who": self.who, "at": self.at}
-
-
-class Scoring(Protocol):
-    """What rescoring a store needs of a scoring table (:class:`sitgen.triage.weights.Weights`)."""
-
-    def score(self, stored: Mapping[str, Any], failure_class: str | None) -> float: ...
-
-    def breakdown(self, stored: Mapping[str, Any]) -> dict[str, dict[str, float]]: ...
-
-
-class StoreError(Exception):
-    """A store that cannot be used (wrong file, other campaign, newer schema)."""
-
-
-class StoreMissing(StoreError):
-    """No store where one was named: a mistyped path or a folder (bad input, not damage)."""
-
-
-def require_store(path: Path) -> None:
-    """Raise StoreMissing unless ``path`` is a file: reading a mistyped path must not create
-    an empty store."""
-    if path.is_dir():
-        raise StoreMissing(f"{path}: is a folder, not a campaign store")
-    if not path.is_file():
-        raise StoreMissing(f"{path}: no such campaign store")
-
-
-@dataclass(frozen=True)
-class RunRow:
-    """One stored run, as produced by a campaign."""
-
-    id: int
-    situation_seed: int
-    situation_spec: dict[str, Any]
-    situation_json: str | None
-    run_spec: dict[str, Any]
-    run_seed: int
-    controller: str
-    record: dict[str, Any] | None
-    """The run record (outcome, reason, score, events, …); None if generation failed."""
-    error: str | None
-    events_jsonl: str
-    trajectory: bytes | None
-    robots: int
-    generation: int | None = None
-    """The search generation that made it (None for a campaign's run)."""
-    parents: tuple[int, ...] | None = None
-    """The runs a search mutated to make it (empty for a fresh draw; None in a campaign)."""
-    genes: dict[str, Any] | None = None
-    """A search's genome for it: each varied field's draw and the situation seed."""
-    keep: bool = True
-    """Store the run whole (its situation, specs, event log and trajectory), or only its
-    summary (a campaign's run: its specs follow from the campaign, and the rest comes back by
-    re-simulation, :mod:`sitgen.triage.recall`)."""
-
-
-KINDS = {
-    "campaign": "campaign",
-    "fault_evaluation": "fault evaluation",
-    "search": "search",
-    "diff": "controller diff",
-}
-"""What a store can hold, as a sentence names it."""
-PLAN_PARTS = {
-    "fault_evaluation": "its controller, faults or strategy",
-    "search": "its strategy, measures or objective",
-    "diff": "its controllers or situations",
-}
-
-TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
+from sitgen.store.schema import (
+    DIFF_SCHEMA,
+    FAULT_SCHEMA,
+    JUDGEMENT_SCHEMA,
+    KILL_TEST_COLUMNS,
+    KILL_TEST_SCHEMA,
+    KINDS,
+    PLAN_PARTS,
+    ROBUSTNESS_SCHEMA,
+    SCHEMA,
+    SCHEMA_VERSION,
+    SEARCH_SCHEMA,
+    SHRINK_SCHEMA,
+    TABLES,
+    TRAJECTORY_ENCODING,
+)
 
 
 class _Connection(sqlite3.Connection):
@@ -1102,24 +846,33 @@ class Store:
         ]
 
 
-def pack_json(value: Any) -> bytes:
-    """A JSON value as a stored column holds a long one: sorted-key JSON, zlib'd (a run's
-    coverage: its cell names repeat, and shrink to about two fifths)."""
-    return zlib.compress(json.dumps(value, sort_keys=True).encode(), 9)
-
-
-def unpack_json(stored: str | bytes) -> Any:
-    """A JSON column's value: zlib'd (:func:`pack_json`) or, as stores before version 7 hold
-    it, text."""
-    return json.loads(zlib.decompress(stored) if isinstance(stored, bytes) else stored)
-
-
-def events_digest(events_jsonl: str) -> str:
-    """The digest a stored run keeps of its event log: what re-simulation must reproduce."""
-    return hashlib.sha256(events_jsonl.encode()).hexdigest()
-
-
-def main_events(breakdown: dict[str, Any]) -> str:
-    """The kinds that earned points, most points first: ``collision×2, unsafe_proximity×1``."""
-    ordered = sorted(breakdown.items(), key=lambda kv: (-kv[1]["points"], kv[0]))
-    return ", ".join(f"{kind}×{line['count']}" for kind, line in ordered)
+__all__ = [
+    "DIFF_SCHEMA",
+    "FAULT_SCHEMA",
+    "JUDGEMENT_SCHEMA",
+    "KILL_TEST_COLUMNS",
+    "KILL_TEST_SCHEMA",
+    "KINDS",
+    "MAX_RUN_ID",
+    "PLAN_PARTS",
+    "ROBUSTNESS_SCHEMA",
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "SEARCH_SCHEMA",
+    "SHRINK_SCHEMA",
+    "TABLES",
+    "TRAJECTORY_ENCODING",
+    "WORSE",
+    "Judgement",
+    "RunRow",
+    "Scoring",
+    "Store",
+    "StoreError",
+    "StoreMissing",
+    "events_digest",
+    "is_run_id",
+    "main_events",
+    "pack_json",
+    "require_store",
+    "unpack_json",
+]
