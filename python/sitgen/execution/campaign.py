@@ -114,7 +114,7 @@ class Keep:
         return replace(row, keep=False), []
 
 
-def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
+def run_row(job: Job, result: Mapping[str, Any]) -> RunRow:
     """The stored form of a job's result."""
     record = json.loads(result["record"]) if result["ok"] else None
     return RunRow(
@@ -131,6 +131,22 @@ def _row(job: Job, result: Mapping[str, Any]) -> RunRow:
         trajectory=result.get("trajectory"),
         robots=result.get("robots", 0),
     )
+
+
+def run_chunk(
+    executor: Executor, store: Store, jobs: list[Job], stop: Callable[[], bool] | None
+) -> tuple[list[int], bool]:
+    """Run one chunk of ``jobs`` and store its runs in one transaction; returns the ids stored
+    and whether every job ran (False: stopped part way). Finished runs are kept even if the
+    chunk is not: a resumed evaluation skips them. Fault evaluations and diffs go chunk by
+    chunk so that what follows a chunk (kill tests, verdicts) sees all its runs."""
+    rows = []
+    for job, result in executor.results(jobs):
+        rows.append(run_row(job, result))
+        if stop is not None and stop():
+            executor.stop()
+    store.add_runs(rows)
+    return [r.id for r in rows], len(rows) == len(jobs)
 
 
 def _core_args(job: Job) -> tuple[str, int, str, int]:
@@ -435,7 +451,7 @@ def run_campaign(
         if stop is not None and stop():
             executor.stop()
         for job, result in executor.results(jobs):
-            row, pushed_out = keep.admit(_row(job, result))
+            row, pushed_out = keep.admit(run_row(job, result))
             # One transaction per run: a kill loses only the runs in flight.
             store.add_runs([row], demote=pushed_out)
             ran += 1

@@ -32,7 +32,7 @@ from typing import Any, TextIO
 from xml.etree import ElementTree
 
 from sitgen import _core
-from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
 from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
@@ -264,15 +264,10 @@ def run_diff(
                 if first in judged:
                     continue
                 jobs = [j for i in chunk for j in _jobs(situations, i, plan) if j.index not in done]
-                rows = []
-                for job, result in executor.results(jobs):
-                    rows.append(_row(job, result))
-                    ran += 1
-                    if stop is not None and stop():
-                        executor.stop()
-                store.add_runs(rows)
-                done.update(r.id for r in rows)
-                if len(rows) < len(jobs):
+                stored, complete = run_chunk(executor, store, jobs, stop)
+                ran += len(stored)
+                done.update(stored)
+                if not complete:
                     interrupted = True
                     break
                 judgements, alike = _differences(store, chunk)

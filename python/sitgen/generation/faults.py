@@ -36,7 +36,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from sitgen import _core
-from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import (
     CampaignSpec,
     Job,
@@ -541,16 +541,10 @@ def _run_faults(
             jobs = [
                 j for i in chunk for j in _jobs(situations, i, plan, alive) if j.index not in done
             ]
-            rows = []
-            for job, result in executor.results(jobs):
-                rows.append(_row(job, result))
-                ran += 1
-                if stop is not None and stop():
-                    executor.stop()
-            # Finished runs are kept even if the chunk is not: a resumed evaluation skips them.
-            store.add_runs(rows)
-            done.update(row.id for row in rows)
-            if len(rows) < len(jobs):
+            stored, complete = run_chunk(executor, store, jobs, stop)
+            ran += len(stored)
+            done.update(stored)
+            if not complete:
                 interrupted = True
                 break
             candidates = _candidates(store, chunk, alive)

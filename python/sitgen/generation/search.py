@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.execution.campaign import Executor, _row, started_at
+from sitgen.execution.campaign import Executor, run_row, started_at
 from sitgen.execution.jobs import (
     CampaignSpec,
     Job,
@@ -698,7 +698,7 @@ def run_search(
                 for job, result in executor.results([_job(spec, c) for c in todo]):
                     child = by_index[job.index]
                     row = dataclasses.replace(
-                        _row(job, result),
+                        run_row(job, result),
                         generation=generation,
                         parents=child.parents,
                         genes=child.stored_genes(spec),
