@@ -28,14 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from sitgen.execution.jobs import campaign_from_data, parse_campaign
-from sitgen.generation.faults import (
-    FaultReport,
-    FaultRow,
-    is_harder,
-    report_from,
-    run_faults,
-    share_killed_within,
-)
+from sitgen.generation.fault_report import FaultReport, FaultRow, report_from, share_killed_within
+from sitgen.generation.faults import is_harder, run_faults
 from sitgen.world.maps import BARN_WORLDS
 
 RESULTS = Path(__file__).resolve().parent / "results"

@@ -26,7 +26,7 @@ from pathlib import Path
 from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
 
 from sitgen.execution.jobs import parse_campaign
-from sitgen.generation.faults import FaultReport, kill_rate_at
+from sitgen.generation.fault_report import FaultReport, kill_rate_at
 from sitgen.store import Store
 from sitgen.triage.coverage import stored, summarise
 

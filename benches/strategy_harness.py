@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from sitgen.execution.jobs import CampaignSpec
-from sitgen.generation.faults import FaultReport, report_from, run_faults
+from sitgen.generation.fault_report import FaultReport, report_from
+from sitgen.generation.faults import run_faults
 from sitgen.generation.search import SearchPlan, run_search
 
 Measure = Callable[[Path, int, FaultReport], dict[str, float]]

@@ -273,13 +273,13 @@ def faults(
     """Measure fault-finding power: run the agent's controller and each of its seeded faults
     (docs/faults.md) on the same situations, and report which faults were killed, after how
     many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
-    from sitgen.generation.faults import (
+    from sitgen.generation.fault_report import (
         fault_status,
         report_from,
-        run_faults,
         summary_lines,
         write_fault_report,
     )
+    from sitgen.generation.faults import run_faults
 
     if format not in ("table", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json")

@@ -29,9 +29,9 @@ import functools
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +46,7 @@ from sitgen.execution.jobs import (
     job_seed,
     stream_jobs,
 )
-from sitgen.store import KINDS, Store, StoreError
+from sitgen.store import Store, StoreError
 from sitgen.triage.kill import (
     ALPHA,
     COPIES,
@@ -69,20 +69,42 @@ from sitgen.triage.robustness import perturbed
 from sitgen.world.maps import BARN_WORLDS, BarnWorlds
 
 POSSIBLY_EQUIVALENT_AFTER = 200
+
+
 """A fault still alive after this many situations is reported as possibly equivalent."""
+
+
 CHUNK = 16
+
+
 """Situations run between two kill checks."""
+
+
 RUN_STRIDE = 64
+
+
 """Run ids per situation: the correct run and up to 63 faults."""
+
+
 STRATEGIES = ("random", "barn", "stored")
+
+
 """How situations are drawn: ``random`` is the campaign's own generation (the paper's);
 ``barn`` takes the 300 BARN worlds (a fixed, hand-curated benchmark, no peers) in an order
 shuffled by the seed, with the campaign's run spec; ``stored`` takes the situations of a stored
 campaign or search (``--situations``) in the order it ran them, each with its own run spec and
 seed, so that any way of generating (a search, too) can be measured by what it kills."""
+
+
 MAX_BUDGET = 1_000_000
+
+
 """Most situations an evaluation may ask for (``random``; ``barn`` has 300)."""
+
+
 CURVE_BUDGETS = (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000)
+
+
 """Budgets at which the kill-rate curve is given (and the evaluation's own)."""
 
 
@@ -113,9 +135,6 @@ def faults_of(controller: str) -> list[str]:
     return [f["id"] for f in catalogue() if controller in f["controllers"]]
 
 
-# The kill rule (sitgen.triage.kill) on stored runs.
-
-
 def outcome_of(store: Store, run_id: int) -> Outcome | None:
     """The kill rule's view of stored run ``run_id``; None if it is not stored."""
     row = store.db.execute(
@@ -126,9 +145,6 @@ def outcome_of(store: Store, run_id: int) -> Outcome | None:
     outcome, score, events, failure_class = row
     classes = frozenset(_core.event_classes(events, 0)) if events else frozenset()
     return Outcome(failure_class, classes, score, outcome == "error")
-
-
-# Planning an evaluation.
 
 
 @dataclass(frozen=True)
@@ -306,9 +322,6 @@ def _run_of(base: Job, plan: FaultPlan, arm: str | None) -> dict[str, Any]:
     """The run spec of situation ``base`` for the correct controller (None) or ``arm``."""
     controller = plan.controller if arm is None else plan.controller_of(arm)
     return dict(base.run, controller=controller)
-
-
-# Running an evaluation.
 
 
 @dataclass(frozen=True)
@@ -559,259 +572,13 @@ def _run_faults(
             if stop is not None and stop():
                 interrupted = chunk.stop < budget
                 break
-        evaluated = _evaluated(store)
+        evaluated = situations_evaluated(store)
     return FaultsResult(ran, evaluated, interrupted, time.perf_counter() - started)
 
 
-def _evaluated(store: Store) -> int:
+def situations_evaluated(store: Store) -> int:
     """Situations evaluated: the correct runs stored (each chunk is stored whole)."""
     count: int = store.db.execute(
         "SELECT count(*) FROM runs WHERE id % ? = 0", (RUN_STRIDE,)
     ).fetchone()[0]
     return count
-
-
-# Reading an evaluation.
-
-
-@dataclass
-class FaultRow:
-    """One fault's result."""
-
-    id: str
-    killed: bool
-    runs_to_first_kill: int | None
-    """Situations it took (1-based); None if not killed."""
-    by: str | None
-    classes: list[str]
-    run: int | None
-    """The faulty run that killed it."""
-    correct_run: int | None
-    """The correct run on the same situation."""
-    score_delta: float | None
-    possibly_equivalent: bool
-    changes: str
-    stands_for: str
-    faulty_recurs: int | None = None
-    """Of the killing test's perturbed copies, the faulty ones showing the failure."""
-    correct_recurs: int | None = None
-    """…and the correct ones."""
-    copies: int | None = None
-    """Copies of each side the killing test ran."""
-    p_value: float | None = None
-    """The killing test's p-value (its bound where it stopped early)."""
-    runs_with_reruns: int | None = None
-    """Runs up to the first kill, every perturbed copy counted (those of its chunk too)."""
-    trials: int = 0
-    """Candidate situations tested for it."""
-
-    def as_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-
-@dataclass
-class FaultReport:
-    """An evaluation's results."""
-
-    controller: str
-    strategy: str
-    seed: int
-    budget: int
-    situations: int
-    """Situations evaluated (equals ``budget`` once finished)."""
-    faults: list[FaultRow] = field(default_factory=list)
-    mutants: list[FaultRow] = field(default_factory=list)
-    """The equivalent mutants run beside the faults: a kill of one is a false kill."""
-    runs: int = 0
-    """Runs in all, every perturbed copy counted."""
-
-    @property
-    def kill_rate(self) -> float:
-        return sum(f.killed for f in self.faults) / len(self.faults) if self.faults else 0.0
-
-    @property
-    def false_kill_rate(self) -> float:
-        """The share of equivalent mutants killed (0 where none ran)."""
-        return sum(m.killed for m in self.mutants) / len(self.mutants) if self.mutants else 0.0
-
-    def curve(self) -> list[dict[str, float]]:
-        """Kill rate at each budget of :data:`CURVE_BUDGETS` up to the situations evaluated,
-        and at that count."""
-        budgets = sorted({b for b in CURVE_BUDGETS if b < self.situations} | {self.situations})
-        return [{"budget": b, "kill_rate": kill_rate_at(self, b)} for b in budgets if b > 0]
-
-    def as_dict(self) -> dict[str, Any]:
-        return {
-            "controller": self.controller,
-            "strategy": self.strategy,
-            "seed": self.seed,
-            "budget": self.budget,
-            "situations": self.situations,
-            "kill_rate": self.kill_rate,
-            "killed": sum(f.killed for f in self.faults),
-            "false_kill_rate": self.false_kill_rate,
-            "runs": self.runs,
-            "curve": self.curve(),
-            "faults": [f.as_dict() for f in self.faults],
-            "mutants": [m.as_dict() for m in self.mutants],
-        }
-
-
-def kill_rate_at(report: FaultReport, budget: int) -> float:
-    """The share of the report's faults killed within ``budget`` situations."""
-    return share_killed_within(report.faults, budget)
-
-
-def share_killed_within(rows: list[FaultRow], budget: int) -> float:
-    """The share of ``rows`` (faults, or equivalent mutants) killed within ``budget``
-    situations; 0 for none."""
-    if not rows:
-        return 0.0
-    killed = sum(f.runs_to_first_kill is not None and f.runs_to_first_kill <= budget for f in rows)
-    return killed / len(rows)
-
-
-def evaluation(store: Store) -> dict[str, Any] | None:
-    """The store's fault evaluation plan, or None if it holds none."""
-    return store.plan("fault_evaluation")
-
-
-def fault_report(store: Store) -> FaultReport:
-    """The results stored in an evaluation's store. Raises StoreError if it holds none."""
-    plan = evaluation(store)
-    if plan is None:
-        raise StoreError(
-            f"{store.path}: holds a {KINDS[store.kind()]}, not a fault evaluation (sitgen faults)"
-        )
-    campaign = store.campaign() or {}
-    kill_columns = {c[1] for c in store.db.execute("PRAGMA table_info(fault_kills)")}
-    tested = "faulty_recurs" in kill_columns
-    test = ", faulty_recurs, correct_recurs, copies, p_value" if tested else ""
-    kills = {
-        row[0]: row[1:]
-        for row in store.db.execute(
-            f"SELECT fault, situation, run_id, by, classes, score_delta{test} FROM fault_kills"
-        )
-    }
-    situations = _evaluated(store)
-    trials: dict[str, int] = {}
-    chunks: list[tuple[int, int]] = []
-    if store.db.execute("SELECT 1 FROM sqlite_master WHERE name = 'fault_trials'").fetchone():
-        trials = dict(
-            store.db.execute("SELECT fault, count(*) FROM fault_trials GROUP BY fault").fetchall()
-        )
-        chunks = store.db.execute(
-            "SELECT first, copies FROM fault_chunks ORDER BY first"
-        ).fetchall()
-    runs_at = _runs_with_reruns(store, chunks)
-    info = {f["id"]: f for f in catalogue()}
-    mutant_info = {m.id: m for m in MUTANTS}
-    report = FaultReport(
-        controller=plan["controller"]["name"],
-        strategy=plan["strategy"],
-        seed=campaign.get("seed", 0),
-        budget=campaign.get("n", 0),
-        situations=situations,
-        runs=store.run_count() + sum(c for _, c in chunks),
-    )
-    for arm in [*plan["faults"], *plan.get("mutants", [])]:
-        mutant = mutant_info.get(arm)
-        if mutant is not None:
-            entry = {
-                "changes": f"{mutant.param} × {mutant.factor!r} (a relative nudge of "
-                f"{abs(mutant.factor - 1):.0e})",
-                "stands_for": "an equivalent mutant: no bug at all",
-            }
-        else:
-            entry = info.get(arm, {"changes": "(not in this sitgen's catalogue)", "stands_for": ""})
-        row = FaultRow(
-            id=arm,
-            killed=arm in kills,
-            runs_to_first_kill=None,
-            by=None,
-            classes=[],
-            run=None,
-            correct_run=None,
-            score_delta=None,
-            possibly_equivalent=arm not in kills and situations >= POSSIBLY_EQUIVALENT_AFTER,
-            changes=entry["changes"],
-            stands_for=entry["stands_for"],
-            trials=trials.get(arm, 0),
-        )
-        if arm in kills:
-            situation, row.run, row.by, classes, row.score_delta, *counts = kills[arm]
-            row.classes = json.loads(classes)
-            row.runs_to_first_kill = situation + 1
-            row.correct_run = situation * RUN_STRIDE
-            if counts:
-                row.faulty_recurs, row.correct_recurs, row.copies, row.p_value = counts
-            row.runs_with_reruns = runs_at(situation)
-        (report.mutants if mutant is not None else report.faults).append(row)
-    return report
-
-
-def _runs_with_reruns(store: Store, chunks: list[tuple[int, int]]) -> Callable[[int], int]:
-    """Runs up to and with situation ``i``, every perturbed copy of the chunks up to and with
-    its own counted."""
-    per_situation: dict[int, int] = dict(
-        store.db.execute(
-            "SELECT id / ?, count(*) FROM runs GROUP BY id / ?", (RUN_STRIDE, RUN_STRIDE)
-        ).fetchall()
-    )
-
-    def at(i: int) -> int:
-        plain = sum(n for s, n in per_situation.items() if s <= i)
-        return plain + sum(c for first, c in chunks if first <= i)
-
-    return at
-
-
-def write_fault_report(report: FaultReport, out: TextIO) -> None:
-    """The report as JSON."""
-    json.dump(report.as_dict(), out, indent=2)
-    out.write("\n")
-
-
-def fault_status(row: FaultRow, situations: int) -> str:
-    """A fault's result in words."""
-    if row.killed:
-        how = (
-            ", ".join(row.classes)
-            if row.by == "class"
-            else f"score +{row.score_delta:.0f}"
-            if row.by == "score"
-            else "controller error"
-        )
-        if row.copies is not None:
-            how += (
-                f"; in {row.faulty_recurs}/{row.copies} perturbed copies against "
-                f"{row.correct_recurs}/{row.copies}, p ≤ {row.p_value:.1g}"
-            )
-        return f"killed at situation {row.runs_to_first_kill} ({how})"
-    if row.possibly_equivalent:
-        return f"possibly equivalent: not killed in {situations} situations"
-    return f"not killed in {situations} situations"
-
-
-def summary_lines(report: FaultReport) -> list[str]:
-    """The kill rate and its curve, in words."""
-    curve = ", ".join(f"{c['budget']:g}: {c['kill_rate']:.0%}" for c in report.curve())
-    lines = [
-        f"{report.controller}, {report.strategy} situations, seed {report.seed}: "
-        f"{sum(f.killed for f in report.faults)} of {len(report.faults)} faults robustly "
-        f"killed in {report.situations} situations, {report.runs} runs with their perturbed "
-        f"copies (kill rate {report.kill_rate:.0%})",
-        f"kill rate by budget: {curve}",
-    ]
-    if report.mutants:
-        lines.append(
-            f"equivalent mutants falsely killed: {sum(m.killed for m in report.mutants)} of "
-            f"{len(report.mutants)} (false-kill rate {report.false_kill_rate:.0%})"
-        )
-    return lines
-
-
-def report_from(db: str | Path) -> FaultReport:
-    """The results of the evaluation in store ``db``."""
-    with Store(db) as store:
-        return fault_report(store)

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from sitgen.presentation.report import run_page
+from sitgen.presentation.run_page import run_page
 from sitgen.store import WORSE, Judgement, Store
 from sitgen.triage.weights import next_pair
 
