@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from sitgen import _core
 from sitgen.store.records import (
     MAX_RUN_ID,
     WORSE,
@@ -53,6 +52,8 @@ from sitgen.store.schema import (
     SHRINK_SCHEMA,
     TABLES,
     TRAJECTORY_ENCODING,
+    add_columns,
+    upgrade,
 )
 
 
@@ -161,76 +162,8 @@ class Store:
                 f"({SCHEMA_VERSION}); upgrade sitgen"
             )
         elif version < SCHEMA_VERSION:
-            self._upgrade(version)
-
-    def _upgrade(self, version: int) -> None:
-        """Bring a store written by an older sitgen up to this schema in one transaction:
-        columns are added, never dropped, so nothing stored is lost."""
-        with self.db:
-            if version < 2:
-                # Version 2 adds each run's failure class, classified from its stored log (logs
-                # written before attribution classify by whose move was refused).
-                self.db.execute("ALTER TABLE runs ADD COLUMN failure_class TEXT")
-                self.db.execute("ALTER TABLE runs ADD COLUMN failure TEXT")
-                runs = self.db.execute("SELECT id, events_jsonl FROM runs").fetchall()
-                for run_id, events in runs:
-                    failure = _core.classify_events(events, 0)
-                    self.db.execute(
-                        "UPDATE runs SET failure_class = ?, failure = ? WHERE id = ?",
-                        (json.loads(failure)["class"] if failure else None, failure, run_id),
-                    )
-                self.db.executescript(
-                    "CREATE INDEX IF NOT EXISTS runs_by_failure_class "
-                    "ON runs (failure_class, score DESC, id)"
-                )
-            if version < 3:
-                # Version 3 adds fault evaluations (sitgen faults): two tables, empty for a
-                # campaign.
-                self.db.executescript(FAULT_SCHEMA)
-            if version < 4:
-                # Version 4 adds shrink results (sitgen shrink): one table, empty until then.
-                self.db.executescript(SHRINK_SCHEMA)
-            if version < 5:
-                # Version 5 adds searches (sitgen search): each run's generation, parents and
-                # genes (NULL for a campaign's runs) and the search's plan.
-                self._add_run_columns("generation INTEGER", "parents TEXT", "genes TEXT")
-                self.db.executescript(SEARCH_SCHEMA)
-            if version < 6:
-                # Version 6 adds each run's situation coverage (NULL for runs stored before:
-                # coverage is observed during a run and cannot be read back from its log).
-                self._add_run_columns("coverage TEXT")
-            if version < 7:
-                # Version 7 stores some runs as a summary only (kept = 0) and each run's event
-                # log digest; runs stored before are whole (kept NULL) with their log.
-                self._add_run_columns("kept INTEGER", "events_sha256 TEXT")
-            if version < 8:
-                # Version 8 adds an expert's pairwise judgements of runs (sitgen judge): one
-                # table, empty until then.
-                self.db.executescript(JUDGEMENT_SCHEMA)
-            if version < 9:
-                # Version 9 adds the robustness of failing runs (reruns under perturbation):
-                # one table, empty until a campaign, search or `sitgen robustness` fills it.
-                self.db.executescript(ROBUSTNESS_SCHEMA)
-                # And the robust kill rule's trials: each candidate situation's test, the
-                # copies each chunk ran, and the killing test's counts on each kill.
-                self.db.executescript(KILL_TEST_SCHEMA)
-                self._add_columns("fault_kills", *KILL_TEST_COLUMNS)
-                # And controller diffs (sitgen diff): their plan and verdicts.
-                self.db.executescript(DIFF_SCHEMA)
-            self.db.execute(
-                "UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),)
-            )
-
-    def _add_run_columns(self, *columns: str) -> None:
-        """Add the columns (``name TYPE``) the ``runs`` table lacks."""
-        self._add_columns("runs", *columns)
-
-    def _add_columns(self, table: str, *columns: str) -> None:
-        """Add the columns (``name TYPE``) ``table`` lacks."""
-        present = {c[1] for c in self.db.execute(f"PRAGMA table_info({table})")}
-        for column in columns:
-            if column.split()[0] not in present:
-                self.db.execute(f"ALTER TABLE {table} ADD COLUMN {column}")
+            with self.db:
+                upgrade(self.db, version)
 
     def _schema_version(self) -> int | None:
         has_meta = self.db.execute(
@@ -386,7 +319,7 @@ class Store:
         it ran, each trial (the columns of ``fault_trials``, ``classes`` a list, and the run id
         of the faulty run it tested as ``run_id``), and as a kill each trial that killed."""
         with self.db:
-            self._add_columns("fault_kills", *KILL_TEST_COLUMNS)
+            add_columns(self.db, "fault_kills", *KILL_TEST_COLUMNS)
             self.db.execute(
                 "INSERT OR REPLACE INTO fault_chunks (first, copies) VALUES (?, ?)",
                 (first, copies),

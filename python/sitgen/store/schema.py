@@ -3,6 +3,11 @@ documents every column), and what each kind of store holds."""
 
 from __future__ import annotations
 
+import json
+import sqlite3
+
+from sitgen import _core
+
 SCHEMA_VERSION = 9
 
 
@@ -224,3 +229,68 @@ PLAN_PARTS = {
 
 
 TABLES = ("meta", "campaign", "situations", "runs", "events", "trajectories")
+
+
+def upgrade(db: sqlite3.Connection, version: int) -> None:
+    """Bring store ``db``, written by an older sitgen at schema ``version``, up to this schema
+    (the caller holds it in one transaction): columns are added, never dropped, so nothing
+    stored is lost."""
+    if version < 2:
+        # Version 2 adds each run's failure class, classified from its stored log (logs
+        # written before attribution classify by whose move was refused).
+        db.execute("ALTER TABLE runs ADD COLUMN failure_class TEXT")
+        db.execute("ALTER TABLE runs ADD COLUMN failure TEXT")
+        runs = db.execute("SELECT id, events_jsonl FROM runs").fetchall()
+        for run_id, events in runs:
+            failure = _core.classify_events(events, 0)
+            db.execute(
+                "UPDATE runs SET failure_class = ?, failure = ? WHERE id = ?",
+                (json.loads(failure)["class"] if failure else None, failure, run_id),
+            )
+        db.executescript(
+            "CREATE INDEX IF NOT EXISTS runs_by_failure_class "
+            "ON runs (failure_class, score DESC, id)"
+        )
+    if version < 3:
+        # Version 3 adds fault evaluations (sitgen faults): two tables, empty for a
+        # campaign.
+        db.executescript(FAULT_SCHEMA)
+    if version < 4:
+        # Version 4 adds shrink results (sitgen shrink): one table, empty until then.
+        db.executescript(SHRINK_SCHEMA)
+    if version < 5:
+        # Version 5 adds searches (sitgen search): each run's generation, parents and
+        # genes (NULL for a campaign's runs) and the search's plan.
+        add_columns(db, "runs", "generation INTEGER", "parents TEXT", "genes TEXT")
+        db.executescript(SEARCH_SCHEMA)
+    if version < 6:
+        # Version 6 adds each run's situation coverage (NULL for runs stored before:
+        # coverage is observed during a run and cannot be read back from its log).
+        add_columns(db, "runs", "coverage TEXT")
+    if version < 7:
+        # Version 7 stores some runs as a summary only (kept = 0) and each run's event
+        # log digest; runs stored before are whole (kept NULL) with their log.
+        add_columns(db, "runs", "kept INTEGER", "events_sha256 TEXT")
+    if version < 8:
+        # Version 8 adds an expert's pairwise judgements of runs (sitgen judge): one
+        # table, empty until then.
+        db.executescript(JUDGEMENT_SCHEMA)
+    if version < 9:
+        # Version 9 adds the robustness of failing runs (reruns under perturbation):
+        # one table, empty until a campaign, search or `sitgen robustness` fills it.
+        db.executescript(ROBUSTNESS_SCHEMA)
+        # And the robust kill rule's trials: each candidate situation's test, the
+        # copies each chunk ran, and the killing test's counts on each kill.
+        db.executescript(KILL_TEST_SCHEMA)
+        add_columns(db, "fault_kills", *KILL_TEST_COLUMNS)
+        # And controller diffs (sitgen diff): their plan and verdicts.
+        db.executescript(DIFF_SCHEMA)
+    db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
+
+
+def add_columns(db: sqlite3.Connection, table: str, *columns: str) -> None:
+    """Add the columns (``name TYPE``) ``table`` lacks."""
+    present = {c[1] for c in db.execute(f"PRAGMA table_info({table})")}
+    for column in columns:
+        if column.split()[0] not in present:
+            db.execute(f"ALTER TABLE {table} ADD COLUMN {column}")
