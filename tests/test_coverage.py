@@ -20,16 +20,9 @@ import pytest
 import sitgen
 from sitgen import _core
 from sitgen.execution.jobs import parse_campaign
-from sitgen.generation.search import (
-    BATCH,
-    GUIDE_EPSILON,
-    INITIAL,
-    Genome,
-    SearchPlan,
-    guide_weights,
-    guided_genes,
-    run_search,
-)
+from sitgen.generation.genome import Genome
+from sitgen.generation.guidance import GUIDE_EPSILON, guide_weights, guided_genes
+from sitgen.generation.search import BATCH, INITIAL, SearchPlan, run_search
 from sitgen.store import Store
 from sitgen.triage.coverage import all_cells, dimensions, split, stored, summarise, total_cells
 from tests.conftest import ROOT, open_page, run_cli

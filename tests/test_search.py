@@ -16,17 +16,8 @@ import pytest
 
 from sitgen import _core
 from sitgen.execution.jobs import parse_campaign
-from sitgen.generation.search import (
-    BATCH,
-    INITIAL,
-    OPERATORS,
-    Archive,
-    SearchPlan,
-    fresh,
-    generation_of,
-    run_search,
-    vary,
-)
+from sitgen.generation.genome import OPERATORS, fresh, vary
+from sitgen.generation.search import BATCH, INITIAL, Archive, SearchPlan, generation_of, run_search
 from tests.conftest import open_page, run_cli
 from tests.test_campaign import SMALL, start_command, wait_for_runs, write_spec
 

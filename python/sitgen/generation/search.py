@@ -36,7 +36,6 @@ later generation draws each ``[vary]`` gene level by level, in proportion to the
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import time
@@ -56,10 +55,25 @@ from sitgen.execution.jobs import (
     check_campaign,
     check_workers,
     controller_names,
-    draw_genes,
     express_job,
     job_seed,
-    vary_order,
+)
+from sitgen.generation.genome import (
+    OPERATORS,
+    P_CHOICE,
+    SIGMA_ISO,
+    SIGMA_LINE,
+    Genome,
+    fresh,
+    solution,
+    vary,
+)
+from sitgen.generation.guidance import (
+    GUIDE_EPSILON,
+    GUIDE_PRIOR_RUNS,
+    GUIDE_STRATA,
+    guide_weights,
+    guided_genes,
 )
 from sitgen.store import KINDS, Store, StoreError, unpack_json
 from sitgen.triage.failures import classes as failure_classes
@@ -67,47 +81,59 @@ from sitgen.triage.failures import classes as failure_classes
 if TYPE_CHECKING:
     from ribs.archives import GridArchive
 
+
 STRATEGIES = ("map-elites", "random", "coverage")
+
+
 OBJECTIVES = ("score", "threshold")
+
+
 """``score``: the run's score (the most dangerous run per cell); ``threshold``: the paper's
 aim of fewer low scores, min(score, threshold) / threshold, so every run at or above the
 threshold is as good as any other and the search spends itself on filling cells."""
+
+
 MEASURES = ("failure_class", "terrain", "peers", "min_clearance", "approach_side")
+
+
 DEFAULT_MEASURES = ("failure_class", "terrain")
+
+
 LOW_SCORE_POINTS = 10.0
+
+
 """The paper's low score (§4.2: the share of runs under 10 points)."""
+
+
 INITIAL = 32
+
+
 """Runs of generation 0: the campaign's first jobs, before any variation."""
+
+
 BATCH = 16
+
+
 """Runs per later generation (fixed, so the runs do not depend on the worker count)."""
+
+
 FRESH_SHARE = 0.125
+
+
 """Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
-P_CHOICE = 0.2
-"""Probability that a child draws a choice gene anew instead of taking its parent's."""
-OPERATORS = {"new_mission": 0.5, "tune": 0.3, "new_map": 0.2}
-"""How a child is varied from its elite, and how often: ``new_mission`` keeps the elite's map
-(its terrain genes and terrain seed) and draws the robots anew on it (a new mission seed; the
-other genes varied); ``tune`` varies every gene and keeps both seeds; ``new_map`` draws a new
-map of varied terrain genes and keeps the mission's draws."""
-SIGMA_ISO = 0.05
-"""Iso+LineDD's isotropic noise, in each real gene's range scaled to [0, 1]."""
-SIGMA_LINE = 0.2
-"""Iso+LineDD's step along the line between the two parents."""
+
+
 CLEARANCE_CELLS = 5
+
+
 """Cells of the ``min_clearance`` measure below the monitor's default unsafe-proximity distance,
 0.5 m (and one more for runs with no near miss)."""
+
+
 CLEARANCE_STEP_M = 0.5 / CLEARANCE_CELLS
+
+
 MAX_BUDGET = 1_000_000
-GUIDE_STRATA = 4
-"""Levels of a real or whole gene for the coverage guide (equal parts of its range)."""
-GUIDE_EPSILON = 0.25
-"""Share of the coverage guide's draw that stays uniform over a gene's levels, so that a level
-that found nothing early is still tried."""
-GUIDE_PRIOR_RUNS = 2.0
-"""Runs' worth of the overall mean credit each level starts with (few runs say little)."""
-
-
-# Measures.
 
 
 @dataclass(frozen=True)
@@ -183,9 +209,6 @@ def measures_for(spec: CampaignSpec, names: Sequence[str]) -> list[Measure]:
     return out
 
 
-# The plan.
-
-
 @dataclass(frozen=True)
 class SearchPlan:
     """What a search does besides the campaign spec, seed and budget (stored with it: a resumed
@@ -244,194 +267,6 @@ def plan_search(
         raise _core.SpecError(f"--threshold: {threshold} is not a positive number of points")
     measures_for(spec, measures)
     return SearchPlan(strategy, tuple(measures), objective, float(threshold))
-
-
-# Genomes.
-
-
-@dataclass(frozen=True)
-class Genome:
-    """A situation to run: one gene per ``[vary]`` entry (in :func:`vary_order`), the seed of
-    its terrain's draws, the seed of its mission's draws (placement, routes, peers) and the
-    run's own seed (sensor noise; the situation seed where a stage has no seed of its own)."""
-
-    genes: tuple[int | float, ...]
-    seed: int
-    terrain_seed: int
-    mission_seed: int
-
-    def as_dict(self, spec: CampaignSpec) -> dict[str, Any]:
-        paths = [path for path, _ in vary_order(spec)]
-        return {
-            "seed": self.seed,
-            "terrain_seed": self.terrain_seed,
-            "mission_seed": self.mission_seed,
-            "draws": dict(zip(paths, self.genes, strict=True)),
-        }
-
-    @staticmethod
-    def from_dict(spec: CampaignSpec, data: dict[str, Any]) -> Genome:
-        draws = data["draws"]
-        return Genome(
-            tuple(draws[path] for path, _ in vary_order(spec)),
-            int(data["seed"]),
-            int(data["terrain_seed"]),
-            int(data["mission_seed"]),
-        )
-
-
-def _to_unit(kind: str, args: list[Any], gene: int | float) -> float:
-    """A gene scaled to [0, 1] over its distribution's range (a choice: its index's middle)."""
-    if kind == "choice":
-        return (int(gene) + 0.5) / len(args)
-    lo, hi = float(args[0]), float(args[1])
-    if kind == "int":
-        return (int(gene) - lo + 0.5) / (hi - lo + 1)
-    return 0.5 if hi == lo else (float(gene) - lo) / (hi - lo)
-
-
-def _from_unit(kind: str, args: list[Any], u: float) -> int | float:
-    lo, hi = args
-    if kind == "int":
-        return int(lo + min(hi - lo, math.floor(u * (hi - lo + 1))))
-    return float(lo + u * (hi - lo))
-
-
-def solution(spec: CampaignSpec, genome: Genome) -> np.ndarray:
-    """The genome's genes scaled to [0, 1], as the archive stores a solution (at least one
-    number: a spec that varies nothing searches seeds alone)."""
-    units = [
-        _to_unit(*next(iter(dist.items())), gene)
-        for (_, dist), gene in zip(vary_order(spec), genome.genes, strict=True)
-    ]
-    return np.array(units or [0.0])
-
-
-def fresh(spec: CampaignSpec, seed: int, index: int) -> Genome:
-    """Run ``index``'s fresh genome: exactly the campaign's job ``index``."""
-    own = job_seed(seed, index)
-    return Genome(tuple(draw_genes(spec, seed, index)), own, own, own)
-
-
-def new_seed(seed: int, index: int, stage: str) -> int:
-    """A new seed for ``stage`` of a varied child at run ``index`` (63 bits, apart from job
-    seeds and from the other stages')."""
-    digest = hashlib.sha256(f"{seed}:{index}:search:{stage}".encode()).digest()
-    return int.from_bytes(digest[:8], "little") >> 1
-
-
-def _is_terrain(path: str) -> bool:
-    return path.startswith("situation.terrain.")
-
-
-def vary(
-    spec: CampaignSpec,
-    seed: int,
-    index: int,
-    first: Genome,
-    second: Genome,
-    rng: np.random.Generator,
-) -> tuple[str, Genome]:
-    """A child of two elites by one of :data:`OPERATORS` (drawn by their weights), and the
-    operator's name. Real genes vary by Iso+LineDD, a choice is drawn anew with probability
-    :data:`P_CHOICE`; the child always has a run seed of its own, so no run repeats."""
-    names = list(OPERATORS)
-    weights = np.array(list(OPERATORS.values()))
-    operator = names[int(rng.choice(len(names), p=weights / weights.sum()))]
-    line = rng.normal()
-    genes: list[int | float] = []
-    for (path, dist), a, b in zip(vary_order(spec), first.genes, second.genes, strict=True):
-        kind, args = next(iter(dist.items()))
-        if operator == "new_mission" and _is_terrain(path):
-            genes.append(a)  # the same map
-        elif kind == "choice":
-            genes.append(int(rng.integers(len(args))) if rng.random() < P_CHOICE else a)
-        else:
-            ua, ub = _to_unit(kind, args, a), _to_unit(kind, args, b)
-            u = ua + SIGMA_ISO * rng.normal() + SIGMA_LINE * line * (ub - ua)
-            genes.append(_from_unit(kind, args, float(np.clip(u, 0.0, 1.0))))
-    terrain_seed = new_seed(seed, index, "terrain") if operator == "new_map" else first.terrain_seed
-    mission_seed = (
-        new_seed(seed, index, "mission") if operator == "new_mission" else first.mission_seed
-    )
-    return operator, Genome(tuple(genes), new_seed(seed, index, "run"), terrain_seed, mission_seed)
-
-
-# The coverage guide.
-
-
-def levels(kind: str, args: list[Any]) -> int:
-    """The coverage guide's levels of a ``[vary]`` entry: a choice's values, else
-    :data:`GUIDE_STRATA` equal parts of its range (fewer for a short whole range)."""
-    if kind == "choice":
-        return len(args)
-    if kind == "int":
-        return min(GUIDE_STRATA, int(args[1]) - int(args[0]) + 1)
-    return GUIDE_STRATA
-
-
-def level_of(kind: str, args: list[Any], gene: int | float) -> int:
-    """The level a gene lies in."""
-    if kind == "choice":
-        return int(gene)
-    n = levels(kind, args)
-    return min(n - 1, int(_to_unit(kind, args, gene) * n))
-
-
-def credit(covered: Sequence[tuple[Genome, tuple[str, ...]]]) -> list[float]:
-    """Each run's coverage credit: the sum over its cells of 1 / (runs that exercised the
-    cell). A cell only this run reached is worth 1, a cell every run reaches almost nothing,
-    and a run that met no peer nothing (after the rare-branch credit of coverage-guided
-    fuzzers, e.g. FairFuzz)."""
-    hits: dict[str, int] = {}
-    for _, cells in covered:
-        for c in cells:
-            hits[c] = hits.get(c, 0) + 1
-    return [sum(1.0 / hits[c] for c in cells) for _, cells in covered]
-
-
-def guide_weights(
-    spec: CampaignSpec, covered: Sequence[tuple[Genome, tuple[str, ...]]]
-) -> list[np.ndarray]:
-    """For each ``[vary]`` entry, the probability of each of its levels: in proportion to the
-    mean :func:`credit` of the runs drawn at that level (each level starting with
-    :data:`GUIDE_PRIOR_RUNS` runs at the overall mean), mixed with a uniform share
-    :data:`GUIDE_EPSILON`."""
-    credits = credit(covered)
-    mean = float(np.mean(credits)) if credits else 0.0
-    out = []
-    for j, (_, dist) in enumerate(vary_order(spec)):
-        kind, args = next(iter(dist.items()))
-        n = levels(kind, args)
-        total = np.full(n, GUIDE_PRIOR_RUNS * mean)
-        runs = np.full(n, GUIDE_PRIOR_RUNS)
-        for (genome, _), c in zip(covered, credits, strict=True):
-            level = level_of(kind, args, genome.genes[j])
-            total[level] += c
-            runs[level] += 1
-        w = total / runs
-        p = w / w.sum() if w.sum() > 0 else np.full(n, 1.0 / n)
-        out.append((1 - GUIDE_EPSILON) * p + GUIDE_EPSILON / n)
-    return out
-
-
-def guided_genes(
-    spec: CampaignSpec, weights: list[np.ndarray], rng: np.random.Generator
-) -> tuple[int | float, ...]:
-    """Genes drawn level by level from :func:`guide_weights`, uniform within a level."""
-    genes: list[int | float] = []
-    for (_, dist), p in zip(vary_order(spec), weights, strict=True):
-        kind, args = next(iter(dist.items()))
-        level = int(rng.choice(len(p), p=p))
-        if kind == "choice":
-            genes.append(level)
-        else:
-            u = (level + rng.random()) / len(p)
-            genes.append(_from_unit(kind, args, min(u, 1.0 - 1e-12)))
-    return tuple(genes)
-
-
-# Generations.
 
 
 def generation_of(index: int) -> int:
@@ -600,9 +435,6 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
     return out
 
 
-# Running a search.
-
-
 @dataclass(frozen=True)
 class SearchProgress:
     """Where a search stands (for a progress bar)."""
@@ -736,9 +568,6 @@ def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any
                 f"{store.path}: run {view['id']} is not the run this search asks for there "
                 "(written by another sitgen?); give a new --db"
             )
-
-
-# Reading a search.
 
 
 @dataclass
