@@ -544,106 +544,37 @@ class Store:
         self.db.execute("DELETE FROM trajectories WHERE run_id = ?", (run_id,))
 
     def _add_run(self, row: RunRow) -> None:
-        situation = json.loads(row.situation_json) if row.situation_json else None
-        spec = row.situation_spec
-        # A situation given whole (a benchmark world) has no terrain spec to name it by.
-        terrain = (
-            spec.get("terrain", {}).get("preset")
-            or spec.get("terrain", {}).get("source", {}).get("kind")
-            or ("given" if "format" in spec else None)
-        )
-        # A summary keeps what ranks, groups and finds the run again, not what re-simulation
-        # gives back; a run that failed is always kept whole (there is nothing to re-run).
-        whole = row.keep or row.record is None
         self.db.execute(
             "INSERT INTO situations (id, seed, spec, terrain, peers, content_hash, situation) "
             "VALUES (?, ?, ?, ?, ?, ?, ?)",
-            (
-                row.id,
-                row.situation_seed,
-                json.dumps(row.situation_spec, sort_keys=True) if whole else "",
-                terrain,
-                len(situation["robots"]) - 1 if situation else None,
-                situation["provenance"]["content_hash"] if situation else None,
-                row.situation_json if whole else None,
-            ),
+            row.situation_values(),
         )
-        rec = row.record or {
-            "outcome": "error",
-            "reason": row.error or "unknown failure",
-            "score": {"total": 0.0, "breakdown": {}},
-            "events": [],
-            "steps": 0,
-            "time_s": 0.0,
-        }
-        events = rec["events"]
-        agent_clearances = [
-            e["details"]["min_clearance_m"]
-            for e in events
-            if e["kind"] == "unsafe_proximity" and e["scored"]
-        ]
-        waypoints = len(situation["robots"][0]["waypoints"]) if situation else 0
-        failure = rec.get("failure")
-        reached = sum(1 for e in events if e["kind"] == "waypoint_reached" and e["robot"] == 0)
         self.db.execute(
             "INSERT INTO runs (id, situation_id, controller, run_spec, run_seed, outcome, reason, "
             "score, breakdown, steps, time_s, collisions, min_clearance_m, waypoints_reached, "
             "waypoints, events_jsonl, failure_class, failure, generation, parents, genes, "
             "coverage, kept, events_sha256) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (
-                row.id,
-                row.id,
-                row.controller,
-                json.dumps(row.run_spec, sort_keys=True) if whole else "",
-                row.run_seed,
-                rec["outcome"],
-                rec["reason"],
-                rec["score"]["total"],
-                json.dumps(rec["score"]["breakdown"], sort_keys=True),
-                rec["steps"],
-                rec["time_s"],
-                sum(1 for e in events if e["kind"] == "collision" and e["scored"]),
-                min(agent_clearances) if agent_clearances else None,
-                reached,
-                waypoints,
-                row.events_jsonl if whole else "",
-                failure["class"] if failure else None,
-                json.dumps(failure, sort_keys=True) if failure else None,
-                row.generation,
-                None if row.parents is None else json.dumps(list(row.parents)),
-                None if row.genes is None else json.dumps(row.genes, sort_keys=True),
-                pack_json(rec["coverage"]) if rec.get("coverage") else None,
-                int(whole),
-                events_digest(row.events_jsonl),
-            ),
+            row.run_values(),
         )
-        if not whole:
+        if not row.whole:
             return
         self.db.executemany(
             "INSERT INTO events (run_id, seq, kind, start_s, end_s, robot, other, scored, "
             "details) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            [
-                (
-                    row.id,
-                    seq,
-                    e["kind"],
-                    e["start_s"],
-                    e["end_s"],
-                    e["robot"],
-                    None if e["other"] is None else str(e["other"]),
-                    int(e["scored"]),
-                    json.dumps(e["details"], sort_keys=True),
-                )
-                for seq, e in enumerate(events)
-            ],
+            row.event_values(),
         )
         if row.trajectory is not None:
-            rows = rec["steps"] + 1
             self.db.execute(
                 "INSERT INTO trajectories (run_id, robots, rows, encoding, data) "
                 "VALUES (?, ?, ?, ?, ?)",
-                (row.id, row.robots, rows, TRAJECTORY_ENCODING, row.trajectory),
+                (
+                    row.id,
+                    row.robots,
+                    row.outcome_record["steps"] + 1,
+                    TRAJECTORY_ENCODING,
+                    row.trajectory,
+                ),
             )
 
     # Reading.

@@ -99,6 +99,101 @@ class RunRow:
     summary (a campaign's run: its specs follow from the campaign, and the rest comes back by
     re-simulation, :mod:`sitgen.triage.recall`)."""
 
+    @property
+    def whole(self) -> bool:
+        """Whether it is stored whole. A summary keeps what ranks, groups and finds the run
+        again, not what re-simulation gives back; a run that failed is always kept whole
+        (there is nothing to re-run)."""
+        return self.keep or self.record is None
+
+    @property
+    def outcome_record(self) -> dict[str, Any]:
+        """Its run record, or the record of an error where generation failed."""
+        return self.record or {
+            "outcome": "error",
+            "reason": self.error or "unknown failure",
+            "score": {"total": 0.0, "breakdown": {}},
+            "events": [],
+            "steps": 0,
+            "time_s": 0.0,
+        }
+
+    def situation_values(self) -> tuple[Any, ...]:
+        """Its row of ``situations`` (id, seed, spec, terrain, peers, content_hash,
+        situation)."""
+        situation = json.loads(self.situation_json) if self.situation_json else None
+        spec = self.situation_spec
+        # A situation given whole (a benchmark world) has no terrain spec to name it by.
+        terrain = (
+            spec.get("terrain", {}).get("preset")
+            or spec.get("terrain", {}).get("source", {}).get("kind")
+            or ("given" if "format" in spec else None)
+        )
+        return (
+            self.id,
+            self.situation_seed,
+            json.dumps(self.situation_spec, sort_keys=True) if self.whole else "",
+            terrain,
+            len(situation["robots"]) - 1 if situation else None,
+            situation["provenance"]["content_hash"] if situation else None,
+            self.situation_json if self.whole else None,
+        )
+
+    def run_values(self) -> tuple[Any, ...]:
+        """Its row of ``runs``, in the table's column order."""
+        situation = json.loads(self.situation_json) if self.situation_json else None
+        rec = self.outcome_record
+        events = rec["events"]
+        agent_clearances = [
+            e["details"]["min_clearance_m"]
+            for e in events
+            if e["kind"] == "unsafe_proximity" and e["scored"]
+        ]
+        failure = rec.get("failure")
+        return (
+            self.id,
+            self.id,
+            self.controller,
+            json.dumps(self.run_spec, sort_keys=True) if self.whole else "",
+            self.run_seed,
+            rec["outcome"],
+            rec["reason"],
+            rec["score"]["total"],
+            json.dumps(rec["score"]["breakdown"], sort_keys=True),
+            rec["steps"],
+            rec["time_s"],
+            sum(1 for e in events if e["kind"] == "collision" and e["scored"]),
+            min(agent_clearances) if agent_clearances else None,
+            sum(1 for e in events if e["kind"] == "waypoint_reached" and e["robot"] == 0),
+            len(situation["robots"][0]["waypoints"]) if situation else 0,
+            self.events_jsonl if self.whole else "",
+            failure["class"] if failure else None,
+            json.dumps(failure, sort_keys=True) if failure else None,
+            self.generation,
+            None if self.parents is None else json.dumps(list(self.parents)),
+            None if self.genes is None else json.dumps(self.genes, sort_keys=True),
+            pack_json(rec["coverage"]) if rec.get("coverage") else None,
+            int(self.whole),
+            events_digest(self.events_jsonl),
+        )
+
+    def event_values(self) -> list[tuple[Any, ...]]:
+        """Its rows of ``events``, one per event in order."""
+        return [
+            (
+                self.id,
+                seq,
+                e["kind"],
+                e["start_s"],
+                e["end_s"],
+                e["robot"],
+                None if e["other"] is None else str(e["other"]),
+                int(e["scored"]),
+                json.dumps(e["details"], sort_keys=True),
+            )
+            for seq, e in enumerate(self.outcome_record["events"])
+        ]
+
 
 def pack_json(value: Any) -> bytes:
     """A JSON value as a stored column holds a long one: sorted-key JSON, zlib'd (a run's
