@@ -5,7 +5,9 @@ Writes happen one batch per transaction, so a process killed at any moment leave
 committed run intact and loses only the runs it had in flight; a resumed campaign skips the
 runs already stored.
 
-The schema is in :mod:`sitgen.store.schema`, the records the store hands out in
+:class:`Store` is longer than the project's 600-line guide: it is the one class that opens,
+upgrades and writes stores, and its writes read best beside each other, under the transaction
+rule above. The schema is in :mod:`sitgen.store.schema`, the records the store hands out in
 :mod:`sitgen.store.records`; both are named here too, where users of the store look."""
 
 from __future__ import annotations
