@@ -24,7 +24,7 @@ lint:
 	$(BIN)/ruff check python tests benches examples
 	$(BIN)/ruff format --check python tests benches examples
 	$(BIN)/mypy
-	cd python && ../$(BIN)/lint-imports ../pyproject.toml
+	$(BIN)/lint-imports pyproject.toml
 
 rust-test:
 	cargo test -p sitgen-core
