@@ -36,7 +36,7 @@ from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
 from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
-from sitgen.triage.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_result, verdict
+from sitgen.triage.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_copy, verdict
 from sitgen.triage.robustness import perturbed
 
 CHUNK = 16
@@ -102,7 +102,7 @@ class DiffPlan:
 
 
 @dataclass
-class Judgement:
+class Difference:
     """One class on one situation where A and B differ, judged on perturbed copies."""
 
     situation: int
@@ -143,10 +143,10 @@ def _jobs(situations: Situations, i: int, plan: DiffPlan) -> list[Job]:
     ]
 
 
-def _differences(store: Store, chunk: range) -> tuple[list[Judgement], list[tuple[int, str]]]:
+def _differences(store: Store, chunk: range) -> tuple[list[Difference], list[tuple[int, str]]]:
     """The classes to judge on the chunk's situations, and each (situation, class) both
     sides showed alike (unchanged)."""
-    judge: list[Judgement] = []
+    judge: list[Difference] = []
     alike: list[tuple[int, str]] = []
     for i in chunk:
         a, b = outcome_of(store, 2 * i), outcome_of(store, 2 * i + 1)
@@ -158,7 +158,7 @@ def _differences(store: Store, chunk: range) -> tuple[list[Judgement], list[tupl
             continue
         shown = {a.failure_class, b.failure_class}
         for c in sorted(x for x in shown if x is not None):
-            judge.append(Judgement(i, c))
+            judge.append(Difference(i, c))
     return judge, alike
 
 
@@ -166,17 +166,17 @@ def _judge(
     executor: Executor,
     situations: Situations,
     plan: DiffPlan,
-    judgements: list[Judgement],
+    differences: list[Difference],
     stop: Callable[[], bool] | None,
 ) -> int | None:
-    """Run perturbed copies of both sides, stage by stage, until every judgement is settled;
+    """Run perturbed copies of both sides, stage by stage, until every difference is settled;
     copies of one situation serve every class judged there. The copies run, or None if
     stopped part way."""
     seen: dict[tuple[str, int, int], Outcome] = {}
     copies = 0
     done = 0
     for target in STAGES:
-        open_ = [j for j in judgements if not (j.new is not None and j.fixed is not None)]
+        open_ = [j for j in differences if not (j.new is not None and j.fixed is not None)]
         if not open_:
             break
         wanted = sorted(
@@ -201,7 +201,7 @@ def _judge(
             )
         got: dict[int, Outcome] = {}
         for job, result in executor.results(jobs):
-            got[job.index] = outcome_of_result(result, lambda _: [])
+            got[job.index] = outcome_of_copy(result)
             if stop is not None and stop():
                 executor.stop()
         if len(got) < len(jobs):
@@ -270,13 +270,13 @@ def run_diff(
                 if not complete:
                     interrupted = True
                     break
-                judgements, alike = _differences(store, chunk)
-                copies = _judge(executor, situations, plan, judgements, stop)
+                differences, alike = _differences(store, chunk)
+                copies = _judge(executor, situations, plan, differences, stop)
                 if copies is None:
                     interrupted = True
                     break
                 ran += copies
-                store.record_diff_chunk(first, copies, [_row_of(j) for j in judgements], alike)
+                store.record_diff_chunk(first, copies, [_row_of(j) for j in differences], alike)
                 if on_progress:
                     on_progress(chunk.stop, n)
                 if stop is not None and stop():
@@ -288,7 +288,7 @@ def run_diff(
     return DiffResult(ran, int(evaluated), interrupted, time.perf_counter() - started)
 
 
-def _row_of(j: Judgement) -> dict[str, Any]:
+def _row_of(j: Difference) -> dict[str, Any]:
     return {
         "situation": j.situation,
         "failure_class": j.failure_class,

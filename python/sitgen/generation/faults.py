@@ -59,8 +59,8 @@ from sitgen.triage.kill import (
     Outcome,
     event_of,
     mutants_of,
-    outcome_of_result,
-    p_value,
+    outcome_of_copy,
+    p_bounds,
     screen,
     verdict,
 )
@@ -392,10 +392,8 @@ class Trial:
     def p_bound(self) -> float:
         """The p-value the verdict rests on: for a kill, the most the full test's could be
         whatever the copies not run would show; for a spare, the least."""
-        left = COPIES - self.done
-        if self.killed:
-            return p_value(self.faulty, self.correct + left, COPIES)
-        return p_value(self.faulty + left, self.correct, COPIES)
+        worst, best = p_bounds(self.faulty, self.correct, self.done)
+        return worst if self.killed else best
 
     def row(self) -> dict[str, Any]:
         """The store's row of this trial (:meth:`Store.record_fault_chunk`)."""
@@ -413,10 +411,6 @@ class Trial:
             "p_value": k.p_value,
             "killed": bool(self.killed),
         }
-
-
-def _classes_of(events_jsonl: str) -> list[str]:
-    return list(_core.event_classes(events_jsonl, 0)) if events_jsonl else []
 
 
 def _confirm(
@@ -451,7 +445,7 @@ def _confirm(
             jobs.append(Job(index, base.seed, base.situation, run, base.error))
         seen: dict[int, Outcome] = {}
         for job, result in executor.results(jobs):
-            seen[job.index] = outcome_of_result(result, _classes_of)
+            seen[job.index] = outcome_of_copy(result)
             if stop is not None and stop():
                 executor.stop()
         if len(seen) < len(jobs):

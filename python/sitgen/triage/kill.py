@@ -148,24 +148,32 @@ def verdict(faulty: int, correct: int, done: int, copies: int = COPIES) -> bool 
     """After ``done`` of ``copies`` copies a side: True (killed) if even the worst remaining
     copies keep the p-value at most :data:`ALPHA`, False (spared) if even the best ones cannot
     bring it there, None (run more) otherwise; at ``done == copies``, the test's verdict."""
-    left = copies - done
-    if p_value(faulty, correct + left, copies) <= ALPHA:
+    worst, best = p_bounds(faulty, correct, done, copies)
+    if worst <= ALPHA:
         return True
-    if p_value(faulty + left, correct, copies) > ALPHA:
+    if best > ALPHA:
         return False
     return None
 
 
-def outcome_of_result(result: Mapping[str, Any], classes_of: Any) -> Outcome:
-    """The kill rule's view of a job's result (``classes_of(events_jsonl)``: the failure
-    classes its events show)."""
+def p_bounds(faulty: int, correct: int, done: int, copies: int = COPIES) -> tuple[float, float]:
+    """The full test's p-value at its largest and at its smallest, whatever the ``copies -
+    done`` copies not yet run show: they all go the correct side's way, or all the faulty's."""
+    left = copies - done
+    return p_value(faulty, correct + left, copies), p_value(faulty + left, correct, copies)
+
+
+def outcome_of_copy(result: Mapping[str, Any]) -> Outcome:
+    """The kill rule's view of a perturbed copy's job result: its failure class, score and
+    whether it erred (a copy is judged by the screen's event, which needs nothing else, so
+    the classes of its other events are not read)."""
     if not result.get("ok"):
         return Outcome(None, frozenset(), 0.0, True)
     record = json.loads(result["record"])
     failure = record.get("failure")
     return Outcome(
         None if failure is None else str(failure["class"]),
-        frozenset(classes_of(result.get("events_jsonl", ""))),
+        frozenset(),
         float(record["score"]["total"]),
         record.get("outcome") == "error",
     )

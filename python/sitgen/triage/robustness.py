@@ -15,6 +15,7 @@ its copies is *robust*; one that recurs less is *knife-edge*.
 from __future__ import annotations
 
 import copy
+import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -24,6 +25,7 @@ from sitgen import _core
 from sitgen.execution.campaign import Executor
 from sitgen.execution.jobs import Job, check_workers
 from sitgen.store import Store, StoreError
+from sitgen.triage.kill import outcome_of_copy
 from sitgen.triage.recall import stored_run
 
 RERUNS = 8
@@ -49,8 +51,6 @@ def perturbed(run_spec: dict[str, Any], k: int) -> dict[str, Any]:
 
 def perturbation_sizes() -> dict[str, float]:
     """The default sizes of a copy's perturbations, as the core resolves them."""
-    import json
-
     spec = json.loads(_core.check_run_spec(json.dumps(perturbed({}, 1))))
     sizes: dict[str, float] = spec["perturbation"]
     return {k: v for k, v in sizes.items() if k != "rerun"}
@@ -127,15 +127,8 @@ def tally(classes: Iterable[str | None]) -> str:
 
 def copy_class(result: dict[str, Any]) -> str | None:
     """A copy's failure class from its job's result (``error`` where it did not run)."""
-    import json
-
-    if not result.get("ok"):
-        return ERROR
-    record = json.loads(result["record"])
-    if record.get("outcome") == "error":
-        return ERROR
-    failure = record.get("failure")
-    return None if failure is None else str(failure["class"])
+    outcome = outcome_of_copy(result)
+    return ERROR if outcome.error else outcome.failure_class
 
 
 def copy_jobs(row: dict[str, Any], reruns: int, first_index: int) -> list[Job]:
