@@ -187,6 +187,11 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str,
     return db, evaluate(tmp, db, "--workers", "1")
 
 
+def stored_runs_count(db: Path) -> int:
+    with sqlite3.connect(db) as c:
+        return int(c.execute("SELECT count(*) FROM runs").fetchone()[0])
+
+
 def test_the_json_report_gives_each_fault_and_the_kill_rate(
     reference: tuple[Path, dict[str, Any]],
 ) -> None:
@@ -200,6 +205,14 @@ def test_the_json_report_gives_each_fault_and_the_kill_rate(
     curve = report["curve"]
     assert curve[-1] == {"budget": 20, "kill_rate": report["kill_rate"]}
     assert [c["kill_rate"] for c in curve] == sorted(c["kill_rate"] for c in curve)
+    # What the kill rule cost: every candidate test, by the copies a side it ran before it
+    # decided, and the copies among all runs.
+    tests = {int(k): v for k, v in report["tests_by_copies"].items()}
+    assert set(tests) <= {2, 4, 8} and sum(tests.values()) >= len(killed)
+    assert report["runs"] == stored_runs_count(db) + report["perturbed_copies"]
+    # Each test ran its faulty copies; a correct copy serves every arm tested on its situation.
+    faulty_copies = sum(k * v for k, v in tests.items())
+    assert 0 < faulty_copies <= report["perturbed_copies"] <= 2 * faulty_copies
     runs = stored_runs(db)
     with sqlite3.connect(db) as c:
         classes = dict(c.execute("SELECT id, failure_class FROM runs"))

@@ -74,6 +74,11 @@ class FaultReport:
     """The equivalent mutants run beside the faults: a kill of one is a false kill."""
     runs: int = 0
     """Runs in all, every perturbed copy counted."""
+    perturbed_copies: int = 0
+    """Of those, the kill tests' perturbed copies."""
+    tests_by_copies: dict[int, int] = field(default_factory=dict)
+    """Candidate tests (faults' and mutants') by the copies a side they ran before the
+    sequential test decided: what the kill rule costs."""
 
     @property
     def kill_rate(self) -> float:
@@ -101,6 +106,8 @@ class FaultReport:
             "killed": sum(f.killed for f in self.faults),
             "false_kill_rate": self.false_kill_rate,
             "runs": self.runs,
+            "perturbed_copies": self.perturbed_copies,
+            "tests_by_copies": {str(k): v for k, v in sorted(self.tests_by_copies.items())},
             "curve": self.curve(),
             "faults": [f.as_dict() for f in self.faults],
             "mutants": [m.as_dict() for m in self.mutants],
@@ -146,6 +153,7 @@ def fault_report(store: Store) -> FaultReport:
     situations = situations_evaluated(store)
     trials: dict[str, int] = {}
     chunks: list[tuple[int, int]] = []
+    tests_by_copies: dict[int, int] = {}
     if store.db.execute("SELECT 1 FROM sqlite_master WHERE name = 'fault_trials'").fetchone():
         trials = dict(
             store.db.execute("SELECT fault, count(*) FROM fault_trials GROUP BY fault").fetchall()
@@ -153,6 +161,9 @@ def fault_report(store: Store) -> FaultReport:
         chunks = store.db.execute(
             "SELECT first, copies FROM fault_chunks ORDER BY first"
         ).fetchall()
+        tests_by_copies = dict(
+            store.db.execute("SELECT copies, count(*) FROM fault_trials GROUP BY copies")
+        )
     runs_at = _runs_with_reruns(store, chunks)
     info = {f["id"]: f for f in catalogue()}
     mutant_info = {m.id: m for m in MUTANTS}
@@ -163,6 +174,8 @@ def fault_report(store: Store) -> FaultReport:
         budget=campaign.get("n", 0),
         situations=situations,
         runs=store.run_count() + sum(c for _, c in chunks),
+        perturbed_copies=sum(c for _, c in chunks),
+        tests_by_copies=tests_by_copies,
     )
     for arm in [*plan["faults"], *plan.get("mutants", [])]:
         mutant = mutant_info.get(arm)
@@ -257,6 +270,14 @@ def summary_lines(report: FaultReport) -> list[str]:
         lines.append(
             f"equivalent mutants falsely killed: {sum(m.killed for m in report.mutants)} of "
             f"{len(report.mutants)} (false-kill rate {report.false_kill_rate:.0%})"
+        )
+    if report.tests_by_copies:
+        stages = sorted(report.tests_by_copies)
+        lines.append(
+            f"kill tests: {sum(report.tests_by_copies.values())} candidate situations, decided "
+            f"after {'/'.join(map(str, stages))} copies a side: "
+            f"{'/'.join(str(report.tests_by_copies[s]) for s in stages)}; "
+            f"{report.perturbed_copies} perturbed copies of {report.runs} runs"
         )
     return lines
 
