@@ -19,12 +19,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
-from sitgen.controllers.external import (
-    STEP_TIMEOUT_S,
-    ControllerError,
-    is_user_controller,
-    load_controller,
-)
+from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
+from sitgen.controllers.user import is_user_controller, load_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
 
@@ -185,12 +181,12 @@ def _drive(
     step_timeout_s: float,
 ) -> None:
     """Step a run whose agent is a user controller, turning its failures into the outcome."""
+    named = run_spec.get("controller") or situation.agent.controller
     if controller is None:
-        named = run_spec.get("controller") or situation.agent.controller
         controller = named["name"]
     assert is_user_controller(controller)
     try:
-        user = load_controller(controller, step_timeout_s)
+        user = load_controller(controller, step_timeout_s, named.get("params"))
     except ControllerError as e:
         core.fail(str(e))
         return

@@ -11,6 +11,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from sitgen.controllers.user import USER_PREFIXES
 from sitgen.world.config import preset_spec
 from sitgen.world.situation import Situation, generate_situation
 
@@ -150,7 +151,9 @@ def run_command(
 
 @app.command("check-controller")
 def check_controller_command(
-    controller: Annotated[str, typer.Argument(help="python:MODULE:CLASS or 'cmd:PROGRAM ARGS'.")],
+    controller: Annotated[
+        str, typer.Argument(help="python:MODULE:CLASS, 'cmd:PROGRAM ARGS' or 'ros2:PROGRAM ARGS'.")
+    ],
     situation: Annotated[
         Path | None,
         typer.Option("--situation", help="Situation to drive (default: open_field, seed 0)."),
@@ -162,8 +165,10 @@ def check_controller_command(
     commands in time, stays within the limits, and shuts down. Exits 1 if a check fails."""
     from sitgen.run import check_controller
 
-    if not controller.startswith(("python:", "cmd:")):
-        raise UsageError(f"controller `{controller}`: expected python:MODULE:CLASS or cmd:PROGRAM")
+    if not controller.startswith(USER_PREFIXES):
+        raise UsageError(
+            f"controller `{controller}`: expected python:MODULE:CLASS, cmd:PROGRAM or ros2:PROGRAM"
+        )
     loaded = (
         Situation.load(situation, allow_edited)
         if situation is not None

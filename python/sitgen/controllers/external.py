@@ -21,11 +21,9 @@ import contextlib
 import json
 import os
 import selectors
-import shlex
 import shutil
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -178,7 +176,7 @@ def _deadline(timeout_s: float) -> Iterator[None]:
         signal.signal(signal.SIGALRM, previous)
 
 
-def _program(argv: list[str], name: str) -> str:
+def program_path(argv: list[str], name: str) -> str:
     """The program ``argv`` starts, resolved as exec would; ControllerError if there is none."""
     program = argv[0]
     found = shutil.which(program) if os.sep not in program else program
@@ -188,7 +186,7 @@ def _program(argv: list[str], name: str) -> str:
     return found
 
 
-def _die_with_parent_prefix() -> list[str]:
+def die_with_parent_prefix() -> list[str]:
     """``setpriv --pdeathsig KILL --`` where util-linux has it: the program is killed if the
     process that started it dies, even by SIGKILL (setpriv execs the program in its place)."""
     setpriv = shutil.which("setpriv")
@@ -214,7 +212,7 @@ class ProcessController(UserController):
         self.name = name
         if not argv:
             raise ControllerError(f"controller {name}: no program given")
-        self._argv = [_program(argv, name), *argv[1:]]
+        self._argv = [program_path(argv, name), *argv[1:]]
         self._host = host
         self._step_timeout_s = step_timeout_s
         self._start_timeout_s = start_timeout_s
@@ -240,7 +238,7 @@ class ProcessController(UserController):
     def _start(self) -> None:
         try:
             self._proc = subprocess.Popen(
-                [*_die_with_parent_prefix(), *self._argv],
+                [*die_with_parent_prefix(), *self._argv],
                 stdin=subprocess.PIPE,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
@@ -275,7 +273,7 @@ class ProcessController(UserController):
         if not all(isinstance(x, int | float) and not isinstance(x, bool) for x in (v, omega)):
             raise ControllerError(
                 f"controller {self.name} sent a malformed reply {when}: expected "
-                f'{{"v": number, "omega": number}}, got {_short(json.dumps(reply))}'
+                f'{{"v": number, "omega": number}}, got {short(json.dumps(reply))}'
             )
         return float(v), float(omega)  # type: ignore[arg-type]
 
@@ -296,12 +294,12 @@ class ProcessController(UserController):
         except ValueError:
             raise ControllerError(
                 f"controller {self.name} sent a malformed reply {when}: not JSON: "
-                f"{_short(line.decode(errors='replace'))}"
+                f"{short(line.decode(errors='replace'))}"
             ) from None
         if not isinstance(reply, dict):
             raise ControllerError(
                 f"controller {self.name} sent a malformed reply {when}: expected a JSON "
-                f"object, got {_short(line.decode(errors='replace'))}"
+                f"object, got {short(line.decode(errors='replace'))}"
             )
         if self._host and isinstance(reply.get("error"), str):
             raise ControllerError(f"controller {self.name} {reply['error']}")
@@ -404,7 +402,7 @@ class ProcessController(UserController):
             code = None
         self._drain_stderr()
         tail = self._stderr_tail.decode(errors="replace").strip().splitlines()
-        said = f": {_short(tail[-1])}" if tail else ""
+        said = f": {short(tail[-1])}" if tail else ""
         if code is None:
             how = "closed its output"
         elif code < 0:
@@ -441,44 +439,5 @@ class ProcessController(UserController):
         return unclean
 
 
-def _short(text: str) -> str:
+def short(text: str) -> str:
     return repr(text if len(text) <= 80 else text[:77] + "...")
-
-
-def load_controller(name: str | Any, step_timeout_s: float = STEP_TIMEOUT_S) -> UserController:
-    """The user controller ``name`` names (``python:…``, ``cmd:…``), or wrap an object with
-    ``reset`` and ``act``. Raises ControllerError if it cannot be started."""
-    if not isinstance(name, str):
-        return PythonController(name, f"`{type(name).__name__}`", step_timeout_s)
-    if name.startswith("python:"):
-        # Not `-m`: the package imports the host module, and runpy would warn that it ran a
-        # module already imported.
-        start = "from sitgen.controllers.host import main; main()"
-        host = [sys.executable, "-c", start, name.removeprefix("python:")]
-        return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
-    if name.startswith("cmd:"):
-        command_line = name.removeprefix("cmd:")
-        return ProcessController(shlex.split(command_line), f"`{name}`", step_timeout_s)
-    raise ControllerError(f"controller `{name}` is neither python:… nor cmd:…")
-
-
-def check_controller_name(name: str) -> None:
-    """Check, before any run, that a user controller can be used: a ``cmd:`` program that
-    exists, a ``python:`` class that loads (in a host process, within the start timeout).
-    Raises ControllerError with the reason; built-in names are the core's to check."""
-    if name.startswith("cmd:"):
-        argv = shlex.split(name.removeprefix("cmd:"))
-        if not argv:
-            raise ControllerError(f"controller `{name}`: no program given")
-        _program(argv, f"`{name}`")
-    elif name.startswith("python:"):
-        controller = load_controller(name)
-        try:
-            controller.load()
-        finally:
-            controller.close()
-
-
-def is_user_controller(name: Any) -> bool:
-    """Whether ``name`` is run by Python (``python:``, ``cmd:``, or an object)."""
-    return not isinstance(name, str) or name.startswith(("python:", "cmd:"))

@@ -32,6 +32,7 @@ from typing import Any
 from sitgen import _core
 from sitgen import _core as core
 from sitgen.controllers.host import die_with_parent
+from sitgen.controllers.user import is_user_controller
 from sitgen.execution.jobs import (
     MAX_RUNS,
     CampaignSpec,
@@ -436,7 +437,7 @@ def run_campaign(
     check_campaign(spec, seed, n, stop)
     if stop is not None and stop():
         return CampaignResult(0, 0, True, time.perf_counter() - started)
-    user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
+    user = any(is_user_controller(name) for _, name in controller_names(spec))
     with Store(db, create=True) as store:
         store.lock_for_writing()
         store.start_campaign(spec.source, seed, n, _core.__version__, started_at())

@@ -36,7 +36,8 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.controllers.external import ControllerError, check_controller_name
+from sitgen.controllers.external import ControllerError
+from sitgen.controllers.user import check_controller_name
 from sitgen.world.config import load_spec, spec_json
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")

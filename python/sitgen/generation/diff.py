@@ -32,6 +32,7 @@ from typing import Any, TextIO
 from xml.etree import ElementTree
 
 from sitgen import _core
+from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
 from sitgen.generation.faults import Situations, outcome_of
@@ -64,7 +65,7 @@ def parse_controller(text: str, option: str) -> dict[str, Any]:
             raise _core.SpecError(f"{option}: not a JSON controller table ({e.msg})") from None
         if not isinstance(controller, dict):
             raise _core.SpecError(f"{option}: expected a JSON object with a name")
-    elif "+" in text and not text.startswith(("python:", "cmd:")):
+    elif "+" in text and not is_user_controller(text):
         name, _, fault = text.partition("+")
         controller = {"name": name, "fault": fault}
     else:
@@ -249,7 +250,7 @@ def run_diff(
                 f"--n: {n} is more than the {situations.most()} runs of {situations_db}"
             )
         check_campaign(spec, seed, n if plan.strategy == "random" else 0, stop)
-        user = any(str(plan.controller(s)["name"]).startswith(("python:", "cmd:")) for s in SIDES)
+        user = any(is_user_controller(str(plan.controller(s)["name"])) for s in SIDES)
         with Store(db, create=True) as store:
             store.lock_for_writing()
             store.start_campaign(

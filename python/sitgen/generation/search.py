@@ -47,6 +47,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from sitgen import _core
+from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor, run_row, started_at
 from sitgen.execution.jobs import (
     CampaignSpec,
@@ -498,7 +499,7 @@ def run_search(
     check_campaign(spec, seed, budget, stop)
     if stop is not None and stop():
         return SearchResult(0, 0, True, time.perf_counter() - started, 0, 0.0)
-    user = any(name.startswith(("python:", "cmd:")) for _, name in controller_names(spec))
+    user = any(is_user_controller(name) for _, name in controller_names(spec))
     with Store(db, create=True) as store:
         store.lock_for_writing()
         store.start_campaign(

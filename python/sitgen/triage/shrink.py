@@ -45,7 +45,7 @@ import numpy.typing as npt
 from scipy import ndimage
 
 from sitgen import _core
-from sitgen.controllers.external import is_user_controller
+from sitgen.controllers.user import is_user_controller
 from sitgen.execution.jobs import check_workers
 from sitgen.run import run
 from sitgen.store import Store

@@ -103,10 +103,13 @@ pub fn period_steps(spec: &ControllerSpec, dt_s: f64, path: &str) -> Result<u64,
     Ok(steps as u64)
 }
 
-/// Whether a controller name is run outside the core (by the Python layer): `python:…` or
-/// `cmd:…`.
+/// How the names of controllers run outside the core (by the Python layer) start:
+/// `python:MODULE:CLASS`, `cmd:PROGRAM …`, `ros2:PROGRAM …` (a ROS 2 node, docs/ros2.md).
+pub const EXTERNAL_PREFIXES: [&str; 3] = ["python:", "cmd:", "ros2:"];
+
+/// Whether a controller name is run outside the core (by the Python layer).
 pub fn is_external(name: &str) -> bool {
-    name.starts_with("python:") || name.starts_with("cmd:")
+    EXTERNAL_PREFIXES.iter().any(|p| name.starts_with(p))
 }
 
 /// Check a controller spec before any run: a built-in name with known parameters in range, or
@@ -135,11 +138,14 @@ pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
                 format!("`{}`: expected python:MODULE:CLASS", spec.name),
             ));
         }
-    } else if let Some(command) = spec.name.strip_prefix("cmd:") {
+    } else if let Some((prefix, command)) = ["cmd:", "ros2:"]
+        .iter()
+        .find_map(|p| spec.name.strip_prefix(p).map(|c| (p, c)))
+    {
         if command.trim().is_empty() {
             return Err(SpecError::new(
                 name_path,
-                "`cmd:` names no program; expected cmd:PROGRAM ARGS",
+                format!("`{prefix}` names no program; expected {prefix}PROGRAM ARGS"),
             ));
         }
     } else {

@@ -61,7 +61,7 @@ pub enum AtEnd {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerSpec {
-    /// Controller name (`snd_follow`, `straight`, `follow`, `vo`, `dwa`, `python:…`, `cmd:…`).
+    /// Controller name (`snd_follow`, `straight`, `follow`, `vo`, `dwa`, `python:…`, `cmd:…`, `ros2:…`).
     pub name: String,
     /// Parameters by name, in the controller's documented units. Default: none.
     #[serde(default)]

@@ -1,0 +1,574 @@
+"""A ROS 2 node as the agent's controller: ``ros2:COMMAND ARGS…``.
+
+What it does: starts the node's process (``COMMAND ARGS… --ros-args -p use_sim_time:=true``,
+the controller's ``params`` as ROS parameters) and stands in for the robot and its simulator
+on the contract of Nav2's loopback simulator, over real DDS:
+
+- publishes ``/clock`` (rosgraph_msgs/Clock: the node runs on simulated time),
+  ``/scan`` (sensor_msgs/LaserScan, frame ``base_scan``, sensor-data QoS: best effort, keep
+  last 5, as ROS 2 laser drivers publish), ``/odom`` (nav_msgs/Odometry, ``odom`` →
+  ``base_link``), the route as ``/plan`` (nav_msgs/Path, frame ``map``) and the current
+  waypoint as ``/goal_pose`` (geometry_msgs/PoseStamped); the last two are transient-local, so a
+  node that subscribes late (with transient-local durability) still gets them;
+- subscribes to ``/cmd_vel`` as whichever of geometry_msgs/Twist or TwistStamped (Nav2's
+  default in Kilted) the node publishes there, read from the graph.
+
+Other topic names are the node's to remap (``--ros-args -r /cmd_vel:=/my_cmd``), as with any
+ROS 2 simulator. ``map`` and ``odom`` coincide (no localisation error is modelled), so a node
+that needs only ``/odom`` has the robot's pose; no ``/tf`` is published while a run is live (no
+tf2_msgs wheel exists for pip; the rosbag2 export carries it).
+
+Why lockstep: a run's result must not depend on the machine's load. Every control period
+sitgen publishes the odometry, the scan and then the clock for simulated time *t*, and waits
+until the node answers with a ``/cmd_vel`` message (for TwistStamped, one not stamped before
+*t*); only then does simulated time move on. A node that does not answer within
+``answer_timeout_s`` of wall time has its last command held for that period (the only way
+machine load can reach a result, so the timeout is generous); ``max_missed_answers`` periods
+in a row without an answer, a node that never publishes within the start timeout, or a node
+process that exits, ends the run as an error, like any controller.
+
+Isolation: each sitgen process talks on a DDS domain of its own (a free id claimed with a lock
+file, so parallel workers and parallel campaigns never see each other), with discovery
+confined to this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``).
+
+Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
+``answer_timeout_s`` (wall seconds, default the step timeout, 1 s) and ``max_missed_answers``
+(periods, default 10), which are sitgen's.
+
+Source: Nav2's loopback simulator (nav2_loopback_sim: topics, frames, stamped cmd_vel) and
+REP 105 (frames); docs/ros2.md.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import fcntl
+import math
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import IO, Any
+
+from sitgen.controllers.external import (
+    START_TIMEOUT_S,
+    STDERR_TAIL_BYTES,
+    STEP_TIMEOUT_S,
+    ControllerError,
+    UserController,
+    die_with_parent_prefix,
+    program_path,
+    short,
+)
+
+PREFIX = "ros2:"
+
+
+@dataclass(frozen=True)
+class Topics:
+    """sitgen's side of the contract (a node remaps its own names to these)."""
+
+    clock: str = "/clock"
+    scan: str = "/scan"
+    odom: str = "/odom"
+    plan: str = "/plan"
+    goal: str = "/goal_pose"
+    cmd_vel: str = "/cmd_vel"
+
+
+@dataclass(frozen=True)
+class Frames:
+    """REP 105 frame ids, as Nav2's loopback simulator names them."""
+
+    map: str = "map"
+    odom: str = "odom"
+    base: str = "base_link"
+    scan: str = "base_scan"
+
+
+TOPICS = Topics()
+FRAMES = Frames()
+MAX_MISSED_ANSWERS = 10
+"""Control periods in a row a node may leave unanswered before its run ends as an error."""
+DOMAIN_IDS = range(1, 102)
+"""DDS domains sitgen may claim: 0 is left to the user's own ROS system; above 101 the
+ports of a domain start to collide with Linux's ephemeral range."""
+REPEAT_S = 0.1
+"""Wall seconds between repeats of the first observation until the node first answers."""
+SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
+CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
+
+
+def ros2_available() -> str | None:
+    """None if rclpy and the messages import, else why not (one line)."""
+    try:
+        _messages()
+    except ImportError as e:
+        return f"the ROS 2 wheels do not import ({e}); pip install 'sitgen[ros2]'"
+    return None
+
+
+def _messages() -> Any:
+    # rclpy and the message packages are an optional extra (sitgen[ros2]): imported when a
+    # ros2: controller is first used, never by sitgen's other commands.
+    import rclpy  # noqa: F401
+    from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+    from nav_msgs.msg import Odometry, Path
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import LaserScan
+
+    return {
+        "PoseStamped": PoseStamped,
+        "Twist": Twist,
+        "TwistStamped": TwistStamped,
+        "Odometry": Odometry,
+        "Path": Path,
+        "Clock": Clock,
+        "LaserScan": LaserScan,
+    }
+
+
+def _claim_domain() -> tuple[int, IO[bytes]]:
+    """A DDS domain id no other sitgen process on this machine holds, and the open lock file
+    that holds it for this process's life."""
+    folder = tempfile.gettempdir()
+    start = os.getpid() % len(DOMAIN_IDS)
+    for k in range(len(DOMAIN_IDS)):
+        domain = DOMAIN_IDS[(start + k) % len(DOMAIN_IDS)]
+        lock = open(os.path.join(folder, f"sitgen-ros2-domain-{domain}.lock"), "wb")  # noqa: SIM115
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        return domain, lock
+    raise ControllerError(
+        f"ros2: every DDS domain {DOMAIN_IDS.start}-{DOMAIN_IDS.stop - 1} is held by another "
+        "sitgen process"
+    )
+
+
+def stamp(t: float) -> Any:
+    """A builtin_interfaces/Time for simulated time ``t`` seconds (exact to the nanosecond)."""
+    from builtin_interfaces.msg import Time
+
+    ns = round(t * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def quaternion(heading: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``heading`` about z."""
+    return (0.0, 0.0, math.sin(heading / 2), math.cos(heading / 2))
+
+
+class Bridge:
+    """sitgen's ROS 2 node in this process: a context on a domain of its own, the simulator's
+    publishers and an executor. One per process (forked pool workers make their own)."""
+
+    _instance: Bridge | None = None
+    _pid = 0
+
+    @classmethod
+    def get(cls) -> Bridge:
+        if cls._instance is None or cls._pid != os.getpid():
+            cls._instance, cls._pid = Bridge(), os.getpid()
+        return cls._instance
+
+    def __init__(self) -> None:
+        reason = ros2_available()
+        if reason is not None:
+            raise ControllerError(f"ros2: {reason}")
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import (
+            DurabilityPolicy,
+            QoSProfile,
+            ReliabilityPolicy,
+            qos_profile_sensor_data,
+        )
+
+        self.msg = _messages()
+        self.domain, self._lock = _claim_domain()
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=self.domain)
+        self.node = rclpy.create_node("sitgen_sim", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        latched = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        m = self.msg
+        self.clock = self.node.create_publisher(m["Clock"], TOPICS.clock, reliable)
+        self.scan = self.node.create_publisher(m["LaserScan"], TOPICS.scan, qos_profile_sensor_data)
+        self.odom = self.node.create_publisher(m["Odometry"], TOPICS.odom, reliable)
+        self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
+        self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
+        atexit.register(self.shutdown)
+
+    def spin(self, timeout_s: float) -> None:
+        self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
+
+    def all_matched(self) -> bool:
+        """Whether the node listens to the scan or the odometry, and every subscription to
+        sitgen's topics that discovery has seen is matched by sitgen's publisher (so the first
+        observation is not lost to a half-finished discovery)."""
+        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal)
+        listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
+        return listening > 0 and all(
+            p.get_subscription_count() >= self._subscriptions_seen(p.topic_name) for p in publishers
+        )
+
+    def _subscriptions_seen(self, topic: str) -> int:
+        me = self.node.get_name()
+        return sum(1 for i in self.node.get_subscriptions_info_by_topic(topic) if i.node_name != me)
+
+    def cmd_vel_type(self) -> str | None:
+        """The type a node publishes ``/cmd_vel`` as, once one is discovered."""
+        for info in self.node.get_publishers_info_by_topic(TOPICS.cmd_vel):
+            if info.node_name != self.node.get_name():
+                return str(info.topic_type)
+        return None
+
+    def shutdown(self) -> None:
+        with contextlib.suppress(Exception):
+            self.executor.shutdown(timeout_sec=0)
+            self.node.destroy_node()
+            self.context.try_shutdown()
+
+
+class Ros2Controller(UserController):
+    """A ROS 2 node's process, driven in lockstep through this process's :class:`Bridge`."""
+
+    def __init__(
+        self,
+        command_line: str,
+        name: str,
+        params: Mapping[str, float] | None = None,
+        step_timeout_s: float = STEP_TIMEOUT_S,
+        start_timeout_s: float = START_TIMEOUT_S,
+    ) -> None:
+        self.name = name
+        argv = shlex.split(command_line)
+        if not argv:
+            raise ControllerError(f"controller {name}: no program given")
+        params = dict(params or {})
+        self._answer_timeout_s = float(params.pop("answer_timeout_s", step_timeout_s))
+        self._max_missed = int(params.pop("max_missed_answers", MAX_MISSED_ANSWERS))
+        ros_params = [a for k, v in sorted(params.items()) for a in ("-p", f"{k}:={v!r}")]
+        self._argv = [
+            program_path(argv, name),
+            *argv[1:],
+            "--ros-args",
+            "-p",
+            "use_sim_time:=true",
+            *ros_params,
+        ]
+        self._start_timeout_s = start_timeout_s
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._tail = bytearray()
+        self._tail_lock = threading.Lock()
+        self._bridge: Bridge | None = None
+        self._subscription: Any = None
+        self._stamped = False
+        self._answers: list[Any] = []
+        self._command = (0.0, 0.0)
+        self._answered_once = False
+        self._missed = 0
+        self._info: dict[str, Any] = {}
+        self._goal_index = -1
+
+    # --- a run: start, reset, act, close ---------------------------------------------------
+
+    def load(self) -> None:
+        self._bridge = Bridge.get()
+        self._start()
+
+    def reset(self, info: dict[str, Any]) -> None:
+        self._info = info
+        bridge = self._bridge = self._bridge or Bridge.get()
+        # The route goes out before the node starts: transient-local keeps it for the node.
+        self._publish_route(bridge, info)
+        if self._proc is None:
+            self._start()
+        self._discover(bridge)
+
+    def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
+        bridge = self._bridge
+        assert bridge is not None
+        t = float(obs["time"])
+        self._publish_goal(bridge, int(obs.get("waypoints_reached", 0)), t)
+        self._answers.clear()
+        self._publish_observation(bridge, obs, t)
+        if not self._answered_once:
+            self._first_answer(bridge, obs, t)
+        elif self._await_answer(bridge, t, self._answer_timeout_s):
+            self._missed = 0
+        else:
+            self._missed += 1
+            if self._missed >= self._max_missed:
+                raise ControllerError(
+                    f"controller {self.name} did not publish {TOPICS.cmd_vel} for "
+                    f"{self._missed} control periods in a row at {t:.1f} s"
+                )
+        return self._command
+
+    def close(self) -> str | None:
+        bridge, proc = self._bridge, self._proc
+        if bridge is not None and self._subscription is not None:
+            bridge.node.destroy_subscription(self._subscription)
+            self._subscription = None
+        unclean = None
+        if proc is not None:
+            # A node is asked to stop as ros2 launch asks it (SIGINT), then its group is killed.
+            if proc.poll() is None:
+                with contextlib.suppress(ProcessLookupError, PermissionError):
+                    os.killpg(proc.pid, signal.SIGINT)
+                try:
+                    proc.wait(timeout=2.0)
+                except subprocess.TimeoutExpired:
+                    unclean = "did not exit within 2 s of SIGINT and was killed"
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            self._proc = None
+        return unclean
+
+    # --- the node's process ----------------------------------------------------------------
+
+    def _start(self) -> None:
+        bridge = self._bridge
+        assert bridge is not None
+        env = dict(os.environ)
+        env.update(
+            ROS_DOMAIN_ID=str(bridge.domain),
+            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+            RMW_IMPLEMENTATION=env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp"),
+            PYTHONUNBUFFERED="1",
+        )
+        # The wheels' shared libraries (the rmw implementation among them) live in the
+        # environment's lib/; a node started from it finds them there.
+        lib = os.path.join(sys.prefix, "lib")
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(
+            p for p in (lib, env.get("LD_LIBRARY_PATH", "")) if p
+        )
+        try:
+            self._proc = subprocess.Popen(
+                [*die_with_parent_prefix(), *self._argv],
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                env=env,
+            )
+        except OSError as e:
+            raise ControllerError(f"controller {self.name} could not start: {e}") from e
+        assert self._proc.stdout is not None
+        threading.Thread(target=self._drain, args=(self._proc.stdout,), daemon=True).start()
+
+    def _drain(self, pipe: IO[bytes]) -> None:
+        """Read the node's output as it comes, keeping only its tail (quoted when it dies)."""
+        with contextlib.suppress(OSError, ValueError):
+            while chunk := pipe.read1(1 << 16):  # type: ignore[attr-defined]
+                with self._tail_lock:
+                    self._tail += chunk
+                    del self._tail[:-STDERR_TAIL_BYTES]
+
+    def _check_alive(self, when: str) -> None:
+        proc = self._proc
+        if proc is None or proc.poll() is None:
+            return
+        code = proc.returncode
+        how = (
+            f"was killed by {signal.Signals(-code).name}"
+            if code < 0
+            else f"exited with code {code}"
+        )
+        time.sleep(0.05)  # the drain thread's last read
+        with self._tail_lock:
+            tail = self._tail.decode(errors="replace").strip().splitlines()
+        said = f": {short(tail[-1])}" if tail else ""
+        raise ControllerError(f"controller {self.name} {how} {when}{said}")
+
+    # --- discovery and the exchange of one control period ----------------------------------
+
+    def _discover(self, bridge: Bridge) -> None:
+        """Wait until the node publishes /cmd_vel and listens to the scan or the odometry,
+        then subscribe to /cmd_vel with the node's type."""
+        deadline = time.monotonic() + self._start_timeout_s
+        kind = None
+        while True:
+            self._check_alive("on start")
+            kind = bridge.cmd_vel_type()
+            if kind is not None and bridge.all_matched():
+                break
+            if time.monotonic() > deadline:
+                missing = (
+                    f"publish {TOPICS.cmd_vel}"
+                    if kind is None
+                    else f"subscribe to {TOPICS.scan} or {TOPICS.odom}"
+                )
+                raise ControllerError(
+                    f"controller {self.name} did not {missing} within "
+                    f"{self._start_timeout_s:g} s of starting"
+                )
+            bridge.spin(0.02)
+        if kind not in CMD_VEL_TYPES:
+            raise ControllerError(
+                f"controller {self.name} publishes {TOPICS.cmd_vel} as {kind}; expected one of "
+                + ", ".join(CMD_VEL_TYPES)
+            )
+        self._stamped = kind.endswith("TwistStamped")
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+        msg_type = bridge.msg["TwistStamped" if self._stamped else "Twist"]
+        self._subscription = bridge.node.create_subscription(
+            msg_type,
+            TOPICS.cmd_vel,
+            self._answers.append,
+            QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
+        )
+        while self._subscription.get_publisher_count() == 0:
+            self._check_alive("on start")
+            if time.monotonic() > deadline:
+                raise ControllerError(
+                    f"controller {self.name}: its {TOPICS.cmd_vel} never matched sitgen's "
+                    f"subscription within {self._start_timeout_s:g} s"
+                )
+            bridge.spin(0.02)
+
+    def _first_answer(self, bridge: Bridge, obs: Mapping[str, Any], t: float) -> None:
+        """The first period: its observation is published again every ``REPEAT_S`` until the
+        node answers (a subscription that discovery had not finished matching loses the
+        first), within the start timeout; answers to the repeats are then let in and
+        dropped, so that every later answer belongs to its own period."""
+        deadline = time.monotonic() + self._start_timeout_s
+        while not self._await_answer(bridge, t, REPEAT_S):
+            if time.monotonic() > deadline:
+                raise ControllerError(
+                    f"controller {self.name} never published {TOPICS.cmd_vel} within "
+                    f"{self._start_timeout_s:g} s of its first observation"
+                )
+            self._publish_observation(bridge, obs, t)
+        settle = time.monotonic() + REPEAT_S
+        while (left := settle - time.monotonic()) > 0:
+            bridge.spin(left)
+        self._answers.clear()
+        self._answered_once = True
+
+    def _await_answer(self, bridge: Bridge, t: float, timeout_s: float) -> bool:
+        """Spin until the node answers the period at ``t``; False if it did not in time."""
+        deadline = time.monotonic() + timeout_s
+        when = f"at {t:.1f} s"
+        while True:
+            while self._answers:
+                message = self._answers.pop(0)
+                twist = message.twist if self._stamped else message
+                if (
+                    self._stamped
+                    and _seconds(message.header.stamp) not in (0.0,)
+                    and (_seconds(message.header.stamp) < t - 1e-9)
+                ):
+                    continue  # an answer to an earlier period, arriving late
+                v, omega = float(twist.linear.x), float(twist.angular.z)
+                if not (math.isfinite(v) and math.isfinite(omega)):
+                    raise ControllerError(
+                        f"controller {self.name} published a non-finite command ({v}, {omega}) "
+                        f"{when}"
+                    )
+                self._command = (v, omega)
+                return True
+            self._check_alive(when)
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            bridge.spin(min(left, 0.1))
+
+    # --- messages ---------------------------------------------------------------------------
+
+    def _publish_route(self, bridge: Bridge, info: Mapping[str, Any]) -> None:
+        path = bridge.msg["Path"]()
+        path.header.frame_id = FRAMES.map
+        path.header.stamp = stamp(0.0)
+        path.poses = [self._pose(bridge, w, 0.0) for w in info["waypoints"]]
+        bridge.plan.publish(path)
+        self._goal_index = -1
+
+    def _publish_goal(self, bridge: Bridge, index: int, t: float) -> None:
+        waypoints = self._info.get("waypoints") or []
+        index = min(index, len(waypoints) - 1)
+        if index == self._goal_index or index < 0:
+            return
+        self._goal_index = index
+        bridge.goal.publish(self._pose(bridge, waypoints[index], t))
+
+    def _pose(self, bridge: Bridge, point: Any, t: float) -> Any:
+        pose = bridge.msg["PoseStamped"]()
+        pose.header.frame_id = FRAMES.map
+        pose.header.stamp = stamp(t)
+        pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
+        pose.pose.orientation.w = 1.0
+        return pose
+
+    def _publish_observation(self, bridge: Bridge, obs: Mapping[str, Any], t: float) -> None:
+        m, now = bridge.msg, stamp(t)
+        odom = m["Odometry"]()
+        odom.header.stamp, odom.header.frame_id, odom.child_frame_id = (
+            now,
+            FRAMES.odom,
+            FRAMES.base,
+        )
+        x, y, heading = (float(c) for c in obs["pose"])
+        odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
+        q = odom.pose.pose.orientation
+        q.x, q.y, q.z, q.w = quaternion(heading)
+        v, omega = (float(c) for c in obs["velocity"])
+        odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
+        bridge.odom.publish(odom)
+        bridge.scan.publish(laser_scan(m["LaserScan"], self._info, obs["ranges"], t))
+        clock = m["Clock"]()
+        clock.clock = now
+        bridge.clock.publish(clock)
+
+
+def laser_scan(msg_type: Any, info: Mapping[str, Any], ranges: Any, t: float) -> Any:
+    """A sensor_msgs/LaserScan of ``ranges`` at simulated time ``t``, for the laser that the
+    run's reset info describes (``laser``: ``angles``, ``range_m``, ``min_range_m``)."""
+    laser, angles = info["laser"], info["laser"]["angles"]
+    scan = msg_type()
+    scan.header.stamp, scan.header.frame_id = stamp(t), FRAMES.scan
+    scan.angle_min, scan.angle_max = float(angles[0]), float(angles[-1])
+    scan.angle_increment = (
+        float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
+    )
+    scan.time_increment = 0.0
+    scan.scan_time = float(info.get("control_period_s", info.get("dt_s", 0.1)))
+    scan.range_min = float(laser.get("min_range_m", 0.0))
+    scan.range_max = float(laser["range_m"])
+    scan.ranges = [float(r) for r in ranges]
+    return scan
+
+
+def _seconds(time_msg: Any) -> float:
+    return float(time_msg.sec) + float(time_msg.nanosec) * 1e-9
+
+
+def check_ros2_name(name: str) -> None:
+    """Check before any run that a ``ros2:`` controller can be used: the wheels import and the
+    program exists. Raises ControllerError with the reason."""
+    argv = shlex.split(name.removeprefix(PREFIX))
+    if not argv:
+        raise ControllerError(f"controller `{name}`: no program given")
+    program_path(argv, f"`{name}`")
+    reason = ros2_available()
+    if reason is not None:
+        raise ControllerError(f"controller `{name}`: {reason}")

@@ -1,0 +1,74 @@
+"""User controllers by name: ``python:module:Class``, ``cmd:program args…`` and
+``ros2:command args…`` (or any object with ``reset`` and ``act``), loaded and checked here so
+that the rest of sitgen asks one place what a name means (docs/controller-protocol.md,
+docs/ros2.md)."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from collections.abc import Mapping
+from typing import Any
+
+from sitgen.controllers.external import (
+    STEP_TIMEOUT_S,
+    ControllerError,
+    ProcessController,
+    PythonController,
+    UserController,
+    program_path,
+)
+from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
+from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name
+
+USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX)
+"""How a user controller's name starts (the core runs every other name itself)."""
+
+
+def load_controller(
+    name: str | Any,
+    step_timeout_s: float = STEP_TIMEOUT_S,
+    params: Mapping[str, float] | None = None,
+) -> UserController:
+    """The user controller ``name`` names (``python:…``, ``cmd:…``, ``ros2:…``; ``params``
+    are a ROS 2 node's parameters), or wrap an object with ``reset`` and ``act``. Raises
+    ControllerError if it cannot be started."""
+    if not isinstance(name, str):
+        return PythonController(name, f"`{type(name).__name__}`", step_timeout_s)
+    if name.startswith("python:"):
+        # Not `-m`: the package imports the host module, and runpy would warn that it ran a
+        # module already imported.
+        start = "from sitgen.controllers.host import main; main()"
+        host = [sys.executable, "-c", start, name.removeprefix("python:")]
+        return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
+    if name.startswith("cmd:"):
+        command_line = name.removeprefix("cmd:")
+        return ProcessController(shlex.split(command_line), f"`{name}`", step_timeout_s)
+    if name.startswith(ROS2_PREFIX):
+        return Ros2Controller(name.removeprefix(ROS2_PREFIX), f"`{name}`", params, step_timeout_s)
+    raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…")
+
+
+def check_controller_name(name: str) -> None:
+    """Check, before any run, that a user controller can be used: a ``cmd:`` program that
+    exists, a ``python:`` class that loads (in a host process, within the start timeout), a
+    ``ros2:`` program that exists with the ROS 2 wheels installed. Raises ControllerError with
+    the reason; built-in names are the core's to check."""
+    if name.startswith("cmd:"):
+        argv = shlex.split(name.removeprefix("cmd:"))
+        if not argv:
+            raise ControllerError(f"controller `{name}`: no program given")
+        program_path(argv, f"`{name}`")
+    elif name.startswith(ROS2_PREFIX):
+        check_ros2_name(name)
+    elif name.startswith("python:"):
+        controller = load_controller(name)
+        try:
+            controller.load()
+        finally:
+            controller.close()
+
+
+def is_user_controller(name: Any) -> bool:
+    """Whether ``name`` is run by Python (``python:``, ``cmd:``, ``ros2:``, or an object)."""
+    return not isinstance(name, str) or name.startswith(USER_PREFIXES)
