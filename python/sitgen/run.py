@@ -10,7 +10,7 @@ here, and whatever goes wrong in it ends the run with outcome ``error`` and a re
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,19 @@ from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.user import is_user_controller, load_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
+
+
+@dataclass(frozen=True)
+class Sensed:
+    """What the agent sensed at the start and after every step (aligned with the
+    trajectory's rows)."""
+
+    ranges: npt.NDArray[np.float64]
+    """Laser ranges, shape (steps + 1, beams), metres."""
+    velocity: npt.NDArray[np.float64]
+    """(v m/s, omega rad/s) it moved with, shape (steps + 1, 2)."""
+    time_s: npt.NDArray[np.float64]
+    """Simulated time, shape (steps + 1,)."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +73,9 @@ class RunRecord:
     coverage: dict[str, Any] | None = None
     """The cells of the interaction space the run exercised: ``cells`` (keys), ``encounters``,
     ``failure_cell`` (docs/coverage.md)."""
+    sensed: Sensed | None = field(default=None, repr=False)
+    """What the agent sensed at every step, if the run was asked to keep it (``sensed=True``:
+    for a rosbag2 of the run)."""
 
     def to_dict(self) -> dict[str, Any]:
         """Everything but the trajectory, as JSON-ready data."""
@@ -84,7 +100,7 @@ def _controller_name(controller: Any) -> str:
     return f"python:{type(controller).__module__}:{type(controller).__qualname__}"
 
 
-def _reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
+def reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
     """What a user controller is told at the start: its route, body, laser and limits."""
     robot = situation.robots[agent]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
@@ -134,6 +150,7 @@ def run(
     spec: Mapping[str, Any] | None = None,
     params: Mapping[str, float] | None = None,
     step_timeout_s: float = STEP_TIMEOUT_S,
+    sensed: bool = False,
 ) -> RunRecord:
     """Run ``situation`` (a Situation or a situation file) to its end.
 
@@ -143,16 +160,22 @@ def run(
     ``seed``: sensor noise. ``spec``: the run spec (``sim``, ``monitor``, ``scoring``,
     ``time_limit_s``). ``params``: the built-in controller's parameters. A bad spec raises
     SpecError naming the field; a failing user controller gives outcome ``error``.
+    ``sensed``: keep what the agent sensed at every step (:class:`Sensed`; the run is the same).
     """
     if not isinstance(situation, Situation):
         situation = Situation.load(situation)
     name = _controller_name(controller)
     run_spec = run_spec_with(spec, time_limit, name, params)
     core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
+    senses: list[Mapping[str, Any]] | None = [] if sensed else None
     if core.agent_is_external:
-        _drive(core, controller, situation, run_spec, step_timeout_s)
+        _drive(core, controller, situation, run_spec, step_timeout_s, senses)
+    elif senses is not None:
+        _step(core, None, senses)
     else:
         core.run_to_end()
+    if senses is not None:
+        senses.append(core.observe_agent())
     out = core.finish()
     record = json.loads(out["record"])
     return RunRecord(
@@ -170,7 +193,36 @@ def run(
         events_text=out["events_text"],
         failure=record.get("failure"),
         coverage=record.get("coverage"),
+        sensed=None if senses is None else _sensed(senses),
     )
+
+
+def _sensed(senses: list[Mapping[str, Any]]) -> Sensed:
+    return Sensed(
+        ranges=np.array([np.asarray(o["ranges"], dtype=np.float64) for o in senses]),
+        velocity=np.array([o["velocity"] for o in senses], dtype=np.float64),
+        time_s=np.array([o["time"] for o in senses], dtype=np.float64),
+    )
+
+
+def _step(
+    core: _core.Run,
+    act: Callable[[Mapping[str, Any]], tuple[float, float]] | None,
+    senses: list[Mapping[str, Any]] | None,
+) -> None:
+    """Step ``core`` to its end, asking ``act`` (an external agent's controller) for a command
+    whenever the agent decides, and keeping every step's observation in ``senses`` if given
+    (the core keeps a step's scan for the step, so observing changes nothing)."""
+    while True:
+        acts = act is not None and core.agent_acts
+        obs = core.observe_agent() if acts or senses is not None else None
+        command = act(obs) if acts and act is not None and obs is not None else None
+        # Kept once the step is sure to be taken, so that the rows match the trajectory's
+        # even when the controller fails.
+        if senses is not None and obs is not None:
+            senses.append(obs)
+        if core.step(command):
+            return
 
 
 def _drive(
@@ -179,6 +231,7 @@ def _drive(
     situation: Situation,
     run_spec: Mapping[str, Any],
     step_timeout_s: float,
+    senses: list[Mapping[str, Any]] | None = None,
 ) -> None:
     """Step a run whose agent is a user controller, turning its failures into the outcome."""
     named = run_spec.get("controller") or situation.agent.controller
@@ -191,11 +244,10 @@ def _drive(
         core.fail(str(e))
         return
     try:
-        user.reset(_reset_info(situation, run_spec, core.agent))
+        user.reset(reset_info(situation, run_spec, core.agent))
         # Between the controller's decisions (its control period) its last command stays in
         # force and it is not asked.
-        while not core.step(user.act(core.observe_agent()) if core.agent_acts else None):
-            pass
+        _step(core, user.act, senses)
     except ControllerError as e:
         core.fail(str(e))
     finally:
@@ -235,7 +287,7 @@ def check_controller(
         user.close()
         return [Check("loads", False, str(e))]
     checks.append(Check("loads", True, user.name))
-    info = _reset_info(situation, {}, 0)
+    info = reset_info(situation, {}, 0)
     core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)
     try:
         try:

@@ -36,6 +36,7 @@ from sitgen.cli.app import (
     _progress,
     _read_text,
     _weights,
+    _writing,
     app,
 )
 from sitgen.cli.triage import failures
@@ -103,6 +104,22 @@ def campaign(
         ),
     ] = None,
     reruns: RerunsOption = 8,
+    junit: Annotated[
+        Path | None,
+        typer.Option(
+            "--junit",
+            help="Write the runs as JUnit XML here: a test case per situation, failed with its "
+            "failure class, sentence and robustness.",
+        ),
+    ] = None,
+    summary_json: Annotated[
+        Path | None,
+        typer.Option(
+            "--summary",
+            help="Write the summary as JSON here (sitgen failures's figures, outcomes, "
+            "errors, top runs, distinct failures).",
+        ),
+    ] = None,
 ) -> None:
     """Generate N randomised situations, run them all, store them, rank the runs, and measure
     the robustness of each distinct failure. Ctrl-C stops after the runs in flight; the same
@@ -134,6 +151,28 @@ def campaign(
     _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
     if shrink_top:
         _shrink_top(db, shrink_top, workers)
+    _write_results(db, junit, summary_json)
+
+
+def _write_results(db: Path, junit: Path | None, summary_json: Path | None) -> None:
+    """The campaign's runs as JUnit XML and its summary as JSON, for CI."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import summary
+    from sitgen.triage.junit import campaign_cases, write_junit
+
+    if junit is None and summary_json is None:
+        return
+    with Store(db) as store:
+        if junit is not None:
+            junit.parent.mkdir(parents=True, exist_ok=True)
+            with _writing(junit, "the JUnit file"), junit.open("w") as out:
+                write_junit(f"sitgen campaign {db.name}", campaign_cases(store), out)
+            typer.echo(f"wrote {junit}")
+        if summary_json is not None:
+            summary_json.parent.mkdir(parents=True, exist_ok=True)
+            with _writing(summary_json, "the summary"):
+                summary_json.write_text(json.dumps(summary(store), indent=2) + "\n")
+            typer.echo(f"wrote {summary_json}")
 
 
 def _echo_stored(

@@ -26,6 +26,7 @@ from sitgen.cli.app import (
     TimeLimitOption,
     UsageError,
     _read_run_spec,
+    _writing,
     app,
 )
 
@@ -110,22 +111,40 @@ def run_command(
     as_json: Annotated[
         bool, typer.Option("--json", help="Print the record as JSON instead of text.")
     ] = False,
+    rosbag2: Annotated[
+        Path | None,
+        typer.Option("--rosbag2", help="Write the run as a rosbag2 (MCAP) into this new folder."),
+    ] = None,
     allow_edited: AllowEditedOption = False,
 ) -> None:
     """Run one situation: print the outcome, the score with its breakdown, and the event log.
     Exits 1 when the controller failed (outcome error)."""
-    from sitgen.run import run
+    from sitgen.presentation.rosbag import RosbagUnavailable, write_rosbag2
+    from sitgen.run import run, run_spec_with
 
+    if rosbag2 is not None and rosbag2.exists():
+        raise UsageError(f"--rosbag2: {rosbag2} already exists; a rosbag2 is written anew")
+    loaded = Situation.load(situation, allow_edited)
+    run_spec = _read_run_spec(spec)
     record = run(
-        Situation.load(situation, allow_edited),
+        loaded,
         controller=controller,
         time_limit=time_limit,
         seed=seed,
-        spec=_read_run_spec(spec),
+        spec=run_spec,
+        sensed=rosbag2 is not None,
     )
     if events is not None:
         events.parent.mkdir(parents=True, exist_ok=True)
         events.write_text(record.events_jsonl)
+    if rosbag2 is not None:
+        try:
+            with _writing(rosbag2, "the rosbag2"):
+                write_rosbag2(
+                    rosbag2, loaded, record, run_spec_with(run_spec, time_limit, controller)
+                )
+        except RosbagUnavailable as e:
+            raise UsageError(f"--rosbag2: {e}") from None
     if as_json:
         typer.echo(json.dumps(record.to_dict(), indent=2))
     else:

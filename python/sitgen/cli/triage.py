@@ -46,16 +46,29 @@ def report(
         typer.Option("--top", min=0, help="Top runs that get a page (and every representative)."),
     ] = 50,
     weights: WeightsOption = None,
+    rosbag2: Annotated[
+        int,
+        typer.Option(
+            "--rosbag2",
+            min=0,
+            help="Also write this many top runs as rosbag2 folders (MCAP; needs sitgen[ros2]), "
+            "linked from their pages.",
+        ),
+    ] = 0,
 ) -> None:
     """Write an HTML triage report of a campaign: distinct failures first, ranked runs, score
     distribution, and for the top runs and each distinct failure's representative a page with
     the figure, failure class, timeline, score breakdown and a replay. Opens from disk."""
     from sitgen.presentation.report import write_report
+    from sitgen.presentation.rosbag import RosbagUnavailable
 
     require_store(db)
     learned = _weights(weights, db)
     with _writing(output, "the report"):
-        pages = write_report(db, output, top, learned, str(weights or ""))
+        try:
+            pages = write_report(db, output, top, learned, str(weights or ""), rosbag2)
+        except RosbagUnavailable as e:
+            raise UsageError(f"--rosbag2: {e}") from None
     typer.echo(f"wrote {output / 'index.html'} and {len(pages) - 1} run pages")
 
 

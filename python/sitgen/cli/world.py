@@ -174,7 +174,7 @@ def export(
             "--format",
             "-f",
             help="Situation: stage (Player/Stage world) or ros (map YAML+PGM). "
-            "Campaign: parquet or csv (one file per table).",
+            "Campaign: parquet or csv (one file per table), or rosbag2 (one run, --run).",
         ),
     ] = "stage",
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
@@ -182,14 +182,22 @@ def export(
     ),
     spec: RunSpecOption = None,
     allow_edited: AllowEditedOption = False,
+    run_id: Annotated[
+        int | None,
+        typer.Option("--run", help="With --format rosbag2: the stored run to write."),
+    ] = None,
 ) -> None:
     """Export a situation for Stage (with how it is run: --spec's laser, limits and time limit,
-    every robot driven by its sitgen controller, docs/stage.md) or ROS, or a campaign's tables
-    for analysis (pandas, polars, DuckDB)."""
+    every robot driven by its sitgen controller, docs/stage.md) or ROS, a campaign's tables
+    for analysis (pandas, polars, DuckDB), or one stored run as a rosbag2 (MCAP) for ROS tools
+    (docs/ros2.md)."""
     if _is_store(source):
         from sitgen.triage.rank import export_tables
 
         require_store(source)
+        if format == "rosbag2" or run_id is not None:
+            _export_rosbag2(source, run_id, format, output)
+            return
         if format == "stage":
             format = "parquet"
         if format not in ("parquet", "csv"):
@@ -204,6 +212,24 @@ def export(
     with _writing(output, "the export"):
         for path in Situation.load(source, allow_edited).export(output, format, run=run_spec):
             typer.echo(f"wrote {path}")
+
+
+def _export_rosbag2(db: Path, run_id: int | None, format: str, output: Path) -> None:
+    from sitgen.presentation.rosbag import RosbagUnavailable, write_stored_run
+    from sitgen.store import Store
+
+    if format != "rosbag2":
+        raise UsageError(f"--run: a single run is exported as --format rosbag2, not `{format}`")
+    if run_id is None:
+        raise UsageError("--format rosbag2: give the run to write with --run ID")
+    if output.exists():
+        raise UsageError(f"{output}: already exists; a rosbag2 is written into a new folder")
+    try:
+        with Store(db) as store, _writing(output, "the rosbag2"):
+            path = write_stored_run(store, run_id, output)
+    except RosbagUnavailable as e:
+        raise UsageError(f"--format rosbag2: {e}") from None
+    typer.echo(f"wrote {output} ({path.name}, metadata.yaml)")
 
 
 @app.command()

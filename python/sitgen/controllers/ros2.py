@@ -41,7 +41,6 @@ REP 105 (frames); docs/ros2.md.
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import fcntl
 import math
@@ -100,6 +99,8 @@ MAX_MISSED_ANSWERS = 10
 DOMAIN_IDS = range(1, 102)
 """DDS domains sitgen may claim: 0 is left to the user's own ROS system; above 101 the
 ports of a domain start to collide with Linux's ephemeral range."""
+MATCH_GRACE_S = 0.3
+"""Wall seconds a node that listens is given for all of its subscriptions to match."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
 SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
@@ -168,18 +169,22 @@ def quaternion(heading: float) -> tuple[float, float, float, float]:
     return (0.0, 0.0, math.sin(heading / 2), math.cos(heading / 2))
 
 
+_claimed: dict[int, tuple[int, IO[bytes]]] = {}
+"""The domain this process holds, by pid (a forked pool worker claims its own)."""
+
+
+def process_domain() -> int:
+    """This process's DDS domain id, claimed on first use and held until it exits."""
+    if os.getpid() not in _claimed:
+        _claimed[os.getpid()] = _claim_domain()
+    return _claimed[os.getpid()][0]
+
+
 class Bridge:
-    """sitgen's ROS 2 node in this process: a context on a domain of its own, the simulator's
-    publishers and an executor. One per process (forked pool workers make their own)."""
-
-    _instance: Bridge | None = None
-    _pid = 0
-
-    @classmethod
-    def get(cls) -> Bridge:
-        if cls._instance is None or cls._pid != os.getpid():
-            cls._instance, cls._pid = Bridge(), os.getpid()
-        return cls._instance
+    """sitgen's side of one run: a ROS 2 context on this process's domain, the simulator's
+    node with its publishers, and an executor. A fresh one per run: a participant that has
+    seen a node die keeps its locators for seconds, and a new node on the same ports would
+    wait that long to be discovered."""
 
     def __init__(self) -> None:
         reason = ros2_available()
@@ -195,7 +200,7 @@ class Bridge:
         )
 
         self.msg = _messages()
-        self.domain, self._lock = _claim_domain()
+        self.domain = process_domain()
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain)
         self.node = rclpy.create_node("sitgen_sim", context=self.context)
@@ -213,19 +218,23 @@ class Bridge:
         self.odom = self.node.create_publisher(m["Odometry"], TOPICS.odom, reliable)
         self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
         self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
-        atexit.register(self.shutdown)
 
     def spin(self, timeout_s: float) -> None:
         self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
 
-    def all_matched(self) -> bool:
-        """Whether the node listens to the scan or the odometry, and every subscription to
-        sitgen's topics that discovery has seen is matched by sitgen's publisher (so the first
-        observation is not lost to a half-finished discovery)."""
+    def all_matched(self, listening_will_do: bool = False) -> bool:
+        """Whether the node listens to the scan or the odometry, and (unless
+        ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
+        is matched by sitgen's publisher (so the first observation is not lost to a
+        half-finished discovery)."""
         publishers = (self.clock, self.scan, self.odom, self.plan, self.goal)
         listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
-        return listening > 0 and all(
-            p.get_subscription_count() >= self._subscriptions_seen(p.topic_name) for p in publishers
+        return listening > 0 and (
+            listening_will_do
+            or all(
+                p.get_subscription_count() >= self._subscriptions_seen(p.topic_name)
+                for p in publishers
+            )
         )
 
     def _subscriptions_seen(self, topic: str) -> int:
@@ -290,12 +299,12 @@ class Ros2Controller(UserController):
     # --- a run: start, reset, act, close ---------------------------------------------------
 
     def load(self) -> None:
-        self._bridge = Bridge.get()
+        self._bridge = Bridge()
         self._start()
 
     def reset(self, info: dict[str, Any]) -> None:
         self._info = info
-        bridge = self._bridge = self._bridge or Bridge.get()
+        bridge = self._bridge = self._bridge or Bridge()
         # The route goes out before the node starts: transient-local keeps it for the node.
         self._publish_route(bridge, info)
         if self._proc is None:
@@ -324,9 +333,9 @@ class Ros2Controller(UserController):
 
     def close(self) -> str | None:
         bridge, proc = self._bridge, self._proc
-        if bridge is not None and self._subscription is not None:
-            bridge.node.destroy_subscription(self._subscription)
-            self._subscription = None
+        if bridge is not None:
+            bridge.shutdown()
+            self._bridge, self._subscription = None, None
         unclean = None
         if proc is not None:
             # A node is asked to stop as ros2 launch asks it (SIGINT), then its group is killed.
@@ -405,11 +414,18 @@ class Ros2Controller(UserController):
         """Wait until the node publishes /cmd_vel and listens to the scan or the odometry,
         then subscribe to /cmd_vel with the node's type."""
         deadline = time.monotonic() + self._start_timeout_s
-        kind = None
+        kind, seen = None, None
         while True:
             self._check_alive("on start")
             kind = bridge.cmd_vel_type()
-            if kind is not None and bridge.all_matched():
+            if kind is not None and seen is None:
+                seen = time.monotonic()
+            # The graph may still list a previous run's node for a while after it has gone,
+            # so a node that listens is waited on only MATCH_GRACE_S for the rest to match
+            # (the first observation is repeated until answered, which covers a late match).
+            if kind is not None and bridge.all_matched(
+                seen is not None and time.monotonic() - seen > MATCH_GRACE_S
+            ):
                 break
             if time.monotonic() > deadline:
                 missing = (

@@ -29,7 +29,6 @@ from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
-from xml.etree import ElementTree
 
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
@@ -37,6 +36,8 @@ from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
 from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
+from sitgen.triage.junit import Case
+from sitgen.triage.junit import write_junit as write_junit_cases
 from sitgen.triage.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_copy, verdict
 from sitgen.triage.robustness import perturbed
 
@@ -425,35 +426,21 @@ def controller_label(controller: dict[str, Any]) -> str:
 def write_junit(report: DiffReport, out: TextIO) -> None:
     """The verdict as JUnit XML: one test case per distinct failure, failed where it is
     robustly new in B."""
-    suite = ElementTree.Element(
-        "testsuite",
-        name=f"sitgen diff: {controller_label(report.a)} -> {controller_label(report.b)}",
-        tests=str(len(report.classes)),
-        failures=str(len(report.robust_new)),
-        errors="0",
-        skipped="0",
-    )
+    cases = []
     for c in report.classes:
-        case = ElementTree.SubElement(
-            suite, "testcase", classname="sitgen.generation.diff", name=c.failure_class
-        )
         if c.new:
-            failure = ElementTree.SubElement(
-                case, "failure", message=f"{c.description}: robustly new in B"
-            )
-            failure.text = (
+            text = (
                 f"robustly new in B on situations {', '.join(map(str, c.new))} "
                 f"(runs {', '.join(str(2 * s + 1) for s in c.new)}); fixed on "
                 f"{len(c.fixed)}, unchanged on {len(c.unchanged)}, not robust on "
                 f"{len(c.not_robust)}"
             )
+            failure = (c.failure_class, f"{c.description}: robustly new in B", text)
+            cases.append(Case(c.failure_class, "sitgen.generation.diff", failure=failure))
         else:
-            ElementTree.SubElement(case, "system-out").text = c.verdict
-    root = ElementTree.Element("testsuites")
-    root.append(suite)
-    ElementTree.indent(root)
-    out.write(ElementTree.tostring(root, encoding="unicode", xml_declaration=True))
-    out.write("\n")
+            cases.append(Case(c.failure_class, "sitgen.generation.diff", output=c.verdict))
+    name = f"sitgen diff: {controller_label(report.a)} -> {controller_label(report.b)}"
+    write_junit_cases(name, cases, out)
 
 
 def summary_lines(report: DiffReport) -> Iterable[str]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import html
 import json
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ from sitgen.generation.fault_report import (
 )
 from sitgen.generation.search import SearchReplay, elite_grid, replay
 from sitgen.presentation.page import _page
+from sitgen.presentation.rosbag import write_stored_run
 from sitgen.presentation.run_page import run_page
 from sitgen.store import KINDS, Store
 from sitgen.triage.coverage import RunCoverage, dimensions, stored, summarise
@@ -598,10 +600,13 @@ def write_report(
     top: int = 50,
     weights: Weights | None = None,
     weights_name: str = "",
+    rosbags: int = 0,
 ) -> list[Path]:
     """Write the report of campaign store ``db`` into ``out``; returns the pages written. The
     ``top`` runs get a page, and so does every distinct failure's representative. With
-    ``weights`` (read from ``weights_name``) every score is rescored by them."""
+    ``weights`` (read from ``weights_name``) every score is rescored by them. The ``rosbags``
+    top runs are written as rosbag2 folders too (``rosbag2/run-ID``), linked from their
+    pages."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written = []
@@ -625,6 +630,12 @@ def write_report(
         if diff is not None:
             # A diff's differing situations are shown as A's run beside B's.
             wanted += diff_runs(diff)
+        for r in ranked[: max(0, rosbags)]:
+            bag = out / "rosbag2" / f"run-{r['run']}"
+            if bag.exists():
+                shutil.rmtree(bag)  # the report's own, from an earlier writing
+            bag.parent.mkdir(exist_ok=True)
+            write_stored_run(store, r["run"], bag)
         pages: set[int] = set()
         for run_id in dict.fromkeys(wanted):
             made = run_page(store, run_id, ranks[run_id], out, Path(db).name, part_of.get(run_id))

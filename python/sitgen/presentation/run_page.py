@@ -306,8 +306,24 @@ def run_page(
         "the situation from its spec and seed, runs it again and confirms the same event log."
         "</p>"
     )
+    body.append(_rosbag_section(db_name, run_id, out))
     scripts = f"<script src='run-{run_id}.js'></script>{RUN_SCRIPT}"
     return _page(f"sitgen run {run_id}", "".join(body), scripts), script
+
+
+def _rosbag_section(db_name: str, run_id: int, out: Path) -> str:
+    """Where the run's rosbag2 is (the report writes one for its top runs), or how to get it."""
+    bag = f"rosbag2/run-{run_id}"
+    if (out / bag / "metadata.yaml").is_file():
+        return (
+            f"<h2>ROS 2</h2><p>The run as a rosbag2 (MCAP): <a href='{bag}/metadata.yaml'>{bag}"
+            f"</a>; <code>ros2 bag play {bag}</code>, or open it in Foxglove or Lichtblick.</p>"
+        )
+    return (
+        f"<h2>ROS 2</h2><p><code>sitgen export {html.escape(db_name)} --run {run_id} --format "
+        f"rosbag2 -o run-{run_id}-bag</code> writes the run as a rosbag2 (MCAP) for "
+        "<code>ros2 bag play</code>, Foxglove or Lichtblick.</p>"
+    )
 
 
 def _why_this_rank(breakdown: dict[str, Any], score: float) -> str:

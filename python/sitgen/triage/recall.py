@@ -63,28 +63,25 @@ def regenerate(row: dict[str, Any]) -> Situation:
     return generate_situation(spec, seed=row["situation_seed"])
 
 
-def resimulate(row: dict[str, Any]) -> tuple[Situation, RunRecord]:
-    """Stored run ``row`` generated and run again, as it was run."""
+def resimulate(row: dict[str, Any], sensed: bool = False) -> tuple[Situation, RunRecord]:
+    """Stored run ``row`` generated and run again, as it was run (``sensed``: keeping what
+    the agent sensed, :class:`sitgen.run.Sensed`)."""
     situation = regenerate(row)
     # The stored run spec names the controller if the campaign gave one (with its parameters
     # and any seeded fault); otherwise the situation's own drives, as it did.
-    return situation, run(situation, seed=row["run_seed"], spec=row["run_spec"])
+    return situation, run(situation, seed=row["run_seed"], spec=row["run_spec"], sensed=sensed)
 
 
-def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
-    """Stored run ``row`` (:func:`stored_run`) whole; None if its situation was never
-    generated. Raises StoreError if re-simulation does not give back the run that was stored
-    (another sitgen version)."""
+def resimulate_checked(
+    store: Store, row: dict[str, Any], sensed: bool = False
+) -> tuple[Situation, RunRecord]:
+    """:func:`resimulate`, checked to give back the run that was stored: its situation's
+    content hash, its event log's digest and its score. Raises StoreError if it does not
+    (another sitgen version, or a controller that is not deterministic) or if the situation no
+    longer generates."""
     run_id = row["id"]
-    if row["content_hash"] is None:
-        return None
-    if row["kept"] and row["situation"] is not None:
-        situation = Situation(row["situation"], check_start=False)
-        trajectory = store.trajectory(run_id)
-        if trajectory is not None:
-            return WholeRun(situation, trajectory, row["events_jsonl"], resimulated=False)
     try:
-        situation, record = resimulate(row)
+        situation, record = resimulate(row, sensed)
     except _core.GenerationFailed as e:
         raise StoreError(
             f"{store.path}: run {run_id}: its situation no longer generates: {e}"
@@ -101,9 +98,25 @@ def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
     if differs:
         version = (store.campaign() or {}).get("sitgen_version", "another version")
         raise StoreError(
-            f"{store.path}: run {run_id} was stored as a summary and re-simulating it gives a "
-            f"different {', '.join(differs)} (stored by sitgen {version}, this is "
-            f"{_core.__version__})"
+            f"{store.path}: run {run_id}: re-simulating it gives a different "
+            f"{', '.join(differs)} (stored by sitgen {version}, this is {_core.__version__}; "
+            f"or its controller is not deterministic)"
         )
+    return situation, record
+
+
+def whole_run(store: Store, row: dict[str, Any]) -> WholeRun | None:
+    """Stored run ``row`` (:func:`stored_run`) whole; None if its situation was never
+    generated. Raises StoreError if re-simulation does not give back the run that was stored
+    (another sitgen version)."""
+    run_id = row["id"]
+    if row["content_hash"] is None:
+        return None
+    if row["kept"] and row["situation"] is not None:
+        situation = Situation(row["situation"], check_start=False)
+        trajectory = store.trajectory(run_id)
+        if trajectory is not None:
+            return WholeRun(situation, trajectory, row["events_jsonl"], resimulated=False)
+    situation, record = resimulate_checked(store, row)
     trajectory = record.trajectory.astype(np.float32)
     return WholeRun(situation, trajectory, record.events_jsonl, resimulated=True)

@@ -1,0 +1,102 @@
+"""Results for CI servers as JUnit XML: a campaign's runs (a test case per situation) and
+``diff``'s verdict share one writer.
+
+Why JUnit: it is what Jenkins, GitLab, GitHub Actions' test reporters and Azure read. The
+document follows the schema those servers accept (Jenkins xunit-plugin's ``junit-10.xsd``,
+which pytest also validates its own output against): ``testsuites`` > ``testsuite`` (``name``,
+``tests``, ``failures``, ``errors``, ``skipped``) > ``testcase`` (``name``, ``classname``)
+with at most one ``failure`` or ``error`` (``type``, ``message``, text) and ``system-out``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, TextIO
+from xml.etree import ElementTree
+
+from sitgen.store import Store, unpack_json
+from sitgen.triage.failures import distinct_failures
+from sitgen.triage.robustness import label, verdict
+
+
+@dataclass(frozen=True)
+class Case:
+    """One test case: failed (``failure``: type, message, text), in error (``error``: type,
+    message) or passed."""
+
+    name: str
+    classname: str
+    failure: tuple[str, str, str] | None = None
+    error: tuple[str, str] | None = None
+    output: str = ""
+
+
+def write_junit(suite_name: str, cases: Sequence[Case], out: TextIO) -> None:
+    """``cases`` as one JUnit test suite named ``suite_name``."""
+    suite = ElementTree.Element(
+        "testsuite",
+        name=suite_name,
+        tests=str(len(cases)),
+        failures=str(sum(c.failure is not None for c in cases)),
+        errors=str(sum(c.error is not None and c.failure is None for c in cases)),
+        skipped="0",
+    )
+    for c in cases:
+        case = ElementTree.SubElement(suite, "testcase", classname=c.classname, name=c.name)
+        if c.failure is not None:
+            kind, message, text = c.failure
+            ElementTree.SubElement(case, "failure", type=kind, message=message).text = text
+        elif c.error is not None:
+            kind, message = c.error
+            ElementTree.SubElement(case, "error", type=kind, message=message)
+        if c.output:
+            ElementTree.SubElement(case, "system-out").text = c.output
+    root = ElementTree.Element("testsuites")
+    root.append(suite)
+    ElementTree.indent(root)
+    out.write(ElementTree.tostring(root, encoding="unicode", xml_declaration=True))
+    out.write("\n")
+
+
+def campaign_cases(store: Store) -> list[Case]:
+    """A test case per run of the campaign in ``store`` (one per situation): failed where the
+    run failed, with its failure class (``type``), sentence (``message``) and robustness (the
+    run's own if it was measured, else that of its distinct failure's representative); in
+    error where it could not run; passed otherwise."""
+    failures = distinct_failures(store)
+    group_of = {run_id: f for f in failures for run_id in f.run_ids}
+    measured = store.robustness()
+    cases = []
+    rows = store.db.execute(
+        "SELECT id, controller, outcome, reason, score, failure_class, failure FROM runs "
+        "ORDER BY id"
+    )
+    for run_id, controller, outcome, reason, score, key, failure_json in rows:
+        name = f"situation {run_id}"
+        classname = f"sitgen.campaign.{controller}"
+        said = f"outcome {outcome} ({reason}), score {score:g}"
+        if key is not None:
+            failure: dict[str, Any] = unpack_json(failure_json) if failure_json else {}
+            description = str(failure.get("description", key))
+            text = f"{said}\nrobustness: {_robustness(run_id, group_of.get(run_id), measured)}"
+            cases.append(Case(name, classname, failure=(key, description, text)))
+        elif outcome == "error":
+            cases.append(Case(name, classname, error=("error", reason)))
+        else:
+            cases.append(Case(name, classname, output=said))
+    return cases
+
+
+def _robustness(run_id: int, group: Any, measured: dict[int, dict[str, Any]]) -> str:
+    if run_id in measured:
+        m = measured[run_id]
+        return f"{verdict(m['recurs'], m['reruns'])}, {label(m['recurs'], m['reruns'])}"
+    if group is not None and group.representative in measured:
+        m = measured[group.representative]
+        return (
+            f"not measured; its distinct failure's representative (run "
+            f"{group.representative}) is {verdict(m['recurs'], m['reruns'])}, "
+            f"{label(m['recurs'], m['reruns'])}"
+        )
+    return "not measured"
