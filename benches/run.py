@@ -146,6 +146,46 @@ def bench_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any
     return out
 
 
+def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """The same route follower (examples/ros2/follower.py) driving the reference scene's agent
+    as a ``cmd:`` program (JSON lines over pipes) and as a ROS 2 node (``ros2:``, DDS in
+    lockstep): control steps per second over the run, and the start-up each pays per run
+    (a 0.1 s run). Skipped where sitgen[ros2] is not installed."""
+    from sitgen.controllers.ros2 import ros2_available
+
+    situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
+    folder = Path(__file__).resolve().parent.parent / "examples" / "ros2"
+    kinds = {
+        "cmd": f"cmd:{sys.executable} {folder / 'follower_cmd.py'}",
+        "ros2": f"ros2:{sys.executable} {folder / 'follower_node.py'}",
+    }
+    reason = ros2_available()
+    if reason is not None:
+        print(f"skipped ros2: against cmd: {reason}")
+        kinds.pop("ros2")
+    out: dict[str, Any] = {}
+    for kind, name in kinds.items():
+        steps: list[int] = []
+
+        def whole(_: int, name: str = name, steps: list[int] = steps) -> None:
+            steps.append(sitgen.run(situation, controller=name, time_limit=60.0).steps)
+
+        def start(_: int, name: str = name) -> None:
+            sitgen.run(situation, controller=name, time_limit=0.1)
+
+        m = measure(whole, repeats=3)
+        s = measure(start, repeats=3)
+        per_s = steps[-1] / max(1e-9, m["median_s"] - s["median_s"])
+        out[kind] = {"steps": steps[-1], "steps_per_s": per_s, "start_s": s["median_s"], **m}
+        rows.append((f"route follower as {kind}: {steps[-1]} control steps", m))
+        print(
+            f"route follower as {kind:4}: {per_s:8,.0f} control steps/s, "
+            f"{s['median_s'] * 1e3:5.0f} ms to start and end a run ({steps[-1]} steps in "
+            f"{m['median_s']:.2f} s)"
+        )
+    return out
+
+
 PAPER_S = 17 * 3600.0
 """The paper's 500-situation campaign: about 17 hours (§4.2)."""
 
@@ -241,6 +281,7 @@ def main() -> None:
     results["sim"] = bench_reference_scene(rows)
     results["laser"] = bench_laser(rows)
     results["controllers"] = bench_controllers(rows)
+    results["user_controllers"] = bench_user_controllers(rows)
     if os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500") != "0":
         results["campaign"] = bench_campaign(rows)
 
