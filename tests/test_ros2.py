@@ -281,3 +281,38 @@ def test_sitgen_run_writes_a_rosbag2_of_a_ros2_nodes_run(
         "--rosbag2", str(bag), cwd=ROOT,
     )  # fmt: skip
     assert again.returncode == 2 and "already exists" in again.stderr
+
+
+def test_a_ros2_runs_failure_shrinks_and_reruns_the_same(
+    ros2_campaign: Path, tmp_path: Path
+) -> None:
+    db = ros2_campaign / "two.db"
+    with sqlite3.connect(db) as c:
+        (run_id,) = c.execute(
+            "SELECT id FROM runs WHERE failure_class IS NOT NULL ORDER BY score DESC LIMIT 1"
+        ).fetchone()
+    out = tmp_path / "min.json"
+    done = run_cli(
+        "shrink", str(db), str(run_id), "--max-probes", "40", "-o", str(out), "--format", "json",
+        cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["probes"] > 0
+    rerun = run_cli(
+        "run", str(out), "--spec", str(tmp_path / "min.run.json"), "--seed",
+        str(result["run_seed"]), "--json", cwd=ROOT,
+    )  # fmt: skip
+    assert rerun.returncode == 0, rerun.stderr
+    assert json.loads(rerun.stdout)["failure"]["class"] == result["failure_class"]
+
+
+def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path) -> None:
+    fast = json.dumps({"name": FOLLOWER, "params": {"speed_m_s": 0.9, "stop_m": 0.2}})
+    done = run_cli(
+        "diff", "--a", FOLLOWER, "--b", fast, "--situations", str(ros2_campaign / "two.db"),
+        "--n", "6", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode in (0, 1), done.stderr
+    report = json.loads(done.stdout)
+    assert report["situations"] == 6

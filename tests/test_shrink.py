@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import sitgen
 from sitgen import _core
 from sitgen.triage.shrink import ShrinkResult, ddmin, shrink
 from sitgen.world.situation import Situation
-from tests.conftest import run_cli
+from tests.conftest import ROOT, run_cli
 from tests.test_campaign import write_spec
 
 # --- ddmin
@@ -227,11 +228,26 @@ def test_a_corrupt_or_foreign_situation_file_gets_one_line(
     assert len(lines) == 1 and lines[0].startswith(f"error: {path}") and says in lines[0]
 
 
-def test_a_user_controller_is_refused(head_on: Situation, tmp_path: Path) -> None:
+FOLLOWER_CMD = f"cmd:{sys.executable} {ROOT / 'examples/ros2/follower_cmd.py'}"
+"""The route follower of examples/ros2 as a program: it does not steer around the peer."""
+
+
+def test_a_user_controllers_failure_shrinks_the_same_on_any_worker_count(
+    head_on: Situation,
+) -> None:
+    run_spec = {"time_limit_s": 60.0, "controller": {"name": FOLLOWER_CMD, "params": {}}}
+    two = shrink(head_on, run_spec, workers=2, max_probes=150)
+    assert two.before.peers == 5 and two.after.peers == 1
+    record = sitgen.run(two.minimal, spec=run_spec)
+    assert record.failure is not None and record.failure["class"] == two.failure_class
+    one = shrink(head_on, run_spec, workers=1, max_probes=150)
+    assert one.minimal.to_json() == two.minimal.to_json()
+    assert (one.probes, one.skipped) == (two.probes, two.skipped)
+
+
+def test_bad_shrink_options_are_refused(head_on: Situation, tmp_path: Path) -> None:
     path = tmp_path / "head_on.json"
     head_on.save(path)
-    done = run_cli("shrink", str(path), "-c", "python:tests.controllers.pycontrollers:Forward")
-    assert done.returncode == 2 and "built-in controllers only" in done.stderr
     done = run_cli("shrink", str(path), "--max-probes", "0")
     assert done.returncode == 2 and "--max-probes: 0 is not in [1, 1000000]" in done.stderr
     done = run_cli("shrink", str(path), "--workers", "100000")

@@ -254,6 +254,33 @@ def _drive(
         user.close()
 
 
+def robots_at(
+    situation: Situation, spec: Mapping[str, Any], seed: int, t_s: float
+) -> list[dict[str, Any]]:
+    """The robots of ``situation`` as they stand ``t_s`` simulated seconds into its run with
+    run spec ``spec`` and sensor seed ``seed``: each at its pose with the rest of its route
+    (as in a situation file). A user controller is started and driven there (the core
+    restarts only its own controllers part-way)."""
+    spec_text = spec_json(dict(spec), "run")
+    core = _core.Run(situation.to_json(), spec_text, seed)
+    if not core.agent_is_external:
+        robots: list[dict[str, Any]] = json.loads(
+            _core.robots_at(situation.to_json(), spec_text, seed, t_s)
+        )
+        return robots
+    named = spec.get("controller") or situation.agent.controller
+    user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
+    try:
+        user.reset(reset_info(situation, spec, core.agent))
+        while core.observe_agent()["time"] < t_s - 1e-9:
+            if core.step(user.act(core.observe_agent()) if core.agent_acts else None):
+                break
+    finally:
+        user.close()
+    robots = json.loads(core.robots_now(situation.to_json()))
+    return robots
+
+
 @dataclass(frozen=True)
 class Check:
     """One conformance check of a user controller."""

@@ -3,7 +3,7 @@
 
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use sitgen_core::failure::{classes, classify, FailureClass};
+use sitgen_core::failure::{self, classes, classify, FailureClass};
 use sitgen_core::monitor::Event;
 
 /// Parse an event log given as JSON Lines; a line that is not an event is an error naming its
@@ -41,6 +41,18 @@ fn event_classes(events_jsonl: &str, agent: u32) -> PyResult<Vec<&'static str>> 
         .collect())
 }
 
+/// (key, seconds) of the first time each failure class an event log (JSON Lines) shows was
+/// seen, most severe first: what a shrink keeps to (`sitgen_core::failure::first_seen`).
+#[pyfunction]
+#[pyo3(signature = (events_jsonl, agent=0))]
+fn first_seen(events_jsonl: &str, agent: u32) -> PyResult<Vec<(&'static str, f64)>> {
+    let events = parse_events(events_jsonl)?;
+    Ok(failure::first_seen(&events, agent)
+        .into_iter()
+        .map(|(c, s)| (c.key(), s))
+        .collect())
+}
+
 /// Every failure class as (key, description), most severe first.
 #[pyfunction]
 fn failure_classes() -> Vec<(&'static str, &'static str)> {
@@ -54,5 +66,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(classify_events, m)?)?;
     m.add_function(wrap_pyfunction!(event_classes, m)?)?;
     m.add_function(wrap_pyfunction!(failure_classes, m)?)?;
+    m.add_function(wrap_pyfunction!(first_seen, m)?)?;
     Ok(())
 }

@@ -99,6 +99,14 @@ impl PyRun {
         Ok(self.live_mut()?.step(command))
     }
 
+    /// Every robot of `situation_json` (the run's situation) as it stands now: at its pose
+    /// with the rest of its route (JSON list, as in a situation file).
+    fn robots_now(&self, situation_json: &str) -> PyResult<String> {
+        let situation = Situation::from_json(situation_json).map_err(spec_error)?;
+        let robots = self.live()?.robots_now(&situation);
+        Ok(serde_json::to_string(&robots).expect("robots serialize"))
+    }
+
     /// End the run with outcome `error` for `reason`.
     fn fail(&mut self, reason: String) -> PyResult<()> {
         self.live_mut()?.fail(reason);

@@ -85,6 +85,18 @@ fn probe_dict(py: Python<'_>, probe: Result<Probe, String>) -> PyResult<Bound<'_
     Ok(d)
 }
 
+/// Why `candidate` (situation JSON) cannot be probed (a shrink's validity checks: a valid
+/// situation, every robot starting clear, peer legs keeping `leg_margin_m`), or `None`: the
+/// check a probe makes first, for probes run outside the core (user controllers).
+#[pyfunction]
+#[pyo3(signature = (candidate, leg_margin_m))]
+fn shrink_check(candidate: &str, leg_margin_m: Option<f64>) -> Option<String> {
+    match Situation::from_json(candidate) {
+        Ok(s) => shrink::check(&s, leg_margin_m).err(),
+        Err(e) => Some(e.to_string()),
+    }
+}
+
 /// The robots of `situation` as they stand `t_s` seconds into its run with `run_json` and
 /// sensor seed `seed` (JSON list): each at its pose with the rest of its route.
 #[pyfunction]
@@ -108,5 +120,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shrink_leg_margin, m)?)?;
     m.add_function(wrap_pyfunction!(shrink_probes, m)?)?;
     m.add_function(wrap_pyfunction!(robots_at, m)?)?;
+    m.add_function(wrap_pyfunction!(shrink_check, m)?)?;
     Ok(())
 }

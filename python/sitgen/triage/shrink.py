@@ -21,10 +21,13 @@ and repeats them while any of them still helps (at most ``PASSES`` times):
 Every candidate is checked first (the core's ``shrink`` module: it reads as a situation file
 does, robots start clear of obstacles, the edge and each other, peer legs are clear on the
 dilated map where the original's are); an invalid candidate is skipped, not run. Every probe is
-an ordinary deterministic run, batched in Rust across ``workers`` threads, and the batches do
-not depend on the thread count, so the same input gives the same minimal situation whatever
-``workers``. The recorded choice sequence of the generator is not shrunk: a shrunk situation is
-edited directly, and records in ``provenance.shrunk_from`` the content hash it came from.
+an ordinary deterministic run, batched in Rust across ``workers`` threads (for a user
+controller — ``python:``, ``cmd:``, ``ros2:`` — across ``workers`` processes, each run through
+:func:`sitgen.run.run`; a candidate its controller could not finish is skipped), and the
+batches do not depend on the worker count, so the same input gives the same minimal situation
+whatever ``workers``. The recorded choice sequence of the generator is not shrunk: a shrunk
+situation is edited directly, and records in ``provenance.shrunk_from`` the content hash it
+came from.
 """
 
 from __future__ import annotations
@@ -33,10 +36,13 @@ import hashlib
 import itertools
 import json
 import math
+import multiprocessing
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
+from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +53,7 @@ from scipy import ndimage
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
 from sitgen.execution.jobs import check_workers
-from sitgen.run import run
+from sitgen.run import robots_at, run
 from sitgen.store import Store
 from sitgen.triage.failures import distinct_failures
 from sitgen.triage.recall import stored_run, whole_run
@@ -225,6 +231,52 @@ def _first(subsets: list[list[Any]], fails: Callable[[list[list[Any]]], list[boo
     return next((s for s, f in zip(subsets, fails(subsets), strict=True) if f), None)
 
 
+def user_probe(
+    candidate: str, run_spec: dict[str, Any], seed: int, leg_margin_m: float | None
+) -> dict[str, Any]:
+    """A probe of ``candidate`` (situation JSON) as the core makes one (``ok``, then
+    ``problem`` or ``class``, ``first_s``, ``time_s``, ``outcome``), run through
+    :func:`sitgen.run.run` for a user controller; a run the controller could not finish is
+    skipped, like a candidate that is not valid."""
+    problem = _core.shrink_check(candidate, leg_margin_m)
+    if problem is not None:
+        return {"ok": False, "problem": problem}
+    record = run(Situation(candidate), seed=seed, spec=run_spec)
+    if record.outcome == "error":
+        return {"ok": False, "problem": f"the controller failed: {record.reason}"}
+    return {
+        "ok": True,
+        "class": None if record.failure is None else record.failure["class"],
+        "first_s": _core.first_seen(record.events_jsonl, 0),
+        "time_s": record.time_s,
+        "outcome": record.outcome,
+    }
+
+
+def user_probes(
+    candidates: list[str],
+    run_spec: dict[str, Any],
+    seed: int,
+    leg_margin_m: float | None,
+    workers: int,
+) -> list[dict[str, Any]]:
+    """:func:`user_probe` of each candidate, in order, on ``workers`` processes (started by a
+    fork server, so that none inherits a ROS 2 or DDS state of this process)."""
+    if workers <= 1 or len(candidates) <= 1:
+        return [user_probe(c, run_spec, seed, leg_margin_m) for c in candidates]
+    context = multiprocessing.get_context("forkserver")
+    with ProcessPoolExecutor(min(workers, len(candidates)), mp_context=context) as pool:
+        return list(
+            pool.map(
+                user_probe,
+                candidates,
+                repeat(run_spec),
+                repeat(seed),
+                repeat(leg_margin_m),
+            )
+        )
+
+
 class Shrinker:
     """One shrink: the original, how it is run, the target class and the probes made."""
 
@@ -250,6 +302,10 @@ class Shrinker:
         self.max_probes = max_probes
         self.on_progress = on_progress
         self.leg_margin = _core.shrink_leg_margin(self.original_json)
+        named = (run_spec.get("controller") or original.agent.controller)["name"]
+        self.user = is_user_controller(named)
+        """Whether the agent's controller is a user's (its probes then run through
+        :func:`sitgen.run.run`, each in a process of a pool, rather than in the core)."""
         self.cache: dict[str, dict[str, Any]] = {}
         self.paths: dict[str, npt.NDArray[np.float64]] = {}
         self.files: dict[str, str] = {}
@@ -291,12 +347,13 @@ class Shrinker:
             batch = list(todo.items())[:room]
             if len(batch) < len(todo):
                 self.exhausted = True
-            probes = _core.shrink_probes(
-                [self.situation_json(c) for _, c in batch],
-                self.run_json,
-                self.run_seed,
-                self.leg_margin,
-                self.workers,
+            situations = [self.situation_json(c) for _, c in batch]
+            probes = (
+                user_probes(situations, self.run_spec, self.run_seed, self.leg_margin, self.workers)
+                if self.user
+                else _core.shrink_probes(
+                    situations, self.run_json, self.run_seed, self.leg_margin, self.workers
+                )
             )
             for (k, _), p in zip(batch, probes, strict=True):
                 self.cache[k] = p
@@ -327,10 +384,7 @@ class Shrinker:
     def robots_at(self, c: Candidate, t_s: float) -> list[dict[str, Any]]:
         """``c``'s robots as they stand ``t_s`` into its run. One more (partial) run."""
         self.probes += 1
-        robots: list[dict[str, Any]] = json.loads(
-            _core.robots_at(self.kept_json(c), self.run_json, self.run_seed, t_s)
-        )
-        return robots
+        return robots_at(Situation(self.kept_json(c)), self.run_spec, self.run_seed, t_s)
 
     # The reductions: each returns a candidate that still fails (``c`` itself if none does).
 
@@ -549,12 +603,6 @@ def shrink(
     situation found that still fails with its failure class (with ``failure_class``: that
     still shows that class). Raises :exc:`ShrinkError` if it does not fail so, and SpecError
     for a bad run spec or a controller that is not built in."""
-    named = (run_spec.get("controller") or situation.agent.controller)["name"]
-    if is_user_controller(named):
-        raise ShrinkError(
-            f"controller {named!r}: shrinking runs built-in controllers only (its probes run "
-            "in Rust); run the situation with a built-in controller"
-        )
     if not 1 <= max_probes <= MOST_PROBES:
         raise ShrinkError(f"--max-probes: {max_probes} is not in [1, {MOST_PROBES}]")
     threads = check_workers(workers, "local")
