@@ -299,12 +299,12 @@ def test_a_ros2_runs_failure_shrinks_and_reruns_the_same(
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert result["probes"] > 0
+    seed = result["rerun"].split("--seed ")[1]
     rerun = run_cli(
-        "run", str(out), "--spec", str(tmp_path / "min.run.json"), "--seed",
-        str(result["run_seed"]), "--json", cwd=ROOT,
+        "run", str(out), "--spec", result["run_spec"], "--seed", seed, "--json", cwd=ROOT,
     )  # fmt: skip
     assert rerun.returncode == 0, rerun.stderr
-    assert json.loads(rerun.stdout)["failure"]["class"] == result["failure_class"]
+    assert json.loads(rerun.stdout)["failure"]["class"] == result["class"]
 
 
 def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path) -> None:
