@@ -98,7 +98,7 @@ def resimulate_checked(
     if differs:
         version = (store.campaign() or {}).get("sitgen_version", "another version")
         raise StoreError(
-            f"{store.path}: run {run_id}: re-simulating it gives a different "
+            f"{store.path}: run {run_id} does not re-simulate the same: it gives a different "
             f"{', '.join(differs)} (stored by sitgen {version}, this is {_core.__version__}; "
             f"or its controller is not deterministic)"
         )
