@@ -1,67 +1,61 @@
-"""Search against random generation at equal budget (``make bench-search``): for each of 5
-seeds, the paper's campaign spec searched with MAP-Elites and generated at random (the
-campaign's own jobs), each for the largest budget; a budget only truncates a search, so the
-first 250 runs of a 500-run search are the 250-run search. At budgets 250 and 500 it prints the
-median over seeds of
+"""Search strategies against random generation by what survives chaos (``make bench-search``).
 
-- distinct failure classes found (failure classes with at least one run),
-- distinct failures (``sitgen failures``: classes, broad ones split by behaviour),
-- the share of runs under 10 points (the paper's low scores),
-- the kill rate of snd_follow's seeded faults on those situations, in the order they were run
-  (``sitgen faults --strategy stored``), and the mean runs to first kill over the faults,
+For each of 5 seeds, the paper's campaign spec is searched with every strategy — ``mutation``
+(situation operators, archive over failure class × variant), ``map-elites`` (spec genes and
+seeds), ``coverage`` (coverage-guided) and ``random`` (the campaign's own jobs) — for the
+largest budget of runs; then the same yardstick is applied to every store
+(:func:`sitgen.triage.variants.robust_variants`): its runs in the order they were made, and
+perturbed copies of each failing run whose variant (class × interaction × terrain context) is
+new, every copy counted against the same budget. At budgets of 250, 500 and 1000 evaluations
+(runs plus copies) it prints the median over seeds of
 
-and the ratio search / random. For the search it also prints the locality of each variation
-operator: of the children it made, the share that failed with their first parent's failure
-class (or, like it, with none) — how much a child resembles the elite it was varied from.
-Writes ``benches/results/search.json``.
-``SITGEN_BENCH_SEARCH_SEEDS`` (default 5) and ``SITGEN_BENCH_SEARCH_BUDGET`` (default 500)
-shrink it for a quick look.
+- robust distinct failures (variants confirmed robust within the budget), and the ratio of
+  each strategy's to random generation's;
+- evaluations to the first robust failure of each class that random generation finds in fewer
+  than half of the seeds (its rare classes);
+- for ``mutation``, each situation operator's locality: of its children, the share that failed
+  with their parent's failure class;
+
+and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
+harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
+(``sitgen faults --strategy stored``). Writes ``benches/results/search.json``.
+``SITGEN_BENCH_SEARCH_SEEDS`` (default 5), ``SITGEN_BENCH_SEARCH_BUDGET`` (default 1000) and
+``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import statistics
+import sys
+import tempfile
+import time
 from pathlib import Path
-
-from strategy_harness import compare, mean_runs_to_first_kill, print_comparison
+from typing import Any
 
 from sitgen.execution.jobs import parse_campaign
-from sitgen.generation.fault_report import FaultReport, kill_rate_at
-from sitgen.generation.search import LOW_SCORE_POINTS
+from sitgen.generation.fault_report import report_from
+from sitgen.generation.faults import is_harder, run_faults
+from sitgen.generation.search import SearchPlan, run_search
 from sitgen.store import Store
-from sitgen.triage.failures import distinct_failures
+from sitgen.triage.variants import robust_variants
 
 RESULTS = Path(__file__).resolve().parent / "results"
-BUDGETS = (250, 500)
-STRATEGIES = ("map-elites", "random")
-
-
-def measure(db: Path, budget: int, faults: FaultReport) -> dict[str, float]:
-    """The figures of the first ``budget`` runs of the search in ``db``."""
-    with Store(db) as store:
-        rows = store.db.execute(
-            "SELECT failure_class, score FROM runs WHERE id < ? ORDER BY id", (budget,)
-        ).fetchall()
-        split = [f for f in distinct_failures(store) if min(f.run_ids) < budget]
-    return {
-        "classes": len({c for c, _ in rows if c}),
-        "distinct_failures": len(split),
-        "low_share": sum(s < LOW_SCORE_POINTS for _, s in rows) / len(rows),
-        "kill_rate": kill_rate_at(faults, budget),
-        "mean_runs_to_first_kill": mean_runs_to_first_kill(faults, budget),
-    }
+BUDGETS = (250, 500, 1000)
+STRATEGIES = ("mutation", "map-elites", "coverage", "random")
+FAULT_SITUATIONS = 250
 
 
 def locality(db: Path) -> dict[str, list[int]]:
-    """Per operator: [children, children with their first parent's failure class]."""
+    """Per operator: [children, children with their parent's failure class]."""
     with Store(db) as store:
         rows = store.db.execute("SELECT id, failure_class, parents, genes FROM runs").fetchall()
     classes = {run_id: cls for run_id, cls, _, _ in rows}
     out: dict[str, list[int]] = {}
     for _, cls, parents, genes in rows:
-        first = json.loads(parents)[:1]
-        if not first:
+        first = json.loads(parents)[:1] if parents else []
+        if not first or first[0] not in classes:
             continue
         tally = out.setdefault(json.loads(genes)["operator"], [0, 0])
         tally[0] += 1
@@ -69,39 +63,129 @@ def locality(db: Path) -> dict[str, list[int]]:
     return out
 
 
+def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, float]:
+    """Robust kills of the harder faults on the store's first situations."""
+    from sitgen import _core
+
+    harder = [f["id"] for f in _core.fault_catalogue() if is_harder(f["id"])]
+    faults_db = folder / f"faults-{db.stem}.db"
+    run_faults(
+        spec, faults_db, seed=seed, budget=FAULT_SITUATIONS, strategy="stored",
+        situations_db=db, faults=harder,
+    )  # fmt: skip
+    report = report_from(faults_db)
+    killed = [f for f in report.faults if f.id in harder and f.run is not None]
+    return {"harder_killed": len(killed), "harder": len(harder)}
+
+
 def main() -> None:
     seeds = range(1, 1 + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
     largest = int(os.environ.get("SITGEN_BENCH_SEARCH_BUDGET", str(BUDGETS[-1])))
     budgets = [b for b in BUDGETS if b <= largest] or [largest]
+    strategies = os.environ.get("SITGEN_BENCH_SEARCH_STRATEGIES", ",".join(STRATEGIES)).split(",")
+    with_faults = os.environ.get("SITGEN_BENCH_SEARCH_FAULTS") == "1"
+    spec = parse_campaign(None)
+    out: dict[str, Any] = {"budgets": budgets, "seeds": list(seeds), "strategies": {}}
     kept: dict[str, list[int]] = {}
-
-    def tally(strategy: str, db: Path) -> None:
-        if strategy != "map-elites":
-            return
-        for operator, (n, same) in locality(db).items():
-            counts = kept.setdefault(operator, [0, 0])
-            counts[0] += n
-            counts[1] += same
-
-    out = compare(parse_campaign(None), STRATEGIES, seeds, budgets, largest, measure, tally)
-    out["strategies"]["map-elites"]["children_keeping_parent_class"] = kept
-    print_comparison(
-        out,
-        STRATEGIES,
-        {
-            "classes": "failure classes found",
-            "distinct_failures": "distinct failures",
-            "low_share": "share of runs under 10 points",
-            "kill_rate": "kill rate of the seeded faults",
-            "mean_runs_to_first_kill": "mean runs to first kill",
-        },
-    )
-    print("\nchildren with their first parent's failure class, all seeds, by operator")
-    for operator, (n, same) in sorted(kept.items()):
-        print(f"  {operator:12} {same:>5} of {n:>5} ({same / n:.0%})")
+    with tempfile.TemporaryDirectory() as tmp:
+        for strategy in strategies:
+            rows: list[dict[str, Any]] = []
+            for seed in seeds:
+                db = Path(tmp) / f"{strategy}-{seed}.db"
+                started = time.perf_counter()
+                run_search(spec, db, seed=seed, budget=largest, plan=SearchPlan(strategy))
+                search_s = time.perf_counter() - started
+                started = time.perf_counter()
+                with Store(db) as store:
+                    tally = robust_variants(store, largest, budgets, workers=2)
+                row: dict[str, Any] = {
+                    "seed": seed,
+                    "robust": {str(b): tally.at_budget[b] for b in budgets},
+                    "runs": tally.runs,
+                    "copies": tally.copies,
+                    "first_by_class": _first_by_class(tally.first_at),
+                    "search_s": search_s,
+                    "yardstick_s": time.perf_counter() - started,
+                }
+                if strategy == "mutation":
+                    for operator, (n, same) in locality(db).items():
+                        counts = kept.setdefault(operator, [0, 0])
+                        counts[0] += n
+                        counts[1] += same
+                if with_faults and strategy in ("mutation", "random"):
+                    row |= harder_kills(spec, db, Path(tmp), seed)
+                rows.append(row)
+                print(f"{strategy} seed {seed}: {row}", file=sys.stderr)
+            out["strategies"][strategy] = {"per_seed": rows}
+    out["locality"] = kept
+    report(out, strategies, budgets, seeds)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "search.json").write_text(json.dumps(out, indent=2) + "\n")
     print(f"wrote {RESULTS / 'search.json'}")
+
+
+def _first_by_class(first_at: dict[str, int]) -> dict[str, int]:
+    """Evaluations to each class's first robust variant."""
+    out: dict[str, int] = {}
+    for key, spent in first_at.items():
+        cls = key.split("/", 1)[0]
+        out[cls] = min(out.get(cls, spent), spent)
+    return out
+
+
+def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds: range) -> None:
+    per = {s: out["strategies"][s]["per_seed"] for s in strategies}
+    print(f"\nrobust distinct failures (median over seeds {seeds[0]}-{seeds[-1]}, runs + copies)")
+    print(f"{'budget':>6}" + "".join(f"{s:>12}" for s in strategies))
+    medians: dict[str, dict[int, float]] = {}
+    for b in budgets:
+        line = f"{b:>6}"
+        for s in strategies:
+            m = statistics.median(r["robust"][str(b)] for r in per[s])
+            medians.setdefault(s, {})[b] = m
+            line += f"{m:>12g}"
+        print(line)
+    if "random" in strategies:
+        for s in strategies:
+            if s == "random":
+                continue
+            ratios = ", ".join(
+                f"{b}: {medians[s][b] / medians['random'][b]:.2f}x" if medians["random"][b] else
+                f"{b}: -"
+                for b in budgets
+            )
+            print(f"  {s} / random: {ratios}")
+        found = [set(r["first_by_class"]) for r in per["random"]]
+        rare = sorted(
+            c for c in set().union(*found) if sum(c in f for f in found) < len(found) / 2
+        ) + sorted(
+            c
+            for s in strategies
+            for r in per[s]
+            for c in r["first_by_class"]
+            if not any(c in f for f in found)
+        )
+        rare = list(dict.fromkeys(rare))
+        if rare:
+            print("\nevaluations to the first robust failure of random's rare classes (median;"
+                  " - where under half the seeds found it)")
+            print(f"{'class':34}" + "".join(f"{s:>12}" for s in strategies))
+            for c in rare:
+                line = f"{c:34}"
+                for s in strategies:
+                    hits = [r["first_by_class"][c] for r in per[s] if c in r["first_by_class"]]
+                    line += f"{statistics.median(hits):>12g}" if len(hits) * 2 >= len(per[s]) else f"{'-':>12}"
+                print(line)
+    if any("harder_killed" in r for s in strategies for r in per[s]):
+        print(f"\nharder faults killed robustly on the first {FAULT_SITUATIONS} situations (median)")
+        for s in strategies:
+            kills = [r["harder_killed"] for r in per[s] if "harder_killed" in r]
+            if kills:
+                print(f"  {s:12} {statistics.median(kills):g} of {per[s][0]['harder']}")
+    if out["locality"]:
+        print("\nmutation: children failing with their parent's failure class, by operator")
+        for operator, (n, same) in sorted(out["locality"].items()):
+            print(f"  {operator:16} {same:>5} of {n:>5} ({same / n:.0%})")
 
 
 if __name__ == "__main__":

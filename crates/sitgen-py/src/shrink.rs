@@ -35,6 +35,21 @@ fn shrunk_situation(
     Ok(read(original)?.shrunk(&map, robots).to_json())
 }
 
+/// A situation a situation operator made from `original` (as [`shrunk_situation`], marked
+/// `mutated_from` in its provenance). Not checked: the search checks it (`shrink_check`).
+#[pyfunction]
+fn mutated_situation(
+    original: &str,
+    occupied: PyReadonlyArray2<'_, bool>,
+    resolution_m: f64,
+    robots_json: &str,
+) -> PyResult<String> {
+    let robots: Vec<Robot> = serde_json::from_str(robots_json)
+        .map_err(|e| SpecError::new_err(format!("robots: {e}")))?;
+    let map = to_map(&occupied, resolution_m)?;
+    Ok(read(original)?.mutated(&map, robots).to_json())
+}
+
 /// The margin peer legs of candidates shrunk from `original` keep (metres), or `None`.
 #[pyfunction]
 fn shrink_leg_margin(original: &str) -> PyResult<Option<f64>> {
@@ -117,6 +132,7 @@ fn robots_at(
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(shrunk_situation, m)?)?;
+    m.add_function(wrap_pyfunction!(mutated_situation, m)?)?;
     m.add_function(wrap_pyfunction!(shrink_leg_margin, m)?)?;
     m.add_function(wrap_pyfunction!(shrink_probes, m)?)?;
     m.add_function(wrap_pyfunction!(robots_at, m)?)?;

@@ -387,16 +387,34 @@ def search(
         str,
         typer.Option(
             "--strategy",
-            help="map-elites (quality diversity), random (the campaign's generation) or "
-            "coverage (fields drawn toward uncovered cells of the interaction space).",
+            help="map-elites (quality diversity), random (the campaign's generation), "
+            "coverage (fields drawn toward uncovered cells of the interaction space) or "
+            "mutation (situation operators on the archive's elites; docs/search.md).",
         ),
     ] = "map-elites",
+    like: Annotated[
+        str | None,
+        typer.Option(
+            "--like",
+            help="DB:RUN: with --strategy mutation, start from this failing run and find "
+            "more, different variants of its failure.",
+        ),
+    ] = None,
+    target_class: Annotated[
+        str | None,
+        typer.Option(
+            "--class",
+            help="With --strategy mutation: vary runs of this failure class, toward more "
+            "variants of it.",
+        ),
+    ] = None,
     measures: Annotated[
         str,
         typer.Option(
             "--measures",
             help="The archive's one or two descriptors, comma-separated: failure_class, terrain, "
-            "peers, min_clearance, approach_side.",
+            "peers, min_clearance, approach_side, variant (default for mutation: "
+            "failure_class,variant).",
         ),
     ] = "failure_class,terrain",
     objective: Annotated[
@@ -422,21 +440,34 @@ def search(
     highest-scoring run; or (--strategy coverage) generation steered toward situation coverage.
     Writes a store like a campaign's (rank, failures, report, rerun, shrink, coverage work on
     it). Ctrl-C stops after the runs in flight; the same command resumes."""
-    from sitgen.generation.search import SearchPlan, SearchProgress, SearchResult, run_search
+    from sitgen.execution.jobs import campaign_from_data
+    from sitgen.generation.search import (
+        SearchProgress,
+        SearchResult,
+        like_run,
+        plan_search,
+        run_search,
+    )
+    from sitgen.triage.failures import FailureFilterError
 
     _check_reruns(reruns)
     parsed = _campaign_spec(spec)
+    liked = like_run(like) if like is not None else None
+    if liked is not None:
+        # A directed search runs its variants as the run it starts from was run.
+        parsed = campaign_from_data({**parsed.source, "run": liked.run_spec})
     learned = _weights(weights)
     if learned is not None:
-        from sitgen.execution.jobs import campaign_from_data
-
         # The runs are scored by the weights as they run (the objective is their score), and
         # the stored spec says so: a summary's run is rebuilt and re-simulated from it.
         source = copy.deepcopy(parsed.source)
         source.setdefault("run", {})["scoring"] = learned.table()
         parsed = campaign_from_data(source)
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
-    plan = SearchPlan(strategy, names, objective, threshold)
+    try:
+        plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)
+    except FailureFilterError as e:
+        raise UsageError(str(e)) from None
 
     def work(on_progress: OnProgress, stop: Callable[[], bool]) -> SearchResult:
         def show(p: SearchProgress) -> None:
@@ -462,6 +493,8 @@ def search(
     result = _stored("search", budget, "runs", work)
     if not result.interrupted:
         _measure_robustness(db, reruns, workers)
+        if plan.strategy == "mutation":
+            _echo_variants(db, plan.target_class, reruns, workers)
     _echo_stored(
         db,
         result.ran,
@@ -472,6 +505,37 @@ def search(
         top,
         f"; archive {result.cells} cells, QD score {result.qd_score:,.0f}",
     )
+
+
+def _echo_variants(db: Path, target_class: str | None, reruns: int, workers: int | None) -> None:
+    """The variants a mutation search found (of its target class, if it has one), each best
+    run measured for robustness."""
+    from sitgen.store import Store
+    from sitgen.triage.robustness import label, measure_runs, verdict
+    from sitgen.triage.variants import variants_of
+
+    with Store(db) as store:
+        found = variants_of(store, target_class)
+        measured = store.robustness([v.best_run for v in found])
+        todo = [v.best_run for v in found if v.best_run not in measured]
+        if todo and reruns:
+            for r in measure_runs(store, todo, reruns, workers or 1):
+                measured[r.run_id] = r.as_row()
+    what = f"of {target_class} " if target_class else ""
+    robust = 0
+    lines = []
+    for v in found:
+        m = measured.get(v.best_run)
+        said = (
+            "unmeasured"
+            if m is None
+            else f"{verdict(m['recurs'], m['reruns'])} {label(m['recurs'], m['reruns'])}"
+        )
+        robust += m is not None and verdict(m["recurs"], m["reruns"]) == "robust"
+        lines.append(f"  {v.key:60} {v.runs:5} runs  best run {v.best_run:6}  {said}")
+    typer.echo(f"{len(found)} variants {what}({robust} robust; sitgen failures {db}):")
+    for line in lines:
+        typer.echo(line)
 
 
 @app.command("diff")

@@ -76,14 +76,20 @@ from sitgen.generation.guidance import (
     guide_weights,
     guided_genes,
 )
+from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
+from sitgen.generation.mutation import Parent, mutate
 from sitgen.store import KINDS, Store, StoreError, unpack_json
+from sitgen.triage.failures import check_class
 from sitgen.triage.failures import classes as failure_classes
+from sitgen.triage.recall import regenerate, stored_run
+from sitgen.triage.variants import NO_PEER, interaction_context, variant
+from sitgen.world.situation import Situation
 
 if TYPE_CHECKING:
     from ribs.archives import GridArchive
 
 
-STRATEGIES = ("map-elites", "random", "coverage")
+STRATEGIES = ("map-elites", "random", "coverage", "mutation")
 
 
 OBJECTIVES = ("score", "threshold")
@@ -94,10 +100,15 @@ aim of fewer low scores, min(score, threshold) / threshold, so every run at or a
 threshold is as good as any other and the search spends itself on filling cells."""
 
 
-MEASURES = ("failure_class", "terrain", "peers", "min_clearance", "approach_side")
+MEASURES = ("failure_class", "terrain", "peers", "min_clearance", "approach_side", "variant")
 
 
 DEFAULT_MEASURES = ("failure_class", "terrain")
+
+
+MUTATION_MEASURES = ("failure_class", "variant")
+"""The mutation strategy's default: the archive's cells are the robust-distinct-failure space
+(class × interaction/context, :mod:`sitgen.triage.variants`)."""
 
 
 LOW_SCORE_POINTS = 10.0
@@ -152,6 +163,9 @@ class Measure:
             return str(run["terrain"])
         if self.name == "peers":
             return str(min(len(self.labels) - 1, int(run["peers"] or 0)))
+        if self.name == "variant":
+            key = run["variant"]
+            return "none" if key is None else interaction_context(key)
         if self.name == "min_clearance":
             clearance = run["min_clearance_m"]
             if clearance is None:
@@ -202,12 +216,31 @@ def measures_for(spec: CampaignSpec, names: Sequence[str]) -> list[Measure]:
             labels = (*near, "no near miss")
         elif name == "approach_side":
             labels = ("none", "front", "left", "right", "rear")
+        elif name == "variant":
+            interactions = (*dict(_core.coverage_dimensions())["interaction"], NO_PEER)
+            contexts = dict(_core.coverage_dimensions())["context"]
+            labels = ("none", *(f"{i}/{c}" for i in interactions for c in contexts))
         else:
             raise _core.SpecError(
                 f"--measures: unknown measure `{name}`; expected some of {', '.join(MEASURES)}"
             )
         out.append(Measure(name, labels))
     return out
+
+
+@dataclass(frozen=True)
+class Like:
+    """The run a directed search starts from: its situation, how it was run, and its failure."""
+
+    source: str
+    """``DB:RUN`` as given."""
+    situation: str
+    """Its situation (JSON)."""
+    run_spec: dict[str, Any]
+    run_seed: int
+    failure_class: str
+    failure_at: dict[str, Any] | None
+    with_peer: bool
 
 
 @dataclass(frozen=True)
@@ -219,12 +252,23 @@ class SearchPlan:
     measures: tuple[str, ...] = DEFAULT_MEASURES
     objective: str = "score"
     threshold: float = LOW_SCORE_POINTS
+    target_class: str | None = None
+    """``--class``: the mutation strategy varies only runs of this failure class (once it has
+    one), toward more variants of it."""
+    like: Like | None = None
+    """``--like``: the mutation strategy starts from this run and varies its descendants."""
 
     @staticmethod
     def from_dict(data: dict[str, Any]) -> SearchPlan:
         """The plan a store holds (its variation constants are this sitgen's)."""
+        like = data.get("like")
         return SearchPlan(
-            data["strategy"], tuple(data["measures"]), data["objective"], data["threshold"]
+            data["strategy"],
+            tuple(data["measures"]),
+            data["objective"],
+            data["threshold"],
+            data.get("target_class"),
+            None if like is None else Like(**like),
         )
 
     def as_dict(self) -> dict[str, Any]:
@@ -240,6 +284,15 @@ class SearchPlan:
             "operators": OPERATORS,
             "sigma_iso": SIGMA_ISO,
             "sigma_line": SIGMA_LINE,
+            **(
+                {
+                    "situation_operators": list(SITUATION_OPERATORS),
+                    "target_class": self.target_class,
+                    "like": None if self.like is None else dataclasses.asdict(self.like),
+                }
+                if self.strategy == "mutation"
+                else {}
+            ),
             **(
                 {
                     "guide_strata": GUIDE_STRATA,
@@ -258,16 +311,27 @@ def plan_search(
     measures: Sequence[str] = DEFAULT_MEASURES,
     objective: str = "score",
     threshold: float = LOW_SCORE_POINTS,
+    target_class: str | None = None,
+    like: Like | None = None,
 ) -> SearchPlan:
     """Check a search's options against its spec. Raises SpecError naming the option."""
     if strategy not in STRATEGIES:
         raise _core.SpecError(f"--strategy: `{strategy}` is not one of {', '.join(STRATEGIES)}")
+    if (target_class is not None or like is not None) and strategy != "mutation":
+        option = "--class" if target_class is not None else "--like"
+        raise _core.SpecError(f"{option}: directs the mutation strategy (--strategy mutation)")
+    if target_class is not None:
+        check_class(target_class)
+    if strategy == "mutation" and tuple(measures) == DEFAULT_MEASURES:
+        measures = MUTATION_MEASURES
     if objective not in OBJECTIVES:
         raise _core.SpecError(f"--objective: `{objective}` is not one of {', '.join(OBJECTIVES)}")
     if not (math.isfinite(threshold) and threshold > 0):
         raise _core.SpecError(f"--threshold: {threshold} is not a positive number of points")
     measures_for(spec, measures)
-    return SearchPlan(strategy, tuple(measures), objective, float(threshold))
+    if like is not None and target_class is None:
+        target_class = like.failure_class
+    return SearchPlan(strategy, tuple(measures), objective, float(threshold), target_class, like)
 
 
 def generation_of(index: int) -> int:
@@ -292,7 +356,12 @@ class Child:
     parents: tuple[int, ...]
     """The elites it was varied from (none for a fresh run)."""
     operator: str
-    """How: one of :data:`OPERATORS`, or ``fresh``."""
+    """How: one of :data:`OPERATORS` or :data:`SITUATION_OPERATORS`, or ``fresh``."""
+    situation: str | None = None
+    """A mutation's situation (JSON), run as given; None: the genome's job."""
+    run_seed: int | None = None
+    """Its sensor-noise seed where it is not the genome's (a directed search's: the run it
+    started from)."""
 
     def stored_genes(self, spec: CampaignSpec) -> dict[str, Any]:
         return {"operator": self.operator, **self.genome.as_dict(spec)}
@@ -331,6 +400,10 @@ class Archive:
         """Each run's genome and the coverage cells it exercised (errors left out)."""
         self.told = 0
         """Runs told (errors included)."""
+        self.parent_of: Callable[[int], Parent] | None = None
+        """The mutation strategy's view of a stored run (set by :func:`run_search`)."""
+        self.classes: dict[int, str | None] = {}
+        """Each run's failure class (errors left out)."""
 
     def objective(self, score: float) -> float:
         if self.plan.objective == "threshold":
@@ -348,6 +421,7 @@ class Archive:
             self.genomes[run["id"]] = run["genome"]
             if run["outcome"] != "error":
                 self.covered.append((run["genome"], run["cells"]))
+                self.classes[run["id"]] = run["failure_class"]
         self.told += len(runs)
         placed = [r for r in runs if r["outcome"] != "error"]
         if not placed:
@@ -369,6 +443,8 @@ class Archive:
 
     def ask(self, generation: int) -> list[Child]:
         """Generation ``generation``'s runs (all of them; the budget truncates)."""
+        if self.plan.strategy == "mutation":
+            return self._ask_mutation(generation)
         elites = self.elites()
         children = []
         guide = (
@@ -400,6 +476,57 @@ class Archive:
             children.append(Child(index, genome, (a,) if a == b else (a, b), operator))
         return children
 
+    def _ask_mutation(self, generation: int) -> list[Child]:
+        """The mutation strategy: each child one situation operator away from an elite drawn
+        uniformly over the filled cells (of the target class's cells, once there are any), or
+        fresh (a share :data:`FRESH_SHARE`; none in a directed search from ``--like``).
+        Generation 0 is the campaign's first jobs, or the ``--like`` run and mutants of it."""
+        like = self.plan.like
+        elites = self.elites()
+        if self.plan.target_class is not None:
+            targeted = [e for e in elites if self.classes.get(e) == self.plan.target_class]
+            elites = targeted or elites
+        children = []
+        for index in generation_runs(generation):
+            rng = np.random.Generator(np.random.PCG64([self.seed, index, 2]))
+            genome = fresh(self.spec, self.seed, index)
+            if like is not None and index == 0:
+                children.append(Child(index, genome, (), "like", like.situation, like.run_seed))
+                continue
+            if like is None and (generation == 0 or not elites or rng.random() < FRESH_SHARE):
+                children.append(Child(index, genome, (), "fresh"))
+                continue
+            if like is not None and (generation == 0 or not elites):
+                parent_id, parent = -1, self.like_parent()
+            else:
+                parent_id = elites[int(rng.integers(len(elites)))]
+                assert self.parent_of is not None
+                parent = self.parent_of(parent_id)
+                genome = self.genomes[parent_id]
+            child = None
+            for operator in rng.permutation(SITUATION_OPERATORS)[:3]:
+                child = mutate(parent, str(operator), rng)
+                if child is not None:
+                    break
+            run_seed = None if like is None else like.run_seed
+            if child is None:
+                children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
+            else:
+                parents = (parent_id,) if parent_id >= 0 else ()
+                children.append(Child(index, genome, parents, str(operator), child, run_seed))
+        return children
+
+    def like_parent(self) -> Parent:
+        """The ``--like`` run as a parent."""
+        like = self.plan.like
+        assert like is not None
+        pose = None if like.failure_at is None else like.failure_at["pose"]
+        return Parent(
+            Situation(like.situation, check_start=False),
+            None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2])),
+            like.with_peer,
+        )
+
     def stats(self) -> ArchiveStats:
         s = self.grid.stats
         best = s.obj_max if s.num_elites and s.obj_max is not None else 0.0
@@ -429,6 +556,7 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "min_clearance_m": clearance,
                 "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
                 "cells": tuple(unpack_json(coverage)["cells"]) if coverage else (),
+                "variant": variant(cls, unpack_json(coverage) if coverage else None),
                 "terrain": terrain,
                 "peers": peers,
             }
@@ -465,6 +593,9 @@ def _job(spec: CampaignSpec, child: Child) -> Job:
     """The child's job (a stage whose seed is not the run's gets it in its spec); one whose
     genes make a bad spec carries its error."""
     g = child.genome
+    if child.situation is not None:
+        situation = json.loads(child.situation)
+        return Job(child.index, g.seed, situation, dict(spec.run), run_seed=child.run_seed)
     try:
         job = express_job(spec, child.index, g.seed, g.genes)
     except _core.SpecError as e:
@@ -493,7 +624,15 @@ def run_search(
     if not 1 <= budget <= MAX_BUDGET:
         raise _core.SpecError(f"--budget: {budget} is not in [1, {MAX_BUDGET}]")
     plan = plan or SearchPlan()
-    plan = plan_search(spec, plan.strategy, plan.measures, plan.objective, plan.threshold)
+    plan = plan_search(
+        spec,
+        plan.strategy,
+        plan.measures,
+        plan.objective,
+        plan.threshold,
+        plan.target_class,
+        plan.like,
+    )
     workers = check_workers(workers, backend)
     started = time.perf_counter()
     check_campaign(spec, seed, budget, stop)
@@ -507,6 +646,7 @@ def run_search(
         )
         done = store.done_ids()
         archive = Archive(spec, seed, plan)
+        archive.parent_of = lambda run_id: parent_of(store, run_id)
         executor = Executor(workers, backend, address, user=user)
         classes_seen = {
             c for (c,) in store.db.execute("SELECT DISTINCT failure_class FROM runs") if c
@@ -557,6 +697,23 @@ def run_search(
     return SearchResult(
         ran, total, interrupted, time.perf_counter() - started, stats.cells, stats.qd_score
     )
+
+
+def parent_of(store: Store, run_id: int) -> Parent:
+    """Stored run ``run_id`` as a parent of the mutation strategy: its situation (kept, or
+    made again) and where its failure began."""
+    row = stored_run(store, run_id)
+    if row["situation"] is not None:
+        situation = Situation(row["situation"], check_start=False)
+    else:
+        situation = regenerate(row)
+    (coverage,) = store.db.execute("SELECT coverage FROM runs WHERE id = ?", (run_id,)).fetchone()
+    record = unpack_json(coverage) if coverage else {}
+    at = record.get("failure_at")
+    pose = (
+        None if at is None else (float(at["pose"][0]), float(at["pose"][1]), float(at["pose"][2]))
+    )
+    return Parent(situation, pose, bool(record.get("failure_cell")))
 
 
 def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any]]) -> None:
@@ -629,3 +786,34 @@ def elite_grid(archive: Archive) -> list[list[dict[str, Any] | None]]:
         row, col = cell[0], cell[1] if cols > 1 else 0
         grid[row][col] = {"run": int(r), "objective": float(o)}
     return grid
+
+
+def like_run(source: str) -> Like:
+    """``--like DB:RUN``: the stored run a directed search starts from (it must have failed).
+    Raises SpecError naming the option."""
+    db, _, run = source.rpartition(":")
+    if not db or not run.isdigit():
+        raise _core.SpecError(f"--like: `{source}` is not DB:RUN (a store and a run id in it)")
+    if not Path(db).is_file():
+        raise _core.SpecError(f"--like: {db}: no such store")
+    with Store(db) as store:
+        row = stored_run(store, int(run))
+        if row["failure"] is None:
+            raise _core.SpecError(f"--like: run {run} of {db} did not fail")
+        if row["situation"] is not None:
+            situation = Situation(row["situation"], check_start=False)
+        else:
+            situation = regenerate(row)
+        (coverage,) = store.db.execute(
+            "SELECT coverage FROM runs WHERE id = ?", (int(run),)
+        ).fetchone()
+    record = unpack_json(coverage) if coverage else {}
+    return Like(
+        source,
+        situation.to_json(),
+        row["run_spec"],
+        int(row["run_seed"]),
+        str(row["failure"]["class"]),
+        record.get("failure_at"),
+        bool(record.get("failure_cell")),
+    )

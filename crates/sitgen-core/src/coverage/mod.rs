@@ -171,6 +171,20 @@ pub struct CoverageRecord {
     /// The cell the run's failure began in: the cell of the agent and the other party at the
     /// start of the first event that decided it, when that party is a peer in an encounter.
     pub failure_cell: Option<String>,
+    /// Where the run's failure began, for every failure (a peer's part in it or not): the
+    /// agent's terrain context (`open`, `corridor`, …) and pose (x m, y m, heading rad) at
+    /// the start of the first event that decided it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failure_at: Option<FailurePlace>,
+}
+
+/// The agent's terrain context and pose where a failure began.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FailurePlace {
+    /// The terrain context's name ([`CONTEXTS`]).
+    pub context: String,
+    /// (x m, y m, heading rad).
+    pub pose: [f64; 3],
 }
 
 /// The state of the agent and one peer at a step of an encounter, less the interaction type.
@@ -379,7 +393,32 @@ impl Observer {
 
     /// What the run covered; `events` and `failure` are its log and failure, for the cell the
     /// failure began in.
-    pub fn finish(self, events: &[Event], failure: Option<&Failure>) -> CoverageRecord {
+    /// `world` is the run's world and `trajectory` its poses (every robot, every step, flat),
+    /// for where the failure began.
+    pub fn finish(
+        self,
+        events: &[Event],
+        failure: Option<&Failure>,
+        world: &World,
+        trajectory: &[f64],
+    ) -> CoverageRecord {
+        let failure_at = failure.and_then(|f| {
+            let e = &events[*f.events.first()?];
+            let robots = world.robots().len();
+            let step = (e.start_s / self.dt_s).round() as usize;
+            let at = (step * robots + self.agent) * 3;
+            let p = trajectory.get(at..at + 3)?;
+            let pose = Pose {
+                x_m: p[0],
+                y_m: p[1],
+                heading_rad: p[2],
+            };
+            let context = terrain_context_at(world, &pose, self.gap_m);
+            Some(FailurePlace {
+                context: CONTEXTS[context as usize].to_string(),
+                pose: [p[0], p[1], p[2]],
+            })
+        });
         let mut cells = BTreeSet::new();
         for e in &self.encounters {
             cells.extend(e.moments.iter().map(|m| e.cell(m)));
@@ -402,6 +441,7 @@ impl Observer {
             cells: cells.iter().map(Cell::key).collect(),
             encounters: self.encounters.len() as u32,
             failure_cell,
+            failure_at,
         }
     }
 }
@@ -427,7 +467,12 @@ fn clearance_bin(clearance_m: f64, touching: bool) -> u8 {
 ///   the robot with ground behind it that its laser cannot see;
 /// - `open`: none of these.
 fn terrain_context(world: &World, i: usize, gap_m: f64) -> u8 {
-    let pose = world.robots()[i].pose;
+    terrain_context_at(world, &world.robots()[i].pose, gap_m)
+}
+
+/// [`terrain_context`] of a robot standing at `pose` (the walls only are looked at).
+fn terrain_context_at(world: &World, pose: &Pose, gap_m: f64) -> u8 {
+    let pose = *pose;
     let step = TAU / CONTEXT_RAYS as f64;
     let ranges: Vec<f64> = (0..CONTEXT_RAYS)
         .map(|k| {

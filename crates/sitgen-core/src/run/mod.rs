@@ -551,7 +551,7 @@ impl Run {
             .coverage
             .take()
             .expect("finished once")
-            .finish(&events, failure.as_ref());
+            .finish(&events, failure.as_ref(), &self.world, &self.trajectory);
         RunRecord {
             outcome,
             reason,

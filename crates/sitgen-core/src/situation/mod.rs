@@ -127,6 +127,11 @@ pub struct Provenance {
     /// spec and seed above made the original, not this one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub shrunk_from: Option<String>,
+    /// For a situation a search made by changing another with a situation operator
+    /// (`sitgen search --strategy mutation`), that one's content hash: the spec and seed above
+    /// made its first ancestor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mutated_from: Option<String>,
 }
 
 /// What the content hash covers.
@@ -225,6 +230,7 @@ impl Situation {
                 sitgen_version: crate::VERSION.into(),
                 content_hash: String::new(),
                 shrunk_from: None,
+                mutated_from: None,
             },
         };
         s.provenance.content_hash = s.content_hash();
@@ -241,6 +247,15 @@ impl Situation {
             self.provenance.seed,
         );
         s.provenance.shrunk_from = Some(self.provenance.content_hash.clone());
+        s
+    }
+
+    /// A situation a situation operator made from this one: `map` and `robots` in place of
+    /// its own, the provenance kept and marked as mutated from this one's content hash.
+    pub fn mutated(&self, map: &Map, robots: Vec<Robot>) -> Self {
+        let mut s = self.shrunk(map, robots);
+        s.provenance.shrunk_from = self.provenance.shrunk_from.clone();
+        s.provenance.mutated_from = Some(self.provenance.content_hash.clone());
         s
     }
 

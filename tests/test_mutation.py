@@ -1,0 +1,172 @@
+"""Search by situation mutation: every operator makes a valid child that differs where it
+should, the same draw makes the same child; the mutation strategy is the same on 1 and 2
+workers, resumes after SIGKILL to the same runs, keeps its archive over failure class ×
+variant for the report, and a directed search (--like, --class) varies the run it is given;
+the yardstick counts every copy against the budget."""
+
+from __future__ import annotations
+
+import json
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sitgen
+from sitgen import _core
+from sitgen.generation.mutation import OPERATORS, Parent, focus_peer, mutate
+from sitgen.generation.search import BATCH, INITIAL, SearchPlan, run_search
+from sitgen.store import Store
+from sitgen.triage.variants import robust_variants, variant, variants_of
+from tests.conftest import run_cli
+from tests.test_campaign import start_command, wait_for_runs, write_spec
+from tests.test_search import SEARCHED, spec_of, stored
+
+BUDGET = INITIAL + 3 * BATCH
+
+
+@pytest.fixture(scope="module")
+def parent() -> Parent:
+    """A rocky desert with peers, run once: its failure (or a route point) is the focus."""
+    situation = sitgen.generate_situation(
+        {"terrain": {"preset": "rocky_desert"}, "mission": {"peers_min": 4, "peers_max": 4}},
+        seed=4,
+    )
+    record = sitgen.run(situation, time_limit=200.0)
+    assert record.coverage is not None and record.coverage["failure_cell"] is not None
+    at = (record.coverage or {}).get("failure_at")
+    pose = None if at is None else tuple(at["pose"])
+    return Parent(situation, pose, bool((record.coverage or {}).get("failure_cell")))  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("operator", OPERATORS)
+def test_every_operator_makes_a_valid_child_that_differs_where_it_should(
+    parent: Parent, operator: str
+) -> None:
+    rng = np.random.default_rng(3)
+    child = mutate(parent, operator, rng)
+    assert child is not None
+    assert _core.shrink_check(child, _core.shrink_leg_margin(parent.situation.to_json())) is None
+    before, after = json.loads(parent.situation.to_json()), json.loads(child)
+    assert after["provenance"]["mutated_from"] == before["provenance"]["content_hash"]
+    same_map = np.array_equal(sitgen.Situation(child).grid.occupied, parent.situation.grid.occupied)
+    robots_changed = [
+        i for i, (a, b) in enumerate(zip(before["robots"], after["robots"], strict=True)) if a != b
+    ]
+    if operator in ("add_obstacle", "remove_obstacle", "move_obstacle"):
+        assert not same_map and not robots_changed
+    elif operator == "mirror":
+        width = parent.situation.grid.size_m[0]
+        assert not same_map
+        for a, b in zip(before["robots"], after["robots"], strict=True):
+            assert b["start"]["x_m"] == pytest.approx(width - a["start"]["x_m"])
+    else:
+        assert same_map and len(robots_changed) == 1
+        if operator in ("move_peer", "turn_peer", "retime_peer", "peer_speed"):
+            focus = parent.failure_pose[:2] if parent.failure_pose else None
+            if focus is not None:
+                assert robots_changed == [focus_peer(before["robots"], focus)]
+
+
+def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:
+    for operator in OPERATORS:
+        a = mutate(parent, operator, np.random.default_rng(11))
+        b = mutate(parent, operator, np.random.default_rng(11))
+        assert a == b
+
+
+def test_a_run_has_a_variant_from_where_its_failure_began(parent: Parent) -> None:
+    record = sitgen.run(parent.situation, time_limit=200.0)
+    assert record.failure is not None
+    key = variant(record.failure["class"], record.coverage)
+    assert key is not None and key.startswith(record.failure["class"] + "/")
+    _, interaction, context = key.split("/")
+    assert context in dict(_core.coverage_dimensions())["context"]
+    assert interaction in (*dict(_core.coverage_dimensions())["interaction"], "no_peer")
+    x, y, _ = record.coverage["failure_at"]["pose"]  # type: ignore[index]
+    assert 0 <= x <= parent.situation.grid.size_m[0] and 0 <= y <= parent.situation.grid.size_m[1]
+    assert variant(None, record.coverage) is None
+
+
+def test_a_mutation_search_is_the_same_on_one_and_two_workers(tmp_path: Path) -> None:
+    spec = spec_of()
+    one, two = tmp_path / "one.db", tmp_path / "two.db"
+    plan = SearchPlan("mutation", ("failure_class", "variant"))
+    run_search(spec, one, seed=3, budget=BUDGET, plan=plan, workers=1)
+    run_search(spec, two, seed=3, budget=BUDGET, plan=plan, workers=2)
+    assert stored(one) == stored(two)
+    rows = stored(one)
+    operators = [json.loads(r[3])["operator"] for r in rows]
+    assert set(operators) - {"fresh"} <= set(OPERATORS)
+    assert sum(op in OPERATORS for op in operators) >= 2 * BATCH * 0.7
+    with Store(one) as store:
+        found = variants_of(store)
+        tally = robust_variants(store, 80, (40, 80))
+    assert found and tally.spent <= 80 + 8
+    assert tally.runs + tally.copies == tally.spent
+    assert tally.at_budget[40] <= tally.at_budget[80] == len(tally.robust)
+
+
+@pytest.mark.parametrize("how", [signal.SIGKILL])
+def test_a_killed_mutation_search_resumes_to_the_same_runs(tmp_path: Path, how: int) -> None:
+    spec = write_spec(tmp_path, SEARCHED)
+    budget = str(INITIAL + 2 * BATCH)
+    args = ("--seed", "8", "--budget", budget, "--strategy", "mutation", "--reruns", "2")
+    reference = tmp_path / "reference.db"
+    done = run_cli("search", str(spec), "--db", str(reference), *args)
+    assert done.returncode == 0, done.stderr
+    assert "variants" in done.stdout
+    db = tmp_path / "killed.db"
+    proc = start_command(spec, db, *args, "--workers", "1", command="search")
+    wait_for_runs(db, INITIAL + 4, proc)
+    proc.send_signal(how)
+    proc.communicate(timeout=120)
+    again = run_cli("search", str(spec), "--db", str(db), *args)
+    assert again.returncode == 0, again.stderr
+    assert stored(db) == stored(reference)
+    report = tmp_path / "report"
+    assert run_cli("report", str(db), "-o", str(report), "--top", "3").returncode == 0
+    page = (report / "index.html").read_text()
+    assert "variant" in page
+
+
+def test_a_directed_search_varies_the_run_it_is_given(tmp_path: Path) -> None:
+    campaign = tmp_path / "c.db"
+    assert (
+        run_cli(
+            "campaign", "--n", "12", "--seed", "1", "--db", str(campaign), "--reruns", "0"
+        ).returncode
+        == 0
+    )
+    with Store(campaign) as store:
+        run_id, cls = store.db.execute(
+            "SELECT id, failure_class FROM runs WHERE failure_class IS NOT NULL "
+            "ORDER BY score DESC LIMIT 1"
+        ).fetchone()
+    db = tmp_path / "like.db"
+    done = run_cli(
+        "search", "--strategy", "mutation", "--like", f"{campaign}:{run_id}", "--budget", "48",
+        "--db", str(db), "--reruns", "2",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert f"variants of {cls}" in done.stdout
+    rows = stored(db)
+    first = rows[0]
+    with Store(campaign) as store:
+        original = store.run_row(run_id)
+    assert first[6] == original["score"]  # the run itself, run again
+    operators = [json.loads(r[3])["operator"] for r in rows[1:]]
+    assert "fresh" not in operators
+    with Store(db) as store:
+        assert any(v.key.startswith(cls + "/") for v in variants_of(store, cls))
+    wrong = run_cli("search", "--like", f"{campaign}:{run_id}", "--db", str(tmp_path / "x.db"))
+    assert wrong.returncode == 2 and "--like: directs the mutation strategy" in wrong.stderr
+    bad = run_cli(
+        "search", "--strategy", "mutation", "--class", "nope", "--db", str(tmp_path / "y.db")
+    )
+    assert bad.returncode == 2 and "--class: unknown failure class" in bad.stderr
+    missing = run_cli(
+        "search", "--strategy", "mutation", "--like", "no.db:3", "--db", str(tmp_path / "z.db")
+    )
+    assert missing.returncode == 2 and "--like: no.db: no such store" in missing.stderr
