@@ -150,8 +150,9 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
             if s == "random":
                 continue
             ratios = ", ".join(
-                f"{b}: {medians[s][b] / medians['random'][b]:.2f}x" if medians["random"][b] else
-                f"{b}: -"
+                f"{b}: {medians[s][b] / medians['random'][b]:.2f}x"
+                if medians["random"][b]
+                else f"{b}: -"
                 for b in budgets
             )
             print(f"  {s} / random: {ratios}")
@@ -167,17 +168,20 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
         )
         rare = list(dict.fromkeys(rare))
         if rare:
-            print("\nevaluations to the first robust failure of random's rare classes (median;"
-                  " - where under half the seeds found it)")
+            print(
+                "\nevaluations to the first robust failure of random's rare classes (median;"
+                " - where under half the seeds found it)"
+            )
             print(f"{'class':34}" + "".join(f"{s:>12}" for s in strategies))
             for c in rare:
                 line = f"{c:34}"
                 for s in strategies:
                     hits = [r["first_by_class"][c] for r in per[s] if c in r["first_by_class"]]
-                    line += f"{statistics.median(hits):>12g}" if len(hits) * 2 >= len(per[s]) else f"{'-':>12}"
+                    enough = len(hits) * 2 >= len(per[s])
+                    line += f"{statistics.median(hits):>12g}" if enough else f"{'-':>12}"
                 print(line)
     if any("harder_killed" in r for s in strategies for r in per[s]):
-        print(f"\nharder faults killed robustly on the first {FAULT_SITUATIONS} situations (median)")
+        print(f"\nharder faults killed robustly, first {FAULT_SITUATIONS} situations (median)")
         for s in strategies:
             kills = [r["harder_killed"] for r in per[s] if "harder_killed" in r]
             if kills:

@@ -37,7 +37,7 @@ def parent() -> Parent:
     assert record.coverage is not None and record.coverage["failure_cell"] is not None
     at = (record.coverage or {}).get("failure_at")
     pose = None if at is None else tuple(at["pose"])
-    return Parent(situation, pose, bool((record.coverage or {}).get("failure_cell")))  # type: ignore[arg-type]
+    return Parent(situation, pose, bool((record.coverage or {}).get("failure_cell")))
 
 
 @pytest.mark.parametrize("operator", OPERATORS)
