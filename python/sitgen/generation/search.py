@@ -135,6 +135,11 @@ FRESH_SHARE = 0.125
 """Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
 
 
+MUTATION_FRESH_SHARE = 0.5
+"""The mutation strategy's share of fresh runs: its children keep their parent's failure and
+mostly its variant too, so half of every generation keeps finding new ones at random."""
+
+
 CLEARANCE_CELLS = 5
 
 
@@ -404,6 +409,10 @@ class Archive:
         """The mutation strategy's view of a stored run (set by :func:`run_search`)."""
         self.classes: dict[int, str | None] = {}
         """Each run's failure class (errors left out)."""
+        self.cell_runs: dict[tuple[int, ...], int] = {}
+        """Runs told per cell (the mutation strategy's novelty: a rarely reached cell's elite
+        is varied more often)."""
+        self.cell_of: dict[int, tuple[int, ...]] = {}
 
     def objective(self, score: float) -> float:
         if self.plan.objective == "threshold":
@@ -422,6 +431,9 @@ class Archive:
             if run["outcome"] != "error":
                 self.covered.append((run["genome"], run["cells"]))
                 self.classes[run["id"]] = run["failure_class"]
+                cell = self.cells(run)
+                self.cell_of[run["id"]] = cell
+                self.cell_runs[cell] = self.cell_runs.get(cell, 0) + 1
         self.told += len(runs)
         placed = [r for r in runs if r["outcome"] != "error"]
         if not placed:
@@ -493,13 +505,15 @@ class Archive:
             if like is not None and index == 0:
                 children.append(Child(index, genome, (), "like", like.situation, like.run_seed))
                 continue
-            if like is None and (generation == 0 or not elites or rng.random() < FRESH_SHARE):
+            if like is None and (
+                generation == 0 or not elites or rng.random() < MUTATION_FRESH_SHARE
+            ):
                 children.append(Child(index, genome, (), "fresh"))
                 continue
             if like is not None and (generation == 0 or not elites):
                 parent_id, parent = -1, self.like_parent()
             else:
-                parent_id = elites[int(rng.integers(len(elites)))]
+                parent_id = elites[self._novel(elites, rng)]
                 assert self.parent_of is not None
                 parent = self.parent_of(parent_id)
                 genome = self.genomes[parent_id]
@@ -515,6 +529,12 @@ class Archive:
                 parents = (parent_id,) if parent_id >= 0 else ()
                 children.append(Child(index, genome, parents, str(operator), child, run_seed))
         return children
+
+    def _novel(self, elites: list[int], rng: np.random.Generator) -> int:
+        """An elite's position, drawn with weight 1/runs of its cell (novelty: the rarer a
+        failure variant has been, the more often it is varied)."""
+        weights = np.array([1.0 / self.cell_runs.get(self.cell_of.get(e, ()), 1) for e in elites])
+        return int(rng.choice(len(elites), p=weights / weights.sum()))
 
     def like_parent(self) -> Parent:
         """The ``--like`` run as a parent."""
