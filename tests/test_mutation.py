@@ -99,7 +99,8 @@ def test_a_mutation_search_is_the_same_on_one_and_two_workers(tmp_path: Path) ->
     rows = stored(one)
     operators = [json.loads(r[3])["operator"] for r in rows]
     assert set(operators) - {"fresh"} <= set(OPERATORS)
-    assert sum(op in OPERATORS for op in operators) >= 2 * BATCH * 0.7
+    # Half of each later generation is fresh (MUTATION_FRESH_SHARE), the rest mutants.
+    assert sum(op in OPERATORS for op in operators) >= BATCH
     with Store(one) as store:
         found = variants_of(store)
         tally = robust_variants(store, 80, (40, 80))
