@@ -4,6 +4,7 @@
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use sitgen_core::grid::Map;
 use sitgen_core::run::{par_map, RunSpec};
 use sitgen_core::shrink::{self, Probe};
 use sitgen_core::situation::{Robot, Situation};
@@ -29,10 +30,20 @@ fn shrunk_situation(
     resolution_m: f64,
     robots_json: &str,
 ) -> PyResult<String> {
+    let (original, map, robots) = edit(original, &occupied, resolution_m, robots_json)?;
+    Ok(original.shrunk(&map, robots).to_json())
+}
+
+/// The parts of an edited situation: the original, the new map and the new robots.
+fn edit(
+    original: &str,
+    occupied: &PyReadonlyArray2<'_, bool>,
+    resolution_m: f64,
+    robots_json: &str,
+) -> PyResult<(Situation, Map, Vec<Robot>)> {
     let robots: Vec<Robot> = serde_json::from_str(robots_json)
         .map_err(|e| SpecError::new_err(format!("robots: {e}")))?;
-    let map = to_map(&occupied, resolution_m)?;
-    Ok(read(original)?.shrunk(&map, robots).to_json())
+    Ok((read(original)?, to_map(occupied, resolution_m)?, robots))
 }
 
 /// A situation a situation operator made from `original` (as [`shrunk_situation`], marked
@@ -44,10 +55,8 @@ fn mutated_situation(
     resolution_m: f64,
     robots_json: &str,
 ) -> PyResult<String> {
-    let robots: Vec<Robot> = serde_json::from_str(robots_json)
-        .map_err(|e| SpecError::new_err(format!("robots: {e}")))?;
-    let map = to_map(&occupied, resolution_m)?;
-    Ok(read(original)?.mutated(&map, robots).to_json())
+    let (original, map, robots) = edit(original, &occupied, resolution_m, robots_json)?;
+    Ok(original.mutated(&map, robots).to_json())
 }
 
 /// The margin peer legs of candidates shrunk from `original` keep (metres), or `None`.

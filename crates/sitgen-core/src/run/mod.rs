@@ -547,11 +547,12 @@ impl Run {
         });
         let failure = failure::classify(&events, agent);
         let score = scoring::score(&events, &self.scoring, failure.as_ref());
-        let coverage = self
-            .coverage
-            .take()
-            .expect("finished once")
-            .finish(&events, failure.as_ref(), &self.world, &self.trajectory);
+        let coverage = self.coverage.take().expect("finished once").finish(
+            &events,
+            failure.as_ref(),
+            &self.world,
+            &self.trajectory,
+        );
         RunRecord {
             outcome,
             reason,
