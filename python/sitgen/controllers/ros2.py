@@ -104,6 +104,7 @@ MATCH_GRACE_S = 0.3
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
 SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
+"""Controller parameters that are sitgen's, not the node's (the rest become ROS parameters)."""
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 
@@ -271,8 +272,9 @@ class Ros2Controller(UserController):
         if not argv:
             raise ControllerError(f"controller {name}: no program given")
         params = dict(params or {})
-        self._answer_timeout_s = float(params.pop("answer_timeout_s", step_timeout_s))
-        self._max_missed = int(params.pop("max_missed_answers", MAX_MISSED_ANSWERS))
+        own = {k: params.pop(k) for k in SITGEN_PARAMS if k in params}
+        self._answer_timeout_s = float(own.get("answer_timeout_s", step_timeout_s))
+        self._max_missed = int(own.get("max_missed_answers", MAX_MISSED_ANSWERS))
         ros_params = [a for k, v in sorted(params.items()) for a in ("-p", f"{k}:={v!r}")]
         self._argv = [
             program_path(argv, name),
