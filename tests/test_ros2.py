@@ -256,13 +256,15 @@ def test_the_rosbag2_has_the_metadata_ros2_bag_play_reads(bagged: tuple[Path, in
     assert types["/tf"] == "tf2_msgs/msg/TFMessage"
     assert types["/events"] == "visualization_msgs/msg/MarkerArray"
     assert types["/cmd_vel"] == "geometry_msgs/msg/TwistStamped"
-    latched = {
-        t["topic_metadata"]["name"]
+    durability = {
+        t["topic_metadata"]["name"]: [
+            q["durability"] for q in t["topic_metadata"]["offered_qos_profiles"]
+        ]
         for t in info["topics_with_message_count"]
-        if "transient_local" in json.dumps(t["topic_metadata"]["offered_qos_profiles"])
-        or '"durability": 1' in json.dumps(t["topic_metadata"]["offered_qos_profiles"])
     }
-    assert {"/map", "/tf_static"} <= latched
+    for topic in ("/map", "/tf_static", "/plan"):
+        assert durability[topic] == ["transient_local"]
+    assert durability["/scan"] == []
 
 
 def test_sitgen_run_writes_a_rosbag2_of_a_ros2_nodes_run(

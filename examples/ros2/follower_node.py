@@ -71,6 +71,10 @@ class FollowerNode(Node):  # type: ignore[misc]
         if self.follower.waypoints == []:
             return  # no route yet: transient-local delivery may trail the first scan
         for key in sorted(set(self.odom) & set(self.scans)):
+            # Anything stamped before what is answered now can never be matched.
+            for pending in (self.odom, self.scans):
+                for older in [k for k in pending if k < key]:
+                    del pending[older]
             odom, scan = self.odom.pop(key), self.scans.pop(key)
             pose = odom.pose.pose
             heading = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
@@ -89,10 +93,6 @@ class FollowerNode(Node):  # type: ignore[misc]
                 message = twist = Twist()
             twist.linear.x, twist.angular.z = float(v), float(omega)
             self.cmd.publish(message)
-        # Anything older than what was answered can never be matched.
-        for pending in (self.odom, self.scans):
-            for key in [k for k in pending if len(pending) > 8 and k < max(pending)]:
-                del pending[key]
 
 
 def _key(stamp: Any) -> tuple[int, int]:

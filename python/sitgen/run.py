@@ -272,8 +272,8 @@ def robots_at(
     user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
     try:
         user.reset(reset_info(situation, spec, core.agent))
-        while core.observe_agent()["time"] < t_s - 1e-9:
-            if core.step(user.act(core.observe_agent()) if core.agent_acts else None):
+        while (obs := core.observe_agent())["time"] < t_s - 1e-9:
+            if core.step(user.act(obs) if core.agent_acts else None):
                 break
     finally:
         user.close()

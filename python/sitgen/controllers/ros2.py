@@ -121,6 +121,7 @@ def _messages() -> Any:
     # rclpy and the message packages are an optional extra (sitgen[ros2]): imported when a
     # ros2: controller is first used, never by sitgen's other commands.
     import rclpy  # noqa: F401
+    from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
     from nav_msgs.msg import Odometry, Path
     from rosgraph_msgs.msg import Clock
@@ -134,6 +135,7 @@ def _messages() -> Any:
         "Path": Path,
         "Clock": Clock,
         "LaserScan": LaserScan,
+        "Time": Time,
     }
 
 
@@ -157,12 +159,16 @@ def _claim_domain() -> tuple[int, IO[bytes]]:
     )
 
 
-def stamp(t: float) -> Any:
-    """A builtin_interfaces/Time for simulated time ``t`` seconds (exact to the nanosecond)."""
-    from builtin_interfaces.msg import Time
-
+def sec_nanosec(t: float) -> tuple[int, int]:
+    """Simulated time ``t`` seconds as a ROS time's (sec, nanosec), exact to the nanosecond."""
     ns = round(t * 1e9)
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def stamp(msg: dict[str, Any], t: float) -> Any:
+    """A builtin_interfaces/Time for simulated time ``t`` (``msg``: the message types)."""
+    sec, nanosec = sec_nanosec(t)
+    return msg["Time"](sec=sec, nanosec=nanosec)
 
 
 def quaternion(heading: float) -> tuple[float, float, float, float]:
@@ -491,12 +497,9 @@ class Ros2Controller(UserController):
             while self._answers:
                 message = self._answers.pop(0)
                 twist = message.twist if self._stamped else message
-                if (
-                    self._stamped
-                    and _seconds(message.header.stamp) not in (0.0,)
-                    and (_seconds(message.header.stamp) < t - 1e-9)
-                ):
-                    continue  # an answer to an earlier period, arriving late
+                stamped_at = _seconds(message.header.stamp) if self._stamped else 0.0
+                if 0.0 < stamped_at < t - 1e-9:
+                    continue  # an answer to an earlier period, arriving late (0: unstamped)
                 v, omega = float(twist.linear.x), float(twist.angular.z)
                 if not (math.isfinite(v) and math.isfinite(omega)):
                     raise ControllerError(
@@ -516,7 +519,7 @@ class Ros2Controller(UserController):
     def _publish_route(self, bridge: Bridge, info: Mapping[str, Any]) -> None:
         path = bridge.msg["Path"]()
         path.header.frame_id = FRAMES.map
-        path.header.stamp = stamp(0.0)
+        path.header.stamp = stamp(bridge.msg, 0.0)
         path.poses = [self._pose(bridge, w, 0.0) for w in info["waypoints"]]
         bridge.plan.publish(path)
         self._goal_index = -1
@@ -532,13 +535,14 @@ class Ros2Controller(UserController):
     def _pose(self, bridge: Bridge, point: Any, t: float) -> Any:
         pose = bridge.msg["PoseStamped"]()
         pose.header.frame_id = FRAMES.map
-        pose.header.stamp = stamp(t)
+        pose.header.stamp = stamp(bridge.msg, t)
         pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
         pose.pose.orientation.w = 1.0
         return pose
 
     def _publish_observation(self, bridge: Bridge, obs: Mapping[str, Any], t: float) -> None:
-        m, now = bridge.msg, stamp(t)
+        m = bridge.msg
+        now = stamp(m, t)
         odom = m["Odometry"]()
         odom.header.stamp, odom.header.frame_id, odom.child_frame_id = (
             now,
@@ -552,18 +556,18 @@ class Ros2Controller(UserController):
         v, omega = (float(c) for c in obs["velocity"])
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
         bridge.odom.publish(odom)
-        bridge.scan.publish(laser_scan(m["LaserScan"], self._info, obs["ranges"], t))
+        bridge.scan.publish(laser_scan(m, self._info, obs["ranges"], t))
         clock = m["Clock"]()
         clock.clock = now
         bridge.clock.publish(clock)
 
 
-def laser_scan(msg_type: Any, info: Mapping[str, Any], ranges: Any, t: float) -> Any:
+def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: float) -> Any:
     """A sensor_msgs/LaserScan of ``ranges`` at simulated time ``t``, for the laser that the
     run's reset info describes (``laser``: ``angles``, ``range_m``, ``min_range_m``)."""
     laser, angles = info["laser"], info["laser"]["angles"]
-    scan = msg_type()
-    scan.header.stamp, scan.header.frame_id = stamp(t), FRAMES.scan
+    scan = msg["LaserScan"]()
+    scan.header.stamp, scan.header.frame_id = stamp(msg, t), FRAMES.scan
     scan.angle_min, scan.angle_max = float(angles[0]), float(angles[-1])
     scan.angle_increment = (
         float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0

@@ -84,6 +84,19 @@ class Parent:
     with_peer: bool
     """Whether a peer took part in the failure (its failure cell names one)."""
 
+    @staticmethod
+    def of(situation: Situation, coverage: dict[str, Any] | None) -> Parent:
+        """``situation`` as a parent, with where its run failed from the run's coverage record
+        (``failure_at``, ``failure_cell``)."""
+        coverage = coverage or {}
+        at = coverage.get("failure_at")
+        pose = (
+            None
+            if at is None
+            else (float(at["pose"][0]), float(at["pose"][1]), float(at["pose"][2]))
+        )
+        return Parent(situation, pose, bool(coverage.get("failure_cell")))
+
 
 def mutate(parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of

@@ -222,8 +222,9 @@ def measures_for(spec: CampaignSpec, names: Sequence[str]) -> list[Measure]:
         elif name == "approach_side":
             labels = ("none", "front", "left", "right", "rear")
         elif name == "variant":
-            interactions = (*dict(_core.coverage_dimensions())["interaction"], NO_PEER)
-            contexts = dict(_core.coverage_dimensions())["context"]
+            dimensions = dict(_core.coverage_dimensions())
+            interactions = (*dimensions["interaction"], NO_PEER)
+            contexts = dimensions["context"]
             labels = ("none", *(f"{i}/{c}" for i in interactions for c in contexts))
         else:
             raise _core.SpecError(
@@ -540,11 +541,10 @@ class Archive:
         """The ``--like`` run as a parent."""
         like = self.plan.like
         assert like is not None
-        pose = None if like.failure_at is None else like.failure_at["pose"]
-        return Parent(
+        failure_cell = "with a peer" if like.with_peer else None
+        return Parent.of(
             Situation(like.situation, check_start=False),
-            None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2])),
-            like.with_peer,
+            {"failure_at": like.failure_at, "failure_cell": failure_cell},
         )
 
     def stats(self) -> ArchiveStats:
@@ -720,20 +720,21 @@ def run_search(
 
 
 def parent_of(store: Store, run_id: int) -> Parent:
-    """Stored run ``run_id`` as a parent of the mutation strategy: its situation (kept, or
-    made again) and where its failure began."""
+    """Stored run ``run_id`` as a parent of the mutation strategy."""
+    return stored_parent(store, run_id)[1]
+
+
+def stored_parent(store: Store, run_id: int) -> tuple[dict[str, Any], Parent, dict[str, Any]]:
+    """Stored run ``run_id`` (:func:`stored_run`), as a parent (its situation, kept or made
+    again, and where its failure began), and its coverage record."""
     row = stored_run(store, run_id)
     if row["situation"] is not None:
         situation = Situation(row["situation"], check_start=False)
     else:
         situation = regenerate(row)
     (coverage,) = store.db.execute("SELECT coverage FROM runs WHERE id = ?", (run_id,)).fetchone()
-    record = unpack_json(coverage) if coverage else {}
-    at = record.get("failure_at")
-    pose = (
-        None if at is None else (float(at["pose"][0]), float(at["pose"][1]), float(at["pose"][2]))
-    )
-    return Parent(situation, pose, bool(record.get("failure_cell")))
+    record: dict[str, Any] = unpack_json(coverage) if coverage else {}
+    return row, Parent.of(situation, record), record
 
 
 def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any]]) -> None:
@@ -817,20 +818,12 @@ def like_run(source: str) -> Like:
     if not Path(db).is_file():
         raise _core.SpecError(f"--like: {db}: no such store")
     with Store(db) as store:
-        row = stored_run(store, int(run))
-        if row["failure"] is None:
-            raise _core.SpecError(f"--like: run {run} of {db} did not fail")
-        if row["situation"] is not None:
-            situation = Situation(row["situation"], check_start=False)
-        else:
-            situation = regenerate(row)
-        (coverage,) = store.db.execute(
-            "SELECT coverage FROM runs WHERE id = ?", (int(run),)
-        ).fetchone()
-    record = unpack_json(coverage) if coverage else {}
+        row, parent, record = stored_parent(store, int(run))
+    if row["failure"] is None:
+        raise _core.SpecError(f"--like: run {run} of {db} did not fail")
     return Like(
         source,
-        situation.to_json(),
+        parent.situation.to_json(),
         row["run_spec"],
         int(row["run_seed"]),
         str(row["failure"]["class"]),

@@ -26,7 +26,6 @@ Source: rosbag2's MCAP storage and metadata (version 9), via the ``rosbags`` lib
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -34,12 +33,14 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
+from sitgen.controllers.ros2 import FRAMES, quaternion, sec_nanosec
 from sitgen.run import RunRecord, reset_info
 from sitgen.store import Store, StoreError
 from sitgen.triage.recall import resimulate_checked, stored_run
 from sitgen.world.situation import Situation
 
-MAP, ODOM, BASE, SCAN = "map", "odom", "base_link", "base_scan"
+# The frames a live ros2: run uses (REP 105, as Nav2's loopback simulator names them).
+MAP, ODOM, BASE, SCAN = FRAMES.map, FRAMES.odom, FRAMES.base, FRAMES.scan
 EVENT_MIN_S = 1.0
 """Shortest time an event's marker stays on screen, seconds."""
 
@@ -125,16 +126,15 @@ class _Messages:
         return [self._blank_field((sub_kind, sub_detail)) for _ in range(length)]
 
     def stamp(self, t: float) -> Any:
-        ns = round(t * 1e9)
-        return self.blank("builtin_interfaces/msg/Time", sec=ns // 10**9, nanosec=ns % 10**9)
+        sec, nanosec = sec_nanosec(t)
+        return self.blank("builtin_interfaces/msg/Time", sec=sec, nanosec=nanosec)
 
     def header(self, t: float, frame: str) -> Any:
         return self.blank("std_msgs/msg/Header", stamp=self.stamp(t), frame_id=frame)
 
     def pose(self, x: float, y: float, heading: float) -> Any:
-        q = self.blank(
-            "geometry_msgs/msg/Quaternion", z=math.sin(heading / 2), w=math.cos(heading / 2)
-        )
+        _, _, z, w = quaternion(heading)
+        q = self.blank("geometry_msgs/msg/Quaternion", z=z, w=w)
         point = self.blank("geometry_msgs/msg/Point", x=float(x), y=float(y))
         return self.blank("geometry_msgs/msg/Pose", position=point, orientation=q)
 
@@ -335,8 +335,8 @@ def _event_markers(
         x, y, _ = trajectory[step, index.get(event["robot"], 0)]
         end = event.get("end_s")
         seconds = max(EVENT_MIN_S, (float(end) - t) if end is not None else 0.0)
-        ns = round(seconds * 1e9)
-        lifetime = m.blank("builtin_interfaces/msg/Duration", sec=ns // 10**9, nanosec=ns % 10**9)
+        sec, nanosec = sec_nanosec(seconds)
+        lifetime = m.blank("builtin_interfaces/msg/Duration", sec=sec, nanosec=nanosec)
         red = bool(event.get("scored"))
         colour = m.blank(
             "std_msgs/msg/ColorRGBA",

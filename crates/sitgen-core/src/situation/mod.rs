@@ -240,20 +240,26 @@ impl Situation {
     /// A situation shrunk from this one: `map` and `robots` in place of its own, the provenance
     /// kept and marked as shrunk from this one's content hash, and a content hash of its own.
     pub fn shrunk(&self, map: &Map, robots: Vec<Robot>) -> Self {
-        let mut s = Self::new(
+        let mut s = self.edited(map, robots);
+        s.provenance.shrunk_from = Some(self.provenance.content_hash.clone());
+        s
+    }
+
+    /// `map` and `robots` in place of this one's, with its spec and seed: a situation they
+    /// no longer make, which its caller marks with where it came from.
+    fn edited(&self, map: &Map, robots: Vec<Robot>) -> Self {
+        Self::new(
             map,
             robots,
             self.provenance.spec.clone(),
             self.provenance.seed,
-        );
-        s.provenance.shrunk_from = Some(self.provenance.content_hash.clone());
-        s
+        )
     }
 
     /// A situation a situation operator made from this one: `map` and `robots` in place of
     /// its own, the provenance kept and marked as mutated from this one's content hash.
     pub fn mutated(&self, map: &Map, robots: Vec<Robot>) -> Self {
-        let mut s = self.shrunk(map, robots);
+        let mut s = self.edited(map, robots);
         s.provenance.shrunk_from = self.provenance.shrunk_from.clone();
         s.provenance.mutated_from = Some(self.provenance.content_hash.clone());
         s
