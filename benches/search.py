@@ -13,8 +13,9 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
   each strategy's to random generation's;
 - evaluations to the first robust failure of each class that random generation finds in fewer
   than half of the seeds (its rare classes);
-- for ``mutation``, each situation operator's locality: of its children, the share that failed
-  with their parent's failure class;
+- for ``mutation``, each situation operator's locality (of its children, the share that failed
+  with their parent's failure class) and, for it and fresh runs, the share of runs that showed
+  a failure variant new to the store;
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
@@ -38,8 +39,8 @@ from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.fault_report import report_from
 from sitgen.generation.faults import is_harder, run_faults
 from sitgen.generation.search import SearchPlan, run_search
-from sitgen.store import Store
-from sitgen.triage.variants import robust_variants
+from sitgen.store import Store, unpack_json
+from sitgen.triage.variants import robust_variants, variant
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BUDGETS = (250, 500, 1000)
@@ -48,18 +49,24 @@ FAULT_SITUATIONS = 250
 
 
 def locality(db: Path) -> dict[str, list[int]]:
-    """Per operator: [children, children with their parent's failure class]."""
+    """Per way of making a run (``fresh`` or an operator): [runs, children with their parent's
+    failure class, runs showing a failure variant not seen before in the store]."""
     with Store(db) as store:
-        rows = store.db.execute("SELECT id, failure_class, parents, genes FROM runs").fetchall()
-    classes = {run_id: cls for run_id, cls, _, _ in rows}
+        rows = store.db.execute(
+            "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id"
+        ).fetchall()
+    classes = {run_id: cls for run_id, cls, _, _, _ in rows}
+    seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for _, cls, parents, genes in rows:
-        first = json.loads(parents)[:1] if parents else []
-        if not first or first[0] not in classes:
-            continue
-        tally = out.setdefault(json.loads(genes)["operator"], [0, 0])
+    for _, cls, parents, genes, coverage in rows:
+        key = variant(cls, unpack_json(coverage) if coverage else None)
+        tally = out.setdefault(json.loads(genes)["operator"], [0, 0, 0])
         tally[0] += 1
-        tally[1] += cls == classes[first[0]]
+        first = json.loads(parents)[:1] if parents else []
+        tally[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
+        tally[2] += key is not None and key not in seen
+        if key is not None:
+            seen.add(key)
     return out
 
 
@@ -108,10 +115,10 @@ def main() -> None:
                     "yardstick_s": time.perf_counter() - started,
                 }
                 if strategy == "mutation":
-                    for operator, (n, same) in locality(db).items():
-                        counts = kept.setdefault(operator, [0, 0])
-                        counts[0] += n
-                        counts[1] += same
+                    for operator, figures in locality(db).items():
+                        counts = kept.setdefault(operator, [0, 0, 0])
+                        for i, figure in enumerate(figures):
+                            counts[i] += figure
                 if with_faults and strategy in ("mutation", "random"):
                     row |= harder_kills(spec, db, Path(tmp), seed)
                 rows.append(row)
@@ -187,9 +194,13 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
             if kills:
                 print(f"  {s:12} {statistics.median(kills):g} of {per[s][0]['harder']}")
     if out["locality"]:
-        print("\nmutation: children failing with their parent's failure class, by operator")
-        for operator, (n, same) in sorted(out["locality"].items()):
-            print(f"  {operator:16} {same:>5} of {n:>5} ({same / n:.0%})")
+        print(
+            "\nmutation, by way of making a run: runs; children failing with their parent's"
+            " failure class (locality); runs showing a variant new to the store"
+        )
+        for operator, (n, same, new) in sorted(out["locality"].items()):
+            local = f"{same:>5} ({same / n:.0%})" if operator != "fresh" else f"{'-':>11}"
+            print(f"  {operator:16} {n:>5} {local:>11} {new:>5} ({new / n:.0%})")
 
 
 if __name__ == "__main__":

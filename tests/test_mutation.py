@@ -7,6 +7,7 @@ the yardstick counts every copy against the budget."""
 from __future__ import annotations
 
 import json
+import math
 import signal
 from pathlib import Path
 
@@ -15,7 +16,15 @@ import pytest
 
 import sitgen
 from sitgen import _core
-from sitgen.generation.mutation import OPERATORS, Parent, focus_peer, mutate
+from sitgen.generation.mutation import (
+    APPROACHES,
+    CONTEXTS,
+    OPERATORS,
+    START_S_MAX,
+    Parent,
+    focus_peer,
+    mutate,
+)
 from sitgen.generation.search import BATCH, INITIAL, SearchPlan, run_search
 from sitgen.store import Store
 from sitgen.triage.variants import robust_variants, variant, variants_of
@@ -35,9 +44,11 @@ def parent() -> Parent:
     )
     record = sitgen.run(situation, time_limit=200.0)
     assert record.coverage is not None and record.coverage["failure_cell"] is not None
-    at = (record.coverage or {}).get("failure_at")
-    pose = None if at is None else tuple(at["pose"])
-    return Parent(situation, pose, bool((record.coverage or {}).get("failure_cell")))
+    parent = Parent.of(situation, record.coverage, record.failure)
+    assert parent.failure_pose is not None and parent.failure_s is not None
+    assert record.failure is not None
+    assert parent.variant == variant(record.failure["class"], record.coverage)
+    return parent
 
 
 @pytest.mark.parametrize("operator", OPERATORS)
@@ -54,7 +65,7 @@ def test_every_operator_makes_a_valid_child_that_differs_where_it_should(
     robots_changed = [
         i for i, (a, b) in enumerate(zip(before["robots"], after["robots"], strict=True)) if a != b
     ]
-    if operator in ("add_obstacle", "remove_obstacle", "move_obstacle"):
+    if operator in ("add_obstacle", "remove_obstacle", "move_obstacle", "reshape_terrain"):
         assert not same_map and not robots_changed
     elif operator == "mirror":
         width = parent.situation.grid.size_m[0]
@@ -63,10 +74,68 @@ def test_every_operator_makes_a_valid_child_that_differs_where_it_should(
             assert b["start"]["x_m"] == pytest.approx(width - a["start"]["x_m"])
     else:
         assert same_map and len(robots_changed) == 1
-        if operator in ("move_peer", "turn_peer", "retime_peer", "peer_speed"):
+        if operator in ("move_peer", "turn_peer", "retime_peer", "peer_speed", "approach_peer"):
             focus = parent.failure_pose[:2] if parent.failure_pose else None
             if focus is not None:
                 assert robots_changed == [focus_peer(before["robots"], focus)]
+
+
+@pytest.mark.parametrize("target", APPROACHES)
+def test_approach_peer_sends_the_peer_through_the_failure_in_the_interaction_asked(
+    parent: Parent, target: str
+) -> None:
+    child = mutate(parent, "approach_peer", np.random.default_rng(5), target)
+    assert child is not None
+    assert parent.failure_pose is not None and parent.failure_s is not None
+    x, y, heading = parent.failure_pose
+    before, after = json.loads(parent.situation.to_json()), json.loads(child)
+    peer = focus_peer(before["robots"], (x, y))
+    assert peer is not None
+    robot = after["robots"][peer]
+    start = robot["start"]
+    # Where it starts, seen from the agent at the failure: ahead, left, right or behind.
+    bearing = math.remainder(math.atan2(start["y_m"] - y, start["x_m"] - x) - heading, math.tau)
+    course = math.remainder(start["heading_rad"] - heading, math.tau)
+    side = {"head_on": 0, "crossing_left": 1, "crossing_right": -1, "from_behind": 2}
+    if target in side and target != "from_behind":
+        assert bearing == pytest.approx(side[target] * math.pi / 2, abs=0.6)
+    if target == "from_behind":
+        assert abs(bearing) > math.pi / 2 and abs(course) < 0.1
+    if target == "head_on":
+        assert abs(course) == pytest.approx(math.pi, abs=0.1)
+    params = robot["controller"]["params"]
+    if target == "stopped":
+        assert params["start_s"] == START_S_MAX
+    else:
+        assert 0 <= params["start_s"] <= parent.failure_s
+    if target != "overtaking":
+        # Its leg passes within a metre of the place ahead of the agent where they meet.
+        (mx, my) = robot["waypoints"][0]
+        assert math.hypot(mx - x, my - y) <= 1.0 + 1e-9
+
+
+def test_a_peer_sent_head_on_meets_the_agent_head_on(parent: Parent) -> None:
+    child = mutate(parent, "approach_peer", np.random.default_rng(5), "head_on")
+    assert child is not None
+    record = sitgen.run(sitgen.Situation(child), time_limit=200.0)
+    assert record.coverage is not None
+    assert any(cell.startswith("head_on/") for cell in record.coverage["cells"])
+
+
+def test_reshape_terrain_makes_the_context_it_aims_at(parent: Parent) -> None:
+    assert parent.failure_pose is not None
+    made = {}
+    for target in CONTEXTS:
+        for seed in range(6):
+            child = mutate(parent, "reshape_terrain", np.random.default_rng(seed), target)
+            if child is not None:
+                made[target] = child
+                break
+    # The core's classifier reads each one made as aimed (a draw that does not is redrawn).
+    for target, child in made.items():
+        assert _core.agent_context(child, *parent.failure_pose) == target
+        assert _core.shrink_check(child, None) is None
+    assert "open" in made and len(made) >= 3, sorted(made)
 
 
 def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:
@@ -99,7 +168,7 @@ def test_a_mutation_search_is_the_same_on_one_and_two_workers(tmp_path: Path) ->
     rows = stored(one)
     operators = [json.loads(r[3])["operator"] for r in rows]
     assert set(operators) - {"fresh"} <= set(OPERATORS)
-    # Half of each later generation is fresh (MUTATION_FRESH_SHARE), the rest mutants.
+    # Later generations are mostly mutants: each way of making a child starts equally likely.
     assert sum(op in OPERATORS for op in operators) >= BATCH
     with Store(one) as store:
         found = variants_of(store)

@@ -19,7 +19,23 @@ peer whose route passes nearest it):
 - ``remove_obstacle``, ``move_obstacle``: the obstacle (8-connected component of at most
   ``BLOB_MAX_CELLS`` cells) nearest the failure goes, or moves by N(0, ``MOVE_SD_M``);
 - ``mirror``: the whole situation mirrored left to right, so a crossing from the left becomes
-  one from the right.
+  one from the right;
+
+and two that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
+parent's failure the search has not seen yet (drawn at random when none is given):
+
+- ``approach_peer``: the peer is sent through where the failure began in another interaction
+  (:data:`APPROACHES`): head-on from ahead, crossing from the left or the right, from behind
+  (faster than the agent), overtaken (slow, ahead, going the same way), or stopped in the way.
+  It starts ``U(APPROACH_M)`` from there, on a straight leg through it, and departs late
+  (``straight``'s ``start_s``) so that it arrives about when the agent did; a stopped one never
+  departs;
+- ``reshape_terrain``: the walls round where the failure began are redrawn to make another
+  terrain context (:data:`CONTEXTS`): two walls along the agent's heading (``corridor``), a
+  narrow opening across it (``gap``), walls on three sides (``dead_end``), a wall beside it that
+  ends just ahead (``blind_corner``), or the walls within a few metres cleared (``open``). The
+  core's own classifier (``agent_context``) must read the target there, or the draw is tried
+  again.
 
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that
@@ -27,7 +43,10 @@ cannot make a valid child in ``TRIES`` draws gives None, and the search draws af
 
 Why: varying a campaign spec's parameters and seeds redraws the whole situation, so a child
 keeps its parent's failure class only 16-19 % of the time (``make bench-search``); an operator
-on the situation leaves the rest of the encounter as it was. Sources: the situation operators of
+on the situation leaves the rest of the encounter as it was. The local operators mostly repeat
+their parent's variant, too; the targeted two change one coordinate of it on purpose (the
+interaction or the terrain context) and leave the rest, so that a search for distinct failures
+gets new ones at a higher rate than random generation. Sources: the situation operators of
 search-based testing of automated vehicles (e.g. Gambi et al., AsFault; Riccio & Tonella,
 DeepJanus' local mutations of the input) applied to sitgen's situations.
 """
@@ -39,13 +58,14 @@ import itertools
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 import numpy.typing as npt
 from scipy import ndimage
 
 from sitgen import _core
+from sitgen.triage.variants import variant
 from sitgen.world.situation import Situation
 
 OPERATORS = (
@@ -60,8 +80,24 @@ OPERATORS = (
     "remove_obstacle",
     "move_obstacle",
     "mirror",
+    "approach_peer",
+    "reshape_terrain",
 )
-PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed")
+TARGETED = ("approach_peer", "reshape_terrain")
+"""Operators aimed at a target variant's interaction or terrain context."""
+PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed", "approach_peer")
+APPROACHES = ("head_on", "crossing_left", "crossing_right", "from_behind", "overtaking", "stopped")
+"""Interactions ``approach_peer`` can stage (coverage's interaction types but ``hidden``)."""
+CONTEXTS = ("open", "corridor", "gap", "dead_end", "blind_corner")
+"""Terrain contexts ``reshape_terrain`` can draw (coverage's)."""
+APPROACH_M = (1.5, 6.0)
+WALL_M = 0.2
+"""Thickness of a drawn wall."""
+LEG_CLEAR_M = 0.7
+"""A drawn wall keeps this far from every peer's route legs (a robot's reach, 0.45 m, and a
+margin): where a peer's leg crosses one, the wall has a doorway."""
+POINT_CLEAR_M = 0.45
+"""A drawn wall keeps this far from the points of the agent's route (a robot's reach)."""
 MOVE_SD_M = 0.5
 TURN_MIN_RAD, TURN_MAX_RAD = 0.15, 0.6
 RETIME_M = 1.5
@@ -83,11 +119,20 @@ class Parent:
     """The agent's pose at the start of the failure (None: the run did not fail)."""
     with_peer: bool
     """Whether a peer took part in the failure (its failure cell names one)."""
+    variant: str | None = None
+    """Its failure's variant (``CLASS/INTERACTION/CONTEXT``)."""
+    failure_s: float | None = None
+    """When its failure began, seconds into the run."""
 
     @staticmethod
-    def of(situation: Situation, coverage: dict[str, Any] | None) -> Parent:
+    def of(
+        situation: Situation,
+        coverage: dict[str, Any] | None,
+        failure: dict[str, Any] | None = None,
+    ) -> Parent:
         """``situation`` as a parent, with where its run failed from the run's coverage record
-        (``failure_at``, ``failure_cell``)."""
+        (``failure_at``, ``failure_cell``) and when from its failure (``class``,
+        ``features.start_s``)."""
         coverage = coverage or {}
         at = coverage.get("failure_at")
         pose = (
@@ -95,31 +140,341 @@ class Parent:
             if at is None
             else (float(at["pose"][0]), float(at["pose"][1]), float(at["pose"][2]))
         )
-        return Parent(situation, pose, bool(coverage.get("failure_cell")))
+        failure = failure or {}
+        start_s = (failure.get("features") or {}).get("start_s")
+        return Parent(
+            situation,
+            pose,
+            bool(coverage.get("failure_cell")),
+            variant(failure.get("class"), coverage),
+            None if start_s is None else float(start_s),
+        )
 
 
-def mutate(parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
+def mutate(
+    parent: Parent, operator: str, rng: np.random.Generator, target: str | None = None
+) -> str | None:
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of
-    :data:`TRIES` draws made a valid one."""
+    :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``) or
+    terrain context (``reshape_terrain``) to make; drawn from the others if None."""
     data = json.loads(parent.situation.to_json())
     robots: list[dict[str, Any]] = data["robots"]
     grid = parent.situation.grid
     occupied = np.ascontiguousarray(grid.occupied, dtype=bool)
     focus = _focus(parent, robots, rng)
     margin = _core.shrink_leg_margin(parent.situation.to_json())
+    if operator in TARGETED:
+        target = target or _other_target(parent, operator, rng)
     for _ in range(TRIES):
-        changed = _apply(
-            operator, copy.deepcopy(robots), occupied, grid.resolution, focus, parent, rng
-        )
+        if operator == "approach_peer":
+            assert target is not None
+            changed = _approach_peer(
+                copy.deepcopy(robots), occupied, grid.resolution, parent, target, rng
+            )
+        elif operator == "reshape_terrain":
+            assert target is not None
+            changed = _reshape_terrain(robots, occupied, grid.resolution, parent, target, rng)
+        else:
+            changed = _apply(
+                operator, copy.deepcopy(robots), occupied, grid.resolution, focus, parent, rng
+            )
         if changed is None:
             return None
         new_robots, new_occupied = changed
         child = _core.mutated_situation(
             parent.situation.to_json(), new_occupied, grid.resolution, json.dumps(new_robots)
         )
-        if _core.shrink_check(child, margin) is None:
-            return child
+        if _core.shrink_check(child, margin) is not None:
+            continue
+        if operator == "reshape_terrain" and not _reads_as(child, parent, target):
+            continue
+        return child
     return None
+
+
+def _other_target(parent: Parent, operator: str, rng: np.random.Generator) -> str:
+    """A target other than the parent's own interaction or context."""
+    parts = (parent.variant or "//").split("/")
+    own, choices = (parts[1], APPROACHES) if operator == "approach_peer" else (parts[2], CONTEXTS)
+    others = [c for c in choices if c != own]
+    return others[int(rng.integers(len(others)))]
+
+
+def _approach_peer(
+    robots: list[dict[str, Any]],
+    occupied: npt.NDArray[np.bool_],
+    resolution: float,
+    parent: Parent,
+    target: str,
+    rng: np.random.Generator,
+) -> tuple[list[dict[str, Any]], npt.NDArray[np.bool_]] | None:
+    """The focus peer sent through the failure's place in interaction ``target``: a start up to
+    ``APPROACH_M`` away on the side the interaction comes from, as far as the ground is clear,
+    a leg through the place and on, and a departure timed to arrive when the agent did."""
+    if parent.failure_pose is None:
+        return None
+    x, y, heading = parent.failure_pose
+    peer = focus_peer(robots, (x, y))
+    if peer is None:
+        return None
+    robot = robots[peer]
+    params = dict(robot["controller"].get("params") or {})
+    speed = float(params.get("speed_m_s", 0.5))
+    # Where the peer comes from (bearing from the place) and the course it drives.
+    side = {
+        "head_on": (0.0, math.pi),
+        "crossing_left": (math.pi / 2, -math.pi / 2),
+        "crossing_right": (-math.pi / 2, math.pi / 2),
+        "from_behind": (math.pi, 0.0),
+        "overtaking": (0.0, 0.0),
+        "stopped": (0.0, 0.0),
+    }[target]
+    bearing, course = heading + side[0], heading + side[1]
+    clear = _clearance(occupied, resolution)
+    # Where they meet: the failure's place, or the nearest point the agent drove through on the
+    # way there with room for the peer's leg (a failure against a wall leaves none).
+    back = _clear_run(clear, resolution, (x, y), heading + math.pi, MEET_BACK_M, first=True)
+    if back is None:
+        return None
+    x, y = x - back * math.cos(heading), y - back * math.sin(heading)
+    room = _clear_run(clear, resolution, (x, y), bearing, APPROACH_M[1])
+    near = 0.8 if target in ("stopped", "overtaking") else APPROACH_M[0]
+    if room < near:
+        return None
+    distance = float(rng.uniform(near, min(room, 2.0 if target == "stopped" else APPROACH_M[1])))
+    sx, sy = x + distance * math.cos(bearing), y + distance * math.sin(bearing)
+    if target == "overtaking":
+        on = (sx, sy)
+        waypoints = []
+    else:
+        on = (x, y)
+        waypoints = [[x, y]]
+    onward = _clear_run(clear, resolution, on, course, APPROACH_M[1])
+    if onward < 0.5:
+        return None
+    beyond = float(rng.uniform(0.5, onward))
+    waypoints.append([on[0] + beyond * math.cos(course), on[1] + beyond * math.sin(course)])
+    # Timing: the peer sets off before the agent comes within range of where it waits (else
+    # they meet with the peer standing), at the speed that brings it to the place when the
+    # agent's failure began.
+    failure_s = parent.failure_s or 0.0
+    start_s = max(0.0, failure_s - (distance + IN_RANGE_M) / AGENT_M_S - float(rng.uniform(0, 2)))
+    travel_s = max(failure_s - start_s, 1e-3)
+    if target == "overtaking":
+        speed = float(rng.uniform(SPEED_RANGE[0] / 5, AGENT_M_S / 2))
+    elif target == "from_behind":
+        speed = float(rng.uniform(2 * AGENT_M_S, SPEED_RANGE[1]))
+        start_s = max(0.0, failure_s - distance / (speed - AGENT_M_S))
+    else:
+        speed = distance / travel_s
+    params["speed_m_s"] = min(SPEED_RANGE[1], max(SPEED_RANGE[0] / 5, speed))
+    params["start_s"] = START_S_MAX if target == "stopped" else round(start_s, 3)
+    robot["controller"]["params"] = params
+    robot["start"] = {"x_m": sx, "y_m": sy, "heading_rad": math.remainder(course, math.tau)}
+    robot["waypoints"] = waypoints
+    robot["at_end"] = "stop"
+    return robots, occupied
+
+
+AGENT_M_S = 0.4
+"""The agent's speed a staged encounter is timed for (a typical cruising speed of the
+built-in agents; a guess: the encounter need only be about right)."""
+IN_RANGE_M = 3.5
+"""Distance, centre to centre, at which the coverage observer starts an encounter (its 2 m
+footprint clearance and two robots' reach)."""
+MEET_BACK_M = 1.5
+"""How far back along the agent's way to the failure a staged encounter may be placed."""
+PEER_CLEAR_M = 0.6
+"""Clearance a staged peer's start and leg keep from every wall (its reach, 0.45 m, and the
+leg margin the checks ask for)."""
+
+
+def _clearance(occupied: npt.NDArray[np.bool_], resolution: float) -> npt.NDArray[np.float64]:
+    """Each cell's distance to the nearest wall, metres."""
+    return np.asarray(ndimage.distance_transform_edt(~occupied), dtype=np.float64) * resolution
+
+
+@overload
+def _clear_run(
+    clear: npt.NDArray[np.float64],
+    resolution: float,
+    start: tuple[float, float],
+    heading: float,
+    most: float,
+    first: Literal[False] = False,
+) -> float: ...
+@overload
+def _clear_run(
+    clear: npt.NDArray[np.float64],
+    resolution: float,
+    start: tuple[float, float],
+    heading: float,
+    most: float,
+    first: Literal[True],
+) -> float | None: ...
+def _clear_run(
+    clear: npt.NDArray[np.float64],
+    resolution: float,
+    start: tuple[float, float],
+    heading: float,
+    most: float,
+    first: bool = False,
+) -> float | None:
+    """How far from ``start`` along ``heading`` (up to ``most``) the ground stays
+    :data:`PEER_CLEAR_M` clear of walls, in half-cell steps (0 if it is not clear at the
+    start); with ``first``, how far until it first is (None if not within ``most``)."""
+    rows, cols = clear.shape
+    step = resolution / 2
+    for k in range(int(most / step) + 1):
+        d = k * step
+        r, c = _cell(
+            clear, resolution, (start[0] + d * math.cos(heading), start[1] + d * math.sin(heading))
+        )
+        is_clear = 0 <= r < rows and 0 <= c < cols and clear[r, c] >= PEER_CLEAR_M
+        if first and is_clear:
+            return d
+        if not first and not is_clear:
+            return max(0.0, d - step)
+    return None if first else most
+
+
+START_S_MAX = 3600.0
+"""``straight``'s largest ``start_s``: a peer that never departs in any run sitgen makes."""
+
+
+def _reshape_terrain(
+    robots: list[dict[str, Any]],
+    occupied: npt.NDArray[np.bool_],
+    resolution: float,
+    parent: Parent,
+    target: str,
+    rng: np.random.Generator,
+) -> tuple[list[dict[str, Any]], npt.NDArray[np.bool_]] | None:
+    """The walls round the failure's place redrawn for terrain context ``target``; robots'
+    routes keep their points clear."""
+    if parent.failure_pose is None:
+        return None
+    x, y, _ = parent.failure_pose
+    before, occupied = occupied, occupied.copy()
+    frame = _Frame(occupied, resolution, (x, y), _leg_heading(robots[0], (x, y)))
+    if target == "open":
+        frame.disc(float(rng.uniform(2.5, 4.0)), False)
+    elif target == "corridor":
+        half = float(rng.uniform(0.85, 1.15))
+        length = float(rng.uniform(2.0, 4.0))
+        frame.box((-length, length), (-half, half), False)
+        for s in (-1, 1):
+            frame.box((-length, length), _span(s * half, s * (half + WALL_M)), True)
+    elif target == "gap":
+        half = float(rng.uniform(0.42, 0.6))
+        reach = float(rng.uniform(1.5, 3.0))
+        frame.disc(1.2, False)
+        for s in (-1, 1):
+            frame.box((-WALL_M / 2, WALL_M / 2), _span(s * half, s * (half + reach)), True)
+    elif target == "dead_end":
+        half = float(rng.uniform(0.6, 0.9))
+        ahead = float(rng.uniform(0.6, 1.2))
+        back = float(rng.uniform(2.0, 3.0))
+        frame.box((-back, ahead), (-half, half), False)
+        frame.box((ahead, ahead + WALL_M), (-half - WALL_M, half + WALL_M), True)
+        for s in (-1, 1):
+            frame.box((-back, ahead), _span(s * half, s * (half + WALL_M)), True)
+    elif target == "blind_corner":
+        s = 1 if rng.random() < 0.5 else -1
+        near = float(rng.uniform(0.6, 1.0))
+        end = float(rng.uniform(0.1, 0.6))
+        frame.box((-3.0, end + 3.0), _span(-s * near, s * near), False)
+        frame.box((-3.0, end), _span(s * near, s * (near + 1.5)), True)
+    else:
+        raise ValueError(f"unknown terrain context `{target}`")
+    # The agent is under test: a narrow way along its route is the point, so only its route's
+    # points stay clear. Peers avoid nothing: their legs must stay drivable, through a doorway.
+    changed = np.nonzero(occupied != before)
+    if not changed[0].size:
+        return robots, occupied
+    window = (changed[0].min(), changed[0].max() + 1, changed[1].min(), changed[1].max() + 1)
+    for point in _route(robots[0]):
+        _restore_near(occupied, before, resolution, window, (point, point), POINT_CLEAR_M)
+    for robot in robots[1:]:
+        for leg in itertools.pairwise(_route(robot)):
+            _restore_near(occupied, before, resolution, window, leg, LEG_CLEAR_M)
+    return robots, occupied
+
+
+def _restore_near(
+    occupied: npt.NDArray[np.bool_],
+    before: npt.NDArray[np.bool_],
+    resolution: float,
+    window: tuple[int, int, int, int],
+    leg: tuple[tuple[float, float], tuple[float, float]],
+    reach: float,
+) -> None:
+    """Cells of ``window`` (rows r0..r1, cols c0..c1) within ``reach`` of ``leg`` go back to
+    what they were ``before``."""
+    r0, r1, c0, c1 = window
+    rows = occupied.shape[0]
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    px, py = (cc + 0.5) * resolution, (rows - rr - 0.5) * resolution
+    (ax, ay), (bx, by) = leg
+    dx, dy = bx - ax, by - ay
+    length2 = dx * dx + dy * dy
+    t = np.zeros_like(px) if length2 == 0 else ((px - ax) * dx + (py - ay) * dy) / length2
+    t = np.clip(t, 0.0, 1.0)
+    near = (px - ax - t * dx) ** 2 + (py - ay - t * dy) ** 2 <= reach * reach
+    block = (slice(r0, r1), slice(c0, c1))
+    occupied[block] = np.where(near, before[block], occupied[block])
+
+
+def _span(a: float, b: float) -> tuple[float, float]:
+    return min(a, b), max(a, b)
+
+
+def _leg_heading(robot: dict[str, Any], point: tuple[float, float]) -> float:
+    """The heading of the robot's route leg nearest ``point``."""
+    legs = list(itertools.pairwise(_route(robot))) or [(_route(robot)[0], _route(robot)[0])]
+    a, b = min(legs, key=lambda leg: _segment_distance(point, *leg))
+    return math.atan2(b[1] - a[1], b[0] - a[0])
+
+
+def _reads_as(child: str, parent: Parent, target: str | None) -> bool:
+    """Whether the core reads terrain context ``target`` at the parent's failure pose."""
+    assert parent.failure_pose is not None
+    return _core.agent_context(child, *parent.failure_pose) == target
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """The grid seen from a pose: boxes and discs drawn in metres along and across the
+    heading."""
+
+    occupied: npt.NDArray[np.bool_]
+    resolution: float
+    origin: tuple[float, float]
+    heading: float
+
+    def _local(self, reach: float) -> tuple[Any, Any, Any, Any]:
+        """Window (rows, cols slices) within ``reach`` of the origin, and its cells' centres
+        along and across the heading."""
+        rows, cols = self.occupied.shape
+        r, c = _cell(self.occupied, self.resolution, self.origin)
+        k = math.ceil(reach / self.resolution) + 1
+        r0, r1, c0, c1 = max(0, r - k), min(rows, r + k + 1), max(0, c - k), min(cols, c + k + 1)
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        xs = (cc + 0.5) * self.resolution - self.origin[0]
+        ys = (rows - rr - 0.5) * self.resolution - self.origin[1]
+        cos, sin = math.cos(self.heading), math.sin(self.heading)
+        return slice(r0, r1), slice(c0, c1), xs * cos + ys * sin, -xs * sin + ys * cos
+
+    def box(self, along: tuple[float, float], across: tuple[float, float], value: bool) -> None:
+        reach = math.hypot(max(map(abs, along)), max(map(abs, across)))
+        rows, cols, u, v = self._local(reach)
+        inside = (u >= along[0]) & (u <= along[1]) & (v >= across[0]) & (v <= across[1])
+        self.occupied[rows, cols] = np.where(inside, value, self.occupied[rows, cols])
+
+    def disc(self, radius: float, value: bool) -> None:
+        rows, cols, u, v = self._local(radius)
+        inside = u * u + v * v <= radius * radius
+        self.occupied[rows, cols] = np.where(inside, value, self.occupied[rows, cols])
 
 
 def _focus(
@@ -256,7 +611,7 @@ def _apply(
 
 
 def _cell(
-    occupied: npt.NDArray[np.bool_], resolution: float, point: tuple[float, float]
+    occupied: npt.NDArray[Any], resolution: float, point: tuple[float, float]
 ) -> tuple[int, int]:
     rows = occupied.shape[0]
     return rows - 1 - int(point[1] / resolution), int(point[0] / resolution)

@@ -76,13 +76,14 @@ from sitgen.generation.guidance import (
     guide_weights,
     guided_genes,
 )
+from sitgen.generation.mutation import APPROACHES, CONTEXTS, Parent, mutate
 from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
-from sitgen.generation.mutation import Parent, mutate
 from sitgen.store import KINDS, Store, StoreError, unpack_json
 from sitgen.triage.failures import check_class
 from sitgen.triage.failures import classes as failure_classes
 from sitgen.triage.recall import regenerate, stored_run
-from sitgen.triage.variants import NO_PEER, interaction_context, variant
+from sitgen.triage.robustness import RERUNS
+from sitgen.triage.variants import NO_PEER, Screen, interaction_context, variant
 from sitgen.world.situation import Situation
 
 if TYPE_CHECKING:
@@ -135,9 +136,12 @@ FRESH_SHARE = 0.125
 """Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
 
 
-MUTATION_FRESH_SHARE = 0.5
-"""The mutation strategy's share of fresh runs: its children keep their parent's failure and
-mostly its variant too, so half of every generation keeps finding new ones at random."""
+ARM_PRIOR = (1.0, 1.0)
+"""Beta prior of every arm's share of new finds: uniform, so each way is tried early."""
+SCREENED_WEIGHT = {"robust": 1.0, "untested": 0.5, "knife_edge": 0.1}
+"""An elite's weight as a parent by what the screen knows of its variant."""
+MUTATION_TRIES = 3
+"""Operators the mutation strategy tries on one parent before it runs a fresh job instead."""
 
 
 CLEARANCE_CELLS = 5
@@ -246,7 +250,10 @@ class Like:
     run_seed: int
     failure_class: str
     failure_at: dict[str, Any] | None
-    with_peer: bool
+    failure_cell: str | None
+    """The interaction cell its failure began in (None: no peer took part)."""
+    failure_s: float | None
+    """When its failure began, seconds into the run."""
 
 
 @dataclass(frozen=True)
@@ -414,6 +421,18 @@ class Archive:
         """Runs told per cell (the mutation strategy's novelty: a rarely reached cell's elite
         is varied more often)."""
         self.cell_of: dict[int, tuple[int, ...]] = {}
+        self.variant_of: dict[int, str | None] = {}
+        self.variants_seen: set[str] = set()
+        """Every failure variant among the runs told."""
+        self.arm_runs: dict[str, int] = {}
+        """Runs told per way of making them (``fresh`` or a situation operator)."""
+        self.arm_new: dict[str, int] = {}
+        """Of those, runs that found a new variant: one that recurred under perturbation where
+        runs are screened (:attr:`screen`), else one not seen before."""
+        self.screen: Screen | None = None
+        """The mutation strategy's screen of its runs (set by :func:`run_search`): each new
+        variant's run rerun in perturbed copies by the yardstick's rule, so that the search is
+        rewarded for robust failures and varies them rather than knife-edge ones."""
 
     def objective(self, score: float) -> float:
         if self.plan.objective == "threshold":
@@ -434,7 +453,14 @@ class Archive:
                 self.classes[run["id"]] = run["failure_class"]
                 cell = self.cells(run)
                 self.cell_of[run["id"]] = cell
+                self.variant_of[run["id"]] = run["variant"]
                 self.cell_runs[cell] = self.cell_runs.get(cell, 0) + 1
+                key, arm = run["variant"], run["operator"]
+                self.arm_runs[arm] = self.arm_runs.get(arm, 0) + 1
+                if self._new_find(run["id"], key):
+                    self.arm_new[arm] = self.arm_new.get(arm, 0) + 1
+                if key is not None:
+                    self.variants_seen.add(key)
         self.told += len(runs)
         placed = [r for r in runs if r["outcome"] != "error"]
         if not placed:
@@ -490,10 +516,11 @@ class Archive:
         return children
 
     def _ask_mutation(self, generation: int) -> list[Child]:
-        """The mutation strategy: each child one situation operator away from an elite drawn
-        uniformly over the filled cells (of the target class's cells, once there are any), or
-        fresh (a share :data:`FRESH_SHARE`; none in a directed search from ``--like``).
-        Generation 0 is the campaign's first jobs, or the ``--like`` run and mutants of it."""
+        """The mutation strategy: each child is a fresh job or one situation operator away
+        from an elite, the choice a curious one (:meth:`_arm`); elites drawn by novelty (of the
+        target class's cells, once there are any). Generation 0 is the campaign's first jobs,
+        or the ``--like`` run and mutants of it (no fresh jobs in a directed search from
+        ``--like``)."""
         like = self.plan.like
         elites = self.elites()
         if self.plan.target_class is not None:
@@ -506,9 +533,7 @@ class Archive:
             if like is not None and index == 0:
                 children.append(Child(index, genome, (), "like", like.situation, like.run_seed))
                 continue
-            if like is None and (
-                generation == 0 or not elites or rng.random() < MUTATION_FRESH_SHARE
-            ):
+            if like is None and (generation == 0 or not elites):
                 children.append(Child(index, genome, (), "fresh"))
                 continue
             if like is not None and (generation == 0 or not elites):
@@ -518,9 +543,14 @@ class Archive:
                 assert self.parent_of is not None
                 parent = self.parent_of(parent_id)
                 genome = self.genomes[parent_id]
-            child = None
-            for operator in rng.permutation(SITUATION_OPERATORS)[:3]:
-                child = mutate(parent, str(operator), rng)
+            child, operator = None, "fresh"
+            tried: set[str] = set()
+            for _ in range(MUTATION_TRIES):
+                operator = self._arm(rng, tried, fresh_allowed=like is None)
+                if operator == "fresh":
+                    break
+                tried.add(operator)
+                child = mutate(parent, operator, rng, self._target(parent, operator, rng))
                 if child is not None:
                     break
             run_seed = None if like is None else like.run_seed
@@ -528,23 +558,86 @@ class Archive:
                 children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
             else:
                 parents = (parent_id,) if parent_id >= 0 else ()
-                children.append(Child(index, genome, parents, str(operator), child, run_seed))
+                children.append(Child(index, genome, parents, operator, child, run_seed))
         return children
+
+    def _new_find(self, run_id: int, key: str | None) -> bool:
+        if key is None:
+            return False
+        if self.screen is not None:
+            return self.screen.robust.get(key) == run_id
+        return key not in self.variants_seen
+
+    def screen_runs(self, store: Store, runs: Sequence[dict[str, Any]]) -> None:
+        """Test the runs (in run order) whose variant the screen wants, before they are told."""
+        if self.screen is None:
+            return
+        for run in runs:
+            key = run["variant"]
+            if self.screen.wants(key):
+                self.screen.test(store, int(run["id"]), key, 0, RERUNS)
+
+    def _arm(self, rng: np.random.Generator, tried: set[str], fresh_allowed: bool) -> str:
+        """Curiosity over the ways to make a child (``fresh`` and each situation operator):
+        Thompson sampling on the share of each one's runs that showed a variant not seen
+        before (Beta(1 + new, 1 + runs - new)), so the search spends its runs on what finds new
+        failures, whichever that turns out to be for the controller under test."""
+        arms = [a for a in ("fresh", *SITUATION_OPERATORS) if a not in tried]
+        if not fresh_allowed:
+            arms.remove("fresh")
+        a0, b0 = ARM_PRIOR
+        draws = [
+            rng.beta(
+                a0 + self.arm_new.get(a, 0), b0 + self.arm_runs.get(a, 0) - self.arm_new.get(a, 0)
+            )
+            for a in arms
+        ]
+        return arms[int(np.argmax(draws))]
+
+    def _target(self, parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
+        """For a targeted operator, a neighbour of the parent's variant (its interaction or its
+        terrain context changed) not seen yet, if there is one; None lets it draw."""
+        if parent.variant is None or operator not in ("approach_peer", "reshape_terrain"):
+            return None
+        cls, interaction, context = parent.variant.split("/")
+        if operator == "approach_peer":
+            keys = {i: f"{cls}/{i}/{context}" for i in APPROACHES if i != interaction}
+        else:
+            keys = {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
+        unseen = [t for t, key in keys.items() if key not in self.variants_seen]
+        return unseen[int(rng.integers(len(unseen)))] if unseen else None
 
     def _novel(self, elites: list[int], rng: np.random.Generator) -> int:
         """An elite's position, drawn with weight 1/runs of its cell (novelty: the rarer a
-        failure variant has been, the more often it is varied)."""
-        weights = np.array([1.0 / self.cell_runs.get(self.cell_of.get(e, ()), 1) for e in elites])
+        failure variant has been, the more often it is varied), times its variant's
+        robustness where runs are screened (:data:`SCREENED_WEIGHT`): a knife-edge failure's
+        children mostly fail otherwise or not at all."""
+        weights = np.array(
+            [
+                self._robust_weight(e) / self.cell_runs.get(self.cell_of.get(e, ()), 1)
+                for e in elites
+            ]
+        )
         return int(rng.choice(len(elites), p=weights / weights.sum()))
+
+    def _robust_weight(self, run_id: int) -> float:
+        key = self.variant_of.get(run_id)
+        if self.screen is None or key is None:
+            return 1.0
+        if key in self.screen.robust:
+            return SCREENED_WEIGHT["robust"]
+        if self.screen.attempts.get(key, 0) > 0:
+            return SCREENED_WEIGHT["knife_edge"]
+        return SCREENED_WEIGHT["untested"]
 
     def like_parent(self) -> Parent:
         """The ``--like`` run as a parent."""
         like = self.plan.like
         assert like is not None
-        failure_cell = "with a peer" if like.with_peer else None
         return Parent.of(
             Situation(like.situation, check_start=False),
-            {"failure_at": like.failure_at, "failure_cell": failure_cell},
+            {"failure_at": like.failure_at, "failure_cell": like.failure_cell},
+            {"class": like.failure_class, "features": {"start_s": like.failure_s}},
         )
 
     def stats(self) -> ArchiveStats:
@@ -577,6 +670,7 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
                 "cells": tuple(unpack_json(coverage)["cells"]) if coverage else (),
                 "variant": variant(cls, unpack_json(coverage) if coverage else None),
+                "operator": None if genes is None else json.loads(genes).get("operator"),
                 "terrain": terrain,
                 "peers": peers,
             }
@@ -667,6 +761,8 @@ def run_search(
         done = store.done_ids()
         archive = Archive(spec, seed, plan)
         archive.parent_of = lambda run_id: parent_of(store, run_id)
+        if plan.strategy == "mutation":
+            archive.screen = Screen(workers if backend == "local" else 1)
         executor = Executor(workers, backend, address, user=user)
         classes_seen = {
             c for (c,) in store.db.execute("SELECT DISTINCT failure_class FROM runs") if c
@@ -710,7 +806,9 @@ def run_search(
                 interrupted = True
                 break
             views += _view(store, spec, [c.index for c in todo])
-            archive.tell(sorted(views, key=lambda v: int(v["id"])))
+            views.sort(key=lambda v: int(v["id"]))
+            archive.screen_runs(store, views)
+            archive.tell(views)
             generation += 1
         total = store.run_count()
         stats = archive.stats()
@@ -732,9 +830,11 @@ def stored_parent(store: Store, run_id: int) -> tuple[dict[str, Any], Parent, di
         situation = Situation(row["situation"], check_start=False)
     else:
         situation = regenerate(row)
-    (coverage,) = store.db.execute("SELECT coverage FROM runs WHERE id = ?", (run_id,)).fetchone()
+    coverage, failure = store.db.execute(
+        "SELECT coverage, failure FROM runs WHERE id = ?", (run_id,)
+    ).fetchone()
     record: dict[str, Any] = unpack_json(coverage) if coverage else {}
-    return row, Parent.of(situation, record), record
+    return row, Parent.of(situation, record, json.loads(failure) if failure else None), record
 
 
 def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any]]) -> None:
@@ -828,5 +928,6 @@ def like_run(source: str) -> Like:
         int(row["run_seed"]),
         str(row["failure"]["class"]),
         record.get("failure_at"),
-        bool(record.get("failure_cell")),
+        record.get("failure_cell"),
+        row["failure"]["features"].get("start_s"),
     )

@@ -94,6 +94,32 @@ def runs_in_order(store: Store) -> Iterator[tuple[int, str | None, dict[str, Any
         yield run_id, cls, unpack_json(coverage) if coverage else None
 
 
+@dataclass
+class Screen:
+    """The yardstick's rule for one run at a time: which failing runs get copies, and what they
+    showed. The yardstick walks a finished store with it; a search screens its own runs as it
+    makes them with the same rule in the same order, so the copies it spends are the ones the
+    yardstick would (and counts), and it learns which variants recur."""
+
+    workers: int = 1
+    robust: dict[str, int] = field(default_factory=dict)
+    """Each robust variant and the run that showed it."""
+    attempts: dict[str, int] = field(default_factory=dict)
+    """Runs of each variant tested so far."""
+
+    def wants(self, key: str | None) -> bool:
+        """Whether a run of variant ``key`` gets copies."""
+        return key is not None and key not in self.robust and self.attempts.get(key, 0) < ATTEMPTS
+
+    def test(self, store: Store, run_id: int, key: str, spent: int, most: int) -> Trial:
+        """Copies of run ``run_id`` (at most ``most``) and the verdict on variant ``key``."""
+        self.attempts[key] = self.attempts.get(key, 0) + 1
+        trial = _trial(store, run_id, key, spent, min(most, RERUNS), self.workers)
+        if trial.robust:
+            self.robust[key] = run_id
+        return trial
+
+
 def robust_variants(
     store: Store,
     budget: int,
@@ -102,38 +128,29 @@ def robust_variants(
 ) -> Tally:
     """Walk ``store``'s runs (:mod:`module docs <sitgen.triage.variants>`) within ``budget``
     evaluations; the robust variants found, and how many within each of ``checkpoints``."""
-    workers = check_workers(workers, "local")
-    tally = Tally(budget)
-    attempts: dict[str, int] = {}
-    marks = sorted(c for c in checkpoints if c <= budget)
-
-    def checkpoint() -> None:
-        while marks and tally.spent >= marks[0]:
-            tally.at_budget[marks.pop(0)] = len(tally.robust)
-
+    screen = Screen(check_workers(workers, "local"))
+    tally = Tally(budget, robust=screen.robust)
     for run_id, cls, coverage in runs_in_order(store):
         if tally.spent >= budget:
             break
         tally.spent += 1
         tally.runs += 1
-        checkpoint()
         key = variant(cls, coverage)
-        if key is None or key in tally.robust or attempts.get(key, 0) >= ATTEMPTS:
+        if key is None or not screen.wants(key):
             continue
         left = budget - tally.spent
         if left < math.ceil(ROBUST_SHARE * RERUNS):
             continue  # too little budget left to confirm anything
-        attempts[key] = attempts.get(key, 0) + 1
-        trial = _trial(store, run_id, key, tally.spent, min(left, RERUNS), workers)
+        trial = screen.test(store, run_id, key, tally.spent, left)
         tally.trials.append(trial)
         tally.spent += len(trial.classes)
         tally.copies += len(trial.classes)
         if trial.robust:
-            tally.robust[key] = run_id
             tally.first_at[key] = tally.spent
-        checkpoint()
-    for mark in marks:
-        tally.at_budget[mark] = len(tally.robust)
+    for mark in checkpoints:
+        if mark <= budget:
+            # Confirmed within the mark: a test whose copies cross it counts after it.
+            tally.at_budget[mark] = sum(spent <= mark for spent in tally.first_at.values())
     return tally
 
 

@@ -14,6 +14,9 @@
 //! - `turn_gain` (1/s, default 1.5, in (0, 100]): turn rate per radian of heading error.
 //! - `drive_within_deg` (degrees, default 45, in (0, 90]): heading error above which it only turns.
 //! - `switch_m` (metres, default 0.3, in (0, 10]): distance at which a waypoint counts as reached.
+//! - `start_s` (seconds, default 0, in [0, 3600]): it stands at its start until the run's clock
+//!   reaches this, then sets off. A peer's departure can be delayed so that an encounter happens
+//!   later at the same place (the search's situation operators time peers this way).
 //!
 //! **Source.** Arnold & Alexander (2013) §4.1 ("dumb robots … collision avoidance disabled");
 //! Stage's position-mode controller turns first and drives when nearly aligned (§2.2).
@@ -33,19 +36,23 @@ pub struct Straight {
     turn_gain: f64,
     drive_within: f64,
     switch_m: f64,
+    start_s: f64,
     route: Option<RouteFollower>,
 }
 
 impl Straight {
     /// Build from named parameters; `path` names them in errors.
     pub fn from_params(params: &BTreeMap<String, f64>, path: &str) -> Result<Self, SpecError> {
-        let known = ["speed_m_s", "turn_gain", "drive_within_deg", "switch_m"];
+        let known = ["speed_m_s", "turn_gain", "drive_within_deg", "switch_m", "start_s"];
         super::check_known(params, &known, path)?;
+        let start_s = params.get("start_s").copied().unwrap_or(0.0);
+        SpecError::check_in(&crate::error::join(path, "start_s"), start_s, 0.0, 3600.0)?;
         Ok(Self {
             speed_m_s: param(params, path, "speed_m_s", 0.5, 10.0)?,
             turn_gain: param(params, path, "turn_gain", 1.5, 100.0)?,
             drive_within: param(params, path, "drive_within_deg", 45.0, 90.0)?.to_radians(),
             switch_m: param(params, path, "switch_m", 0.3, 10.0)?,
+            start_s,
             route: None,
         })
     }
@@ -68,6 +75,9 @@ impl Controller for Straight {
         let Some(route) = self.route.as_mut() else {
             return (0.0, 0.0);
         };
+        if obs.time_s < self.start_s {
+            return (0.0, 0.0);
+        }
         let here = (obs.pose.x_m, obs.pose.y_m);
         let Some(target) = route.target(here) else {
             return (0.0, 0.0);

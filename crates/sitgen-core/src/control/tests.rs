@@ -132,3 +132,28 @@ fn straight_never_reverses() {
     );
     assert!(world.robots().iter().all(|r| r.command.0 >= 0.0));
 }
+
+#[test]
+fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
+    let text = "[terrain]\npreset = \"open_field\"\n[mission]\npeers_min = 1\npeers_max = 1\npeer_at_end = \"stop\"\n";
+    let spec = from_toml_str(text).unwrap();
+    let (mut s, _) = situation::generate(&spec, 4).unwrap();
+    s.robots[1].controller.params.insert("start_s".into(), 3.0);
+    let agent = ControllerSpec {
+        name: "straight".into(),
+        params: Default::default(),
+        fault: None,
+        control_period_s: None,
+    };
+    let start = s.robots[1].start;
+    let dt = SimSpec::default().dt_s;
+    let moved = |steps: f64| {
+        let world = run_situation(&s, &agent, (steps / dt).round() as usize, |_| false);
+        let p = world.robots()[1].pose;
+        (p.x_m - start.x_m).hypot(p.y_m - start.y_m) + (p.heading_rad - start.heading_rad).abs()
+    };
+    assert_eq!(moved(2.9), 0.0, "still before start_s");
+    assert!(moved(6.0) > 0.1, "on its way after start_s");
+    let e = build_error("straight", &[("start_s", -1.0)], "c");
+    assert_eq!(e, "c.params.start_s: -1 is not in [0, 3600]");
+}

@@ -470,6 +470,14 @@ fn terrain_context(world: &World, i: usize, gap_m: f64) -> u8 {
     terrain_context_at(world, &world.robots()[i].pose, gap_m)
 }
 
+/// The terrain context (a [`CONTEXTS`] name) the agent of `world` would be in standing at
+/// `pose`: what a run's coverage would record there. A search that edits the walls round a
+/// failure asks it whether the edit made the context it aimed at.
+pub fn agent_context_at(world: &World, agent: u32, pose: &Pose) -> &'static str {
+    let gap_m = 2.0 * world.robots()[agent as usize].body.width_m + GAP_SLACK_M;
+    CONTEXTS[terrain_context_at(world, pose, gap_m) as usize]
+}
+
 /// [`terrain_context`] of a robot standing at `pose` (the walls only are looked at).
 fn terrain_context_at(world: &World, pose: &Pose, gap_m: f64) -> u8 {
     let pose = *pose;

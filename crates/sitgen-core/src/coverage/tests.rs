@@ -50,7 +50,14 @@ fn context_at(occupied: &[(usize, usize)], pose: (f64, f64, f64)) -> &'static st
     );
     let world = World::new(&s, SimSpec::default(), 0).unwrap();
     let gap = 2.0 * world.robots()[0].body.width_m + GAP_SLACK_M;
-    CONTEXTS[terrain_context(&world, 0, gap) as usize]
+    let pose = Pose {
+        x_m: pose.0,
+        y_m: pose.1,
+        heading_rad: pose.2,
+    };
+    let asked = agent_context_at(&world, 0, &pose);
+    assert_eq!(asked, CONTEXTS[terrain_context(&world, 0, gap) as usize]);
+    asked
 }
 
 #[test]
