@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 import signal
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +26,9 @@ from sitgen.generation.mutation import (
     focus_peer,
     mutate,
 )
-from sitgen.generation.search import BATCH, INITIAL, SearchPlan, run_search
+from sitgen.generation.search import BATCH, INITIAL, Archive, SearchPlan, run_search
 from sitgen.store import Store
-from sitgen.triage.variants import robust_variants, variant, variants_of
+from sitgen.triage.variants import Screen, robust_variants, variant, variants_of
 from tests.conftest import run_cli
 from tests.test_campaign import start_command, wait_for_runs, write_spec
 from tests.test_search import SEARCHED, spec_of, stored
@@ -240,3 +241,27 @@ def test_a_directed_search_varies_the_run_it_is_given(tmp_path: Path) -> None:
         "search", "--strategy", "mutation", "--like", "no.db:3", "--db", str(tmp_path / "z.db")
     )
     assert missing.returncode == 2 and "--like: no.db: no such store" in missing.stderr
+
+
+def test_curiosity_prefers_the_way_that_found_new_robust_variants() -> None:
+    archive = Archive(spec_of(), 0, SearchPlan("mutation", ("failure_class", "variant")))
+    archive.arm_runs = {arm: 40 for arm in ("fresh", *OPERATORS)}
+    archive.arm_new = {"reshape_terrain": 12, "fresh": 4}
+    rng = np.random.default_rng(0)
+    picks = Counter(archive._arm(rng, set(), fresh_allowed=True) for _ in range(400))
+    assert picks.most_common(1)[0][0] == "reshape_terrain"
+    assert picks["reshape_terrain"] > 0.8 * 400 and picks["insert_waypoint"] < 0.05 * 400
+    # What was tried for this child is not drawn again; a directed search draws no fresh job.
+    assert archive._arm(rng, {"reshape_terrain"}, fresh_allowed=False) not in (
+        "reshape_terrain",
+        "fresh",
+    )
+
+
+def test_the_screen_tests_a_variant_on_two_runs_at_most_and_never_once_confirmed() -> None:
+    screen = Screen()
+    assert not screen.wants(None) and screen.wants("a/no_peer/open")
+    screen.attempts["a/no_peer/open"] = 2
+    assert not screen.wants("a/no_peer/open")
+    screen.robust["b/head_on/gap"] = 7
+    assert not screen.wants("b/head_on/gap")

@@ -56,6 +56,8 @@ def view(run_id: int, cls: str | None, terrain: str, score: float, spec: Any) ->
         "terrain": terrain,
         "peers": 0,
         "cells": (),
+        "variant": None if cls is None else f"{cls}/no_peer/open",
+        "operator": "fresh",
     }
 
 

@@ -24,7 +24,11 @@ fn agent_context(situation: &str, x_m: f64, y_m: f64, heading_rad: f64) -> PyRes
     let s = Situation::from_json(situation).map_err(|e| SpecError::new_err(e.to_string()))?;
     let world =
         World::new(&s, SimSpec::default(), 0).map_err(|e| SpecError::new_err(e.to_string()))?;
-    let agent = s.robots.iter().position(|r| r.role == Role::Agent).unwrap_or(0) as u32;
+    let agent = s
+        .robots
+        .iter()
+        .position(|r| r.role == Role::Agent)
+        .unwrap_or(0) as u32;
     let pose = Pose {
         x_m,
         y_m,

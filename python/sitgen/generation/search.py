@@ -141,7 +141,8 @@ ARM_PRIOR = (1.0, 1.0)
 SCREENED_WEIGHT = {"robust": 1.0, "untested": 0.5, "knife_edge": 0.1}
 """An elite's weight as a parent by what the screen knows of its variant."""
 MUTATION_TRIES = 3
-"""Operators the mutation strategy tries on one parent before it runs a fresh job instead."""
+"""Operators the mutation strategy tries on one parent before it runs a fresh job instead (a
+directed search, which has none, tries them all)."""
 
 
 CLEARANCE_CELLS = 5
@@ -545,7 +546,8 @@ class Archive:
                 genome = self.genomes[parent_id]
             child, operator = None, "fresh"
             tried: set[str] = set()
-            for _ in range(MUTATION_TRIES):
+            # A directed search has no fresh jobs to fall back on: it tries every operator.
+            for _ in range(MUTATION_TRIES if like is None else len(SITUATION_OPERATORS)):
                 operator = self._arm(rng, tried, fresh_allowed=like is None)
                 if operator == "fresh":
                     break
@@ -554,6 +556,9 @@ class Archive:
                 if child is not None:
                     break
             run_seed = None if like is None else like.run_seed
+            if child is None and like is not None:
+                # No operator could change this parent: it is run again as it is.
+                child, operator = parent.situation.to_json(), "like"
             if child is None:
                 children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
             else:

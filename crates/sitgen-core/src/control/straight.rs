@@ -43,7 +43,13 @@ pub struct Straight {
 impl Straight {
     /// Build from named parameters; `path` names them in errors.
     pub fn from_params(params: &BTreeMap<String, f64>, path: &str) -> Result<Self, SpecError> {
-        let known = ["speed_m_s", "turn_gain", "drive_within_deg", "switch_m", "start_s"];
+        let known = [
+            "speed_m_s",
+            "turn_gain",
+            "drive_within_deg",
+            "switch_m",
+            "start_s",
+        ];
         super::check_known(params, &known, path)?;
         let start_s = params.get("start_s").copied().unwrap_or(0.0);
         SpecError::check_in(&crate::error::join(path, "start_s"), start_s, 0.0, 3600.0)?;
