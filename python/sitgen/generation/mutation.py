@@ -57,8 +57,9 @@ import copy
 import itertools
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Literal, overload
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -108,6 +109,10 @@ BLOB_MAX_CELLS = 2500
 terrain, not an obstacle near the failure."""
 TRIES = 8
 SPEED_RANGE = (0.1, 1.5)
+
+
+Edit = tuple[list[dict[str, Any]], npt.NDArray[np.bool_]]
+"""An operator's work: the child's robots (situation JSON's) and its map's occupied cells."""
 
 
 @dataclass(frozen=True)
@@ -207,7 +212,7 @@ def _approach_peer(
     parent: Parent,
     target: str,
     rng: np.random.Generator,
-) -> tuple[list[dict[str, Any]], npt.NDArray[np.bool_]] | None:
+) -> Edit | None:
     """The focus peer sent through the failure's place in interaction ``target``: a start up to
     ``APPROACH_M`` away on the side the interaction comes from, as far as the ground is clear,
     a leg through the place and on, and a departure timed to arrive when the agent did."""
@@ -230,14 +235,14 @@ def _approach_peer(
         "stopped": (0.0, 0.0),
     }[target]
     bearing, course = heading + side[0], heading + side[1]
-    clear = _clearance(occupied, resolution)
+    ground = _Ground.of(occupied, resolution)
     # Where they meet: the failure's place, or the nearest point the agent drove through on the
     # way there with room for the peer's leg (a failure against a wall leaves none).
-    back = _clear_run(clear, resolution, (x, y), heading + math.pi, MEET_BACK_M, first=True)
+    back = ground.first((x, y), heading + math.pi, MEET_BACK_M)
     if back is None:
         return None
     x, y = x - back * math.cos(heading), y - back * math.sin(heading)
-    room = _clear_run(clear, resolution, (x, y), bearing, APPROACH_M[1])
+    room = ground.run((x, y), bearing, APPROACH_M[1])
     near = 0.8 if target in ("stopped", "overtaking") else APPROACH_M[0]
     if room < near:
         return None
@@ -249,7 +254,7 @@ def _approach_peer(
     else:
         on = (x, y)
         waypoints = [[x, y]]
-    onward = _clear_run(clear, resolution, on, course, APPROACH_M[1])
+    onward = ground.run(on, course, APPROACH_M[1])
     if onward < 0.5:
         return None
     beyond = float(rng.uniform(0.5, onward))
@@ -289,53 +294,44 @@ PEER_CLEAR_M = 0.6
 leg margin the checks ask for)."""
 
 
-def _clearance(occupied: npt.NDArray[np.bool_], resolution: float) -> npt.NDArray[np.float64]:
-    """Each cell's distance to the nearest wall, metres."""
-    return np.asarray(ndimage.distance_transform_edt(~occupied), dtype=np.float64) * resolution
+@dataclass(frozen=True)
+class _Ground:
+    """Where a staged peer has room: each cell's distance to the nearest wall, walked along a
+    line in half-cell steps."""
 
+    clear: npt.NDArray[np.float64]
+    resolution: float
 
-@overload
-def _clear_run(
-    clear: npt.NDArray[np.float64],
-    resolution: float,
-    start: tuple[float, float],
-    heading: float,
-    most: float,
-    first: Literal[False] = False,
-) -> float: ...
-@overload
-def _clear_run(
-    clear: npt.NDArray[np.float64],
-    resolution: float,
-    start: tuple[float, float],
-    heading: float,
-    most: float,
-    first: Literal[True],
-) -> float | None: ...
-def _clear_run(
-    clear: npt.NDArray[np.float64],
-    resolution: float,
-    start: tuple[float, float],
-    heading: float,
-    most: float,
-    first: bool = False,
-) -> float | None:
-    """How far from ``start`` along ``heading`` (up to ``most``) the ground stays
-    :data:`PEER_CLEAR_M` clear of walls, in half-cell steps (0 if it is not clear at the
-    start); with ``first``, how far until it first is (None if not within ``most``)."""
-    rows, cols = clear.shape
-    step = resolution / 2
-    for k in range(int(most / step) + 1):
-        d = k * step
-        r, c = _cell(
-            clear, resolution, (start[0] + d * math.cos(heading), start[1] + d * math.sin(heading))
-        )
-        is_clear = 0 <= r < rows and 0 <= c < cols and clear[r, c] >= PEER_CLEAR_M
-        if first and is_clear:
-            return d
-        if not first and not is_clear:
-            return max(0.0, d - step)
-    return None if first else most
+    @staticmethod
+    def of(occupied: npt.NDArray[np.bool_], resolution: float) -> _Ground:
+        distance = ndimage.distance_transform_edt(~occupied)
+        return _Ground(np.asarray(distance, dtype=np.float64) * resolution, resolution)
+
+    def _along(
+        self, start: tuple[float, float], heading: float, most: float
+    ) -> Iterator[tuple[float, bool]]:
+        """(distance, whether the ground there is :data:`PEER_CLEAR_M` clear of walls) at
+        each step from ``start`` along ``heading`` up to ``most``."""
+        rows, cols = self.clear.shape
+        step = self.resolution / 2
+        for k in range(int(most / step) + 1):
+            d = k * step
+            point = (start[0] + d * math.cos(heading), start[1] + d * math.sin(heading))
+            r, c = _cell(self.clear, self.resolution, point)
+            yield d, 0 <= r < rows and 0 <= c < cols and bool(self.clear[r, c] >= PEER_CLEAR_M)
+
+    def run(self, start: tuple[float, float], heading: float, most: float) -> float:
+        """How far from ``start`` along ``heading`` (up to ``most``) the ground stays clear (0
+        if it is not clear at the start)."""
+        for d, is_clear in self._along(start, heading, most):
+            if not is_clear:
+                return max(0.0, d - self.resolution / 2)
+        return most
+
+    def first(self, start: tuple[float, float], heading: float, most: float) -> float | None:
+        """How far from ``start`` along ``heading`` the ground first is clear (None: not
+        within ``most``)."""
+        return next((d for d, is_clear in self._along(start, heading, most) if is_clear), None)
 
 
 START_S_MAX = 3600.0
@@ -349,7 +345,7 @@ def _reshape_terrain(
     parent: Parent,
     target: str,
     rng: np.random.Generator,
-) -> tuple[list[dict[str, Any]], npt.NDArray[np.bool_]] | None:
+) -> Edit | None:
     """The walls round the failure's place redrawn for terrain context ``target``; robots'
     routes keep their points clear."""
     if parent.failure_pose is None:
@@ -526,7 +522,7 @@ def _apply(
     focus: tuple[float, float],
     parent: Parent,
     rng: np.random.Generator,
-) -> tuple[list[dict[str, Any]], npt.NDArray[np.bool_]] | None:
+) -> Edit | None:
     """The operator applied to copies of the robots and the map; None where it does not apply
     (a peer operator without peers, a route too short to lose a waypoint, …)."""
     peer = focus_peer(robots, focus)
