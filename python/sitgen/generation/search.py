@@ -301,6 +301,9 @@ class SearchPlan:
             **(
                 {
                     "situation_operators": list(SITUATION_OPERATORS),
+                    "arm_prior": list(ARM_PRIOR),
+                    "screened_weight": SCREENED_WEIGHT,
+                    "mutation_tries": MUTATION_TRIES,
                     "target_class": self.target_class,
                     "like": None if self.like is None else dataclasses.asdict(self.like),
                 }
@@ -584,9 +587,10 @@ class Archive:
 
     def _arm(self, rng: np.random.Generator, tried: set[str], fresh_allowed: bool) -> str:
         """Curiosity over the ways to make a child (``fresh`` and each situation operator):
-        Thompson sampling on the share of each one's runs that showed a variant not seen
-        before (Beta(1 + new, 1 + runs - new)), so the search spends its runs on what finds new
-        failures, whichever that turns out to be for the controller under test."""
+        Thompson sampling on the share of each one's runs that found a new variant (robust,
+        where runs are screened; Beta(prior + found, prior + runs - found), :data:`ARM_PRIOR`),
+        so the search spends its runs on what finds new failures, whichever that turns out to
+        be for the controller under test; ``tried``: ways already tried for this child."""
         arms = [a for a in ("fresh", *SITUATION_OPERATORS) if a not in tried]
         if not fresh_allowed:
             arms.remove("fresh")

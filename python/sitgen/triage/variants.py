@@ -15,7 +15,8 @@ against the budget: it walks a store's runs in the order they were made, each co
 evaluation; a failing run whose variant is not yet confirmed is rerun in perturbed copies
 (:mod:`sitgen.triage.robustness`) in two stages, 4 copies and then 4 more unless 3 already
 missed (6 of 8 must recur with the run's class, the robustness rule), each copy costing one; a
-variant is tried at most :data:`ATTEMPTS` times. It stops when the budget is spent.
+variant is tried at most :data:`ATTEMPTS` times. It stops when the budget is spent. The rule
+for one run is :class:`Screen`, which a search uses on its own runs as it makes them.
 """
 
 from __future__ import annotations
