@@ -24,18 +24,21 @@ peer whose route passes nearest it):
 and two that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
 parent's failure the search has not seen yet (drawn at random when none is given):
 
-- ``approach_peer``: the peer is sent through where the failure began in another interaction
+- ``approach_peer``: the peer is sent through where the failure began (or the nearest point
+  the agent drove through on its way there with room for it) in another interaction
   (:data:`APPROACHES`): head-on from ahead, crossing from the left or the right, from behind
   (faster than the agent), overtaken (slow, ahead, going the same way), or stopped in the way.
-  It starts ``U(APPROACH_M)`` from there, on a straight leg through it, and departs late
-  (``straight``'s ``start_s``) so that it arrives about when the agent did; a stopped one never
-  departs;
+  It starts up to ``APPROACH_M`` from there, as far as the ground is clear, on a straight leg
+  through it, and departs (``straight``'s ``start_s``) early enough to be moving when the agent
+  comes in range, at the speed that brings it there about when the failure began; a stopped one
+  never departs;
 - ``reshape_terrain``: the walls round where the failure began are redrawn to make another
-  terrain context (:data:`CONTEXTS`): two walls along the agent's heading (``corridor``), a
-  narrow opening across it (``gap``), walls on three sides (``dead_end``), a wall beside it that
-  ends just ahead (``blind_corner``), or the walls within a few metres cleared (``open``). The
-  core's own classifier (``agent_context``) must read the target there, or the draw is tried
-  again.
+  terrain context (:data:`CONTEXTS`): two walls along the agent's route leg there
+  (``corridor``), a narrow opening across it (``gap``), walls on three sides (``dead_end``), a
+  wall beside it that ends just ahead (``blind_corner``), or the walls within a few metres
+  cleared (``open``); a peer's leg that crosses a new wall gets a doorway and the agent's route
+  points stay clear. The core's own classifier (``agent_context``) must read the target there,
+  or the draw is tried again.
 
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that
@@ -224,7 +227,6 @@ def _approach_peer(
         return None
     robot = robots[peer]
     params = dict(robot["controller"].get("params") or {})
-    speed = float(params.get("speed_m_s", 0.5))
     # Where the peer comes from (bearing from the place) and the course it drives.
     side = {
         "head_on": (0.0, math.pi),
