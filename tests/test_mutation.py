@@ -20,7 +20,9 @@ from sitgen import _core
 from sitgen.generation.mutation import (
     APPROACHES,
     CONTEXTS,
+    MEET_BACK_M,
     OPERATORS,
+    POINT_CLEAR_M,
     START_S_MAX,
     Parent,
     focus_peer,
@@ -110,9 +112,11 @@ def test_approach_peer_sends_the_peer_through_the_failure_in_the_interaction_ask
     else:
         assert 0 <= params["start_s"] <= parent.failure_s
     if target != "overtaking":
-        # Its leg passes within a metre of the place ahead of the agent where they meet.
+        # Its leg passes where they meet: the failure's place or a point the agent drove
+        # through on its way there, not ahead of it.
         (mx, my) = robot["waypoints"][0]
-        assert math.hypot(mx - x, my - y) <= 1.0 + 1e-9
+        assert math.hypot(mx - x, my - y) <= MEET_BACK_M + 1e-9
+        assert (mx - x) * math.cos(heading) + (my - y) * math.sin(heading) <= 1e-9
 
 
 def test_a_peer_sent_head_on_meets_the_agent_head_on(parent: Parent) -> None:
@@ -132,11 +136,26 @@ def test_reshape_terrain_makes_the_context_it_aims_at(parent: Parent) -> None:
             if child is not None:
                 made[target] = child
                 break
-    # The core's classifier reads each one made as aimed (a draw that does not is redrawn).
+    assert "open" in made and len(made) >= 3, sorted(made)
+    x, y, _ = parent.failure_pose
+    before = parent.situation.grid.occupied
+    resolution = parent.situation.grid.resolution
+    agent_route = [
+        tuple(w) for w in json.loads(parent.situation.to_json())["robots"][0]["waypoints"]
+    ]
     for target, child in made.items():
         assert _core.agent_context(child, *parent.failure_pose) == target
-        assert _core.shrink_check(child, None) is None
-    assert "open" in made and len(made) >= 3, sorted(made)
+        after = sitgen.Situation(child).grid.occupied
+        rows, cols = np.nonzero(after != before)
+        assert rows.size, target
+        xs, ys = (cols + 0.5) * resolution, (before.shape[0] - rows - 0.5) * resolution
+        # Only the walls round the failure are redrawn…
+        assert np.hypot(xs - x, ys - y).max() <= 4.5, target
+        # …and nothing new stands on the agent's route.
+        added = after[rows, cols]
+        for wx, wy in agent_route:
+            near = np.hypot(xs[added] - wx, ys[added] - wy)
+            assert near.size == 0 or near.min() >= POINT_CLEAR_M - resolution, target
 
 
 def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:

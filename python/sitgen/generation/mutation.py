@@ -95,6 +95,20 @@ APPROACHES = ("head_on", "crossing_left", "crossing_right", "from_behind", "over
 CONTEXTS = ("open", "corridor", "gap", "dead_end", "blind_corner")
 """Terrain contexts ``reshape_terrain`` can draw (coverage's)."""
 APPROACH_M = (1.5, 6.0)
+"""How far from where they meet a staged peer may start, metres."""
+AGENT_M_S = 0.4
+"""The agent's speed a staged encounter is timed for (a typical cruising speed of the
+built-in agents; a guess: the encounter need only be about right)."""
+IN_RANGE_M = 3.5
+"""Distance, centre to centre, at which the coverage observer starts an encounter (its 2 m
+footprint clearance and two robots' reach)."""
+MEET_BACK_M = 1.5
+"""How far back along the agent's way to the failure a staged encounter may be placed."""
+PEER_CLEAR_M = 0.6
+"""Clearance a staged peer's start and leg keep from every wall (its reach, 0.45 m, and the
+leg margin the checks ask for)."""
+START_S_MAX = 3600.0
+"""``straight``'s largest ``start_s``: a peer that never departs in any run sitgen makes."""
 WALL_M = 0.2
 """Thickness of a drawn wall."""
 LEG_CLEAR_M = 0.7
@@ -125,8 +139,6 @@ class Parent:
     situation: Situation
     failure_pose: tuple[float, float, float] | None
     """The agent's pose at the start of the failure (None: the run did not fail)."""
-    with_peer: bool
-    """Whether a peer took part in the failure (its failure cell names one)."""
     variant: str | None = None
     """Its failure's variant (``CLASS/INTERACTION/CONTEXT``)."""
     failure_s: float | None = None
@@ -139,8 +151,8 @@ class Parent:
         failure: dict[str, Any] | None = None,
     ) -> Parent:
         """``situation`` as a parent, with where its run failed from the run's coverage record
-        (``failure_at``, ``failure_cell``) and when from its failure (``class``,
-        ``features.start_s``)."""
+        (``failure_at``; ``failure_cell`` for its variant) and when from its failure
+        (``class``, ``features.start_s``)."""
         coverage = coverage or {}
         at = coverage.get("failure_at")
         pose = (
@@ -153,7 +165,6 @@ class Parent:
         return Parent(
             situation,
             pose,
-            bool(coverage.get("failure_cell")),
             variant(failure.get("class"), coverage),
             None if start_s is None else float(start_s),
         )
@@ -165,20 +176,19 @@ def mutate(
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of
     :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``) or
     terrain context (``reshape_terrain``) to make; drawn from the others if None."""
-    data = json.loads(parent.situation.to_json())
-    robots: list[dict[str, Any]] = data["robots"]
+    original = parent.situation.to_json()
+    robots: list[dict[str, Any]] = json.loads(original)["robots"]
     grid = parent.situation.grid
     occupied = np.ascontiguousarray(grid.occupied, dtype=bool)
     focus = _focus(parent, robots, rng)
-    margin = _core.shrink_leg_margin(parent.situation.to_json())
+    margin = _core.shrink_leg_margin(original)
     if operator in TARGETED:
         target = target or _other_target(parent, operator, rng)
+    ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
     for _ in range(TRIES):
         if operator == "approach_peer":
-            assert target is not None
-            changed = _approach_peer(
-                copy.deepcopy(robots), occupied, grid.resolution, parent, target, rng
-            )
+            assert target is not None and ground is not None
+            changed = _approach_peer(copy.deepcopy(robots), occupied, ground, parent, target, rng)
         elif operator == "reshape_terrain":
             assert target is not None
             changed = _reshape_terrain(robots, occupied, grid.resolution, parent, target, rng)
@@ -190,7 +200,7 @@ def mutate(
             return None
         new_robots, new_occupied = changed
         child = _core.mutated_situation(
-            parent.situation.to_json(), new_occupied, grid.resolution, json.dumps(new_robots)
+            original, new_occupied, grid.resolution, json.dumps(new_robots)
         )
         if _core.shrink_check(child, margin) is not None:
             continue
@@ -200,18 +210,26 @@ def mutate(
     return None
 
 
+def neighbours(key: str | None, operator: str) -> dict[str, str]:
+    """The targets a targeted ``operator`` can aim at from variant ``key``
+    (``CLASS/INTERACTION/CONTEXT``; None: any), each with the variant it would make: every
+    other interaction (``approach_peer``) or terrain context (``reshape_terrain``)."""
+    cls, interaction, context = (key or "//").split("/")
+    if operator == "approach_peer":
+        return {i: f"{cls}/{i}/{context}" for i in APPROACHES if i != interaction}
+    return {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
+
+
 def _other_target(parent: Parent, operator: str, rng: np.random.Generator) -> str:
     """A target other than the parent's own interaction or context."""
-    parts = (parent.variant or "//").split("/")
-    own, choices = (parts[1], APPROACHES) if operator == "approach_peer" else (parts[2], CONTEXTS)
-    others = [c for c in choices if c != own]
+    others = list(neighbours(parent.variant, operator))
     return others[int(rng.integers(len(others)))]
 
 
 def _approach_peer(
     robots: list[dict[str, Any]],
     occupied: npt.NDArray[np.bool_],
-    resolution: float,
+    ground: _Ground,
     parent: Parent,
     target: str,
     rng: np.random.Generator,
@@ -237,7 +255,6 @@ def _approach_peer(
         "stopped": (0.0, 0.0),
     }[target]
     bearing, course = heading + side[0], heading + side[1]
-    ground = _Ground.of(occupied, resolution)
     # Where they meet: the failure's place, or the nearest point the agent drove through on the
     # way there with room for the peer's leg (a failure against a wall leaves none).
     back = ground.first((x, y), heading + math.pi, MEET_BACK_M)
@@ -283,19 +300,6 @@ def _approach_peer(
     return robots, occupied
 
 
-AGENT_M_S = 0.4
-"""The agent's speed a staged encounter is timed for (a typical cruising speed of the
-built-in agents; a guess: the encounter need only be about right)."""
-IN_RANGE_M = 3.5
-"""Distance, centre to centre, at which the coverage observer starts an encounter (its 2 m
-footprint clearance and two robots' reach)."""
-MEET_BACK_M = 1.5
-"""How far back along the agent's way to the failure a staged encounter may be placed."""
-PEER_CLEAR_M = 0.6
-"""Clearance a staged peer's start and leg keep from every wall (its reach, 0.45 m, and the
-leg margin the checks ask for)."""
-
-
 @dataclass(frozen=True)
 class _Ground:
     """Where a staged peer has room: each cell's distance to the nearest wall, walked along a
@@ -334,10 +338,6 @@ class _Ground:
         """How far from ``start`` along ``heading`` the ground first is clear (None: not
         within ``most``)."""
         return next((d for d, is_clear in self._along(start, heading, most) if is_clear), None)
-
-
-START_S_MAX = 3600.0
-"""``straight``'s largest ``start_s``: a peer that never departs in any run sitgen makes."""
 
 
 def _reshape_terrain(
@@ -390,37 +390,50 @@ def _reshape_terrain(
     changed = np.nonzero(occupied != before)
     if not changed[0].size:
         return robots, occupied
-    window = (changed[0].min(), changed[0].max() + 1, changed[1].min(), changed[1].max() + 1)
+    window = _centres(
+        occupied.shape,
+        resolution,
+        int(changed[0].min()),
+        int(changed[0].max()) + 1,
+        int(changed[1].min()),
+        int(changed[1].max()) + 1,
+    )
     for point in _route(robots[0]):
-        _restore_near(occupied, before, resolution, window, (point, point), POINT_CLEAR_M)
+        _restore_near(occupied, before, window, (point, point), POINT_CLEAR_M)
     for robot in robots[1:]:
         for leg in itertools.pairwise(_route(robot)):
-            _restore_near(occupied, before, resolution, window, leg, LEG_CLEAR_M)
+            _restore_near(occupied, before, window, leg, LEG_CLEAR_M)
     return robots, occupied
 
 
 def _restore_near(
     occupied: npt.NDArray[np.bool_],
     before: npt.NDArray[np.bool_],
-    resolution: float,
-    window: tuple[int, int, int, int],
+    window: tuple[slice, slice, npt.NDArray[np.float64], npt.NDArray[np.float64]],
     leg: tuple[tuple[float, float], tuple[float, float]],
     reach: float,
 ) -> None:
-    """Cells of ``window`` (rows r0..r1, cols c0..c1) within ``reach`` of ``leg`` go back to
-    what they were ``before``."""
-    r0, r1, c0, c1 = window
-    rows = occupied.shape[0]
-    rr, cc = np.mgrid[r0:r1, c0:c1]
-    px, py = (cc + 0.5) * resolution, (rows - rr - 0.5) * resolution
+    """Cells of ``window`` (:func:`_centres`) within ``reach`` of ``leg`` go back to what they
+    were ``before``."""
+    rows, cols, px, py = window
     (ax, ay), (bx, by) = leg
     dx, dy = bx - ax, by - ay
     length2 = dx * dx + dy * dy
     t = np.zeros_like(px) if length2 == 0 else ((px - ax) * dx + (py - ay) * dy) / length2
     t = np.clip(t, 0.0, 1.0)
     near = (px - ax - t * dx) ** 2 + (py - ay - t * dy) ** 2 <= reach * reach
-    block = (slice(r0, r1), slice(c0, c1))
-    occupied[block] = np.where(near, before[block], occupied[block])
+    occupied[rows, cols] = np.where(near, before[rows, cols], occupied[rows, cols])
+
+
+def _centres(
+    shape: tuple[int, ...], resolution: float, r0: int, r1: int, c0: int, c1: int
+) -> tuple[slice, slice, npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Rows r0..r1 and columns c0..c1 of a map of ``shape`` (row 0 north), with the x and y of
+    their cells' centres in metres (the inverse of :func:`_cell`)."""
+    rr, cc = np.mgrid[r0:r1, c0:c1]
+    xs = (cc + 0.5) * resolution
+    ys = (shape[0] - rr - 0.5) * resolution
+    return slice(r0, r1), slice(c0, c1), xs, ys
 
 
 def _span(a: float, b: float) -> tuple[float, float]:
@@ -429,7 +442,8 @@ def _span(a: float, b: float) -> tuple[float, float]:
 
 def _leg_heading(robot: dict[str, Any], point: tuple[float, float]) -> float:
     """The heading of the robot's route leg nearest ``point``."""
-    legs = list(itertools.pairwise(_route(robot))) or [(_route(robot)[0], _route(robot)[0])]
+    route = _route(robot)
+    legs = list(itertools.pairwise(route)) or [(route[0], route[0])]
     a, b = min(legs, key=lambda leg: _segment_distance(point, *leg))
     return math.atan2(b[1] - a[1], b[0] - a[0])
 
@@ -457,11 +471,12 @@ class _Frame:
         r, c = _cell(self.occupied, self.resolution, self.origin)
         k = math.ceil(reach / self.resolution) + 1
         r0, r1, c0, c1 = max(0, r - k), min(rows, r + k + 1), max(0, c - k), min(cols, c + k + 1)
-        rr, cc = np.mgrid[r0:r1, c0:c1]
-        xs = (cc + 0.5) * self.resolution - self.origin[0]
-        ys = (rows - rr - 0.5) * self.resolution - self.origin[1]
+        window_rows, window_cols, xs, ys = _centres(
+            self.occupied.shape, self.resolution, r0, r1, c0, c1
+        )
+        xs, ys = xs - self.origin[0], ys - self.origin[1]
         cos, sin = math.cos(self.heading), math.sin(self.heading)
-        return slice(r0, r1), slice(c0, c1), xs * cos + ys * sin, -xs * sin + ys * cos
+        return window_rows, window_cols, xs * cos + ys * sin, -xs * sin + ys * cos
 
     def box(self, along: tuple[float, float], across: tuple[float, float], value: bool) -> None:
         reach = math.hypot(max(map(abs, along)), max(map(abs, across)))

@@ -76,8 +76,8 @@ from sitgen.generation.guidance import (
     guide_weights,
     guided_genes,
 )
-from sitgen.generation.mutation import APPROACHES, CONTEXTS, Parent, mutate
 from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
+from sitgen.generation.mutation import TARGETED, Parent, mutate, neighbours
 from sitgen.store import KINDS, Store, StoreError, unpack_json
 from sitgen.triage.failures import check_class
 from sitgen.triage.failures import classes as failure_classes
@@ -606,14 +606,10 @@ class Archive:
     def _target(self, parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
         """For a targeted operator, a neighbour of the parent's variant (its interaction or its
         terrain context changed) not seen yet, if there is one; None lets it draw."""
-        if parent.variant is None or operator not in ("approach_peer", "reshape_terrain"):
+        if parent.variant is None or operator not in TARGETED:
             return None
-        cls, interaction, context = parent.variant.split("/")
-        if operator == "approach_peer":
-            keys = {i: f"{cls}/{i}/{context}" for i in APPROACHES if i != interaction}
-        else:
-            keys = {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
-        unseen = [t for t, key in keys.items() if key not in self.variants_seen]
+        targets = neighbours(parent.variant, operator)
+        unseen = [t for t, key in targets.items() if key not in self.variants_seen]
         return unseen[int(rng.integers(len(unseen)))] if unseen else None
 
     def _novel(self, elites: list[int], rng: np.random.Generator) -> int:
@@ -668,6 +664,8 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
     out = []
     for run_id, outcome, score, cls, failure, clearance, genes, coverage, terrain, peers in rows:
         features = json.loads(failure)["features"] if failure else {}
+        gene_data = None if genes is None else json.loads(genes)
+        record = unpack_json(coverage) if coverage else None
         out.append(
             {
                 "id": run_id,
@@ -676,10 +674,10 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "failure_class": cls,
                 "bearing": features.get("bearing"),
                 "min_clearance_m": clearance,
-                "genome": None if genes is None else Genome.from_dict(spec, json.loads(genes)),
-                "cells": tuple(unpack_json(coverage)["cells"]) if coverage else (),
-                "variant": variant(cls, unpack_json(coverage) if coverage else None),
-                "operator": None if genes is None else json.loads(genes).get("operator"),
+                "genome": None if gene_data is None else Genome.from_dict(spec, gene_data),
+                "cells": tuple(record["cells"]) if record else (),
+                "variant": variant(cls, record),
+                "operator": None if gene_data is None else gene_data.get("operator"),
                 "terrain": terrain,
                 "peers": peers,
             }
