@@ -264,14 +264,23 @@ def test_a_directed_search_varies_the_run_it_is_given(tmp_path: Path) -> None:
 
 def test_curiosity_prefers_the_way_that_found_new_robust_variants() -> None:
     archive = Archive(spec_of(), 0, SearchPlan("mutation", ("failure_class", "variant")))
-    archive.arm_runs = {arm: 40 for arm in ("fresh", *OPERATORS)}
-    archive.arm_new = {"reshape_terrain": 12, "fresh": 4}
+    archive.arm_runs = {("fresh", "fresh"): 40} | {("confirmed", a): 40 for a in OPERATORS}
+    archive.arm_runs |= {("unconfirmed", a): 10 for a in OPERATORS}
+    archive.arm_new = {("confirmed", "reshape_terrain"): 12, ("fresh", "fresh"): 4}
+    archive.arm_new[("unconfirmed", "shift_waypoint")] = 6
     rng = np.random.default_rng(0)
-    picks = Counter(archive._arm(rng, set(), fresh_allowed=True) for _ in range(400))
+    picks = Counter(archive._arm(rng, set(), True, "confirmed") for _ in range(400))
     assert picks.most_common(1)[0][0] == "reshape_terrain"
     assert picks["reshape_terrain"] > 0.8 * 400 and picks["insert_waypoint"] < 0.05 * 400
+    # Each parent context keeps its own record: what keeps an unconfirmed variant differs.
+    picks = Counter(archive._arm(rng, set(), True, "unconfirmed") for _ in range(400))
+    assert picks.most_common(1)[0][0] == "shift_waypoint"
+    # A way never tried is drawn from the pooled share, not a coin flip: rarely, here.
+    archive.arm_runs[("confirmed", "mirror")] = 0
+    picks = Counter(archive._arm(rng, set(), True, "confirmed") for _ in range(400))
+    assert 0 < picks["mirror"] < picks["reshape_terrain"] / 4
     # What was tried for this child is not drawn again; a directed search draws no fresh job.
-    assert archive._arm(rng, {"reshape_terrain"}, fresh_allowed=False) not in (
+    assert archive._arm(rng, {"reshape_terrain"}, False, "confirmed") not in (
         "reshape_terrain",
         "fresh",
     )

@@ -136,10 +136,17 @@ FRESH_SHARE = 0.125
 """Share of a later generation's runs drawn fresh (the campaign's job of that index)."""
 
 
-ARM_PRIOR = (1.0, 1.0)
-"""Beta prior of every arm's share of new finds: uniform, so each way is tried early."""
+ARM_PRIOR_RUNS = 2.0
+"""Weight, in runs, of every arm's Beta prior, whose mean is the share of new finds pooled over
+all arms so far (empirical Bayes): a way not yet tried is drawn as about as good as the search
+is doing, not as a coin flip, so fourteen ways are not each tried many times before the search
+settles on the few that find something."""
 SCREENED_WEIGHT = {"robust": 1.0, "untested": 0.5, "knife_edge": 0.1}
 """An elite's weight as a parent by what the screen knows of its variant."""
+ARM_CONTEXTS = ("fresh", "confirmed", "unconfirmed")
+"""What an arm's record is kept per: a fresh job, or an operator on a parent whose variant the
+screen had confirmed robust when the child was made (a child that keeps that variant finds
+nothing new) or had not (it may be the run that confirms it)."""
 MUTATION_TRIES = 3
 """Operators the mutation strategy tries on one parent before it runs a fresh job instead (a
 directed search, which has none, tries them all)."""
@@ -301,7 +308,8 @@ class SearchPlan:
             **(
                 {
                     "situation_operators": list(SITUATION_OPERATORS),
-                    "arm_prior": list(ARM_PRIOR),
+                    "arm_prior_runs": ARM_PRIOR_RUNS,
+                    "arm_contexts": list(ARM_CONTEXTS),
                     "screened_weight": SCREENED_WEIGHT,
                     "mutation_tries": MUTATION_TRIES,
                     "target_class": self.target_class,
@@ -428,11 +436,14 @@ class Archive:
         self.variant_of: dict[int, str | None] = {}
         self.variants_seen: set[str] = set()
         """Every failure variant among the runs told."""
-        self.arm_runs: dict[str, int] = {}
-        """Runs told per way of making them (``fresh`` or a situation operator)."""
-        self.arm_new: dict[str, int] = {}
+        self.arm_runs: dict[tuple[str, str], int] = {}
+        """Runs told per way of making them (``fresh`` or a situation operator), in its
+        :data:`ARM_CONTEXTS` context."""
+        self.arm_new: dict[tuple[str, str], int] = {}
         """Of those, runs that found a new variant: one that recurred under perturbation where
         runs are screened (:attr:`screen`), else one not seen before."""
+        self.confirmed_at_ask: frozenset[str] = frozenset()
+        """The variants confirmed robust when this generation's children were made."""
         self.screen: Screen | None = None
         """The mutation strategy's screen of its runs (set by :func:`run_search`): each new
         variant's run rerun in perturbed copies by the yardstick's rule, so that the search is
@@ -459,7 +470,7 @@ class Archive:
                 self.cell_of[run["id"]] = cell
                 self.variant_of[run["id"]] = run["variant"]
                 self.cell_runs[cell] = self.cell_runs.get(cell, 0) + 1
-                key, arm = run["variant"], run["operator"]
+                key, arm = run["variant"], (self._arm_context(run), run["operator"])
                 self.arm_runs[arm] = self.arm_runs.get(arm, 0) + 1
                 if self._new_find(run["id"], key):
                     self.arm_new[arm] = self.arm_new.get(arm, 0) + 1
@@ -527,6 +538,8 @@ class Archive:
         ``--like``)."""
         like = self.plan.like
         elites = self.elites()
+        if self.screen is not None:
+            self.confirmed_at_ask = frozenset(self.screen.robust)
         if self.plan.target_class is not None:
             targeted = [e for e in elites if self.classes.get(e) == self.plan.target_class]
             elites = targeted or elites
@@ -551,7 +564,8 @@ class Archive:
             tried: set[str] = set()
             # A directed search has no fresh jobs to fall back on: it tries every operator.
             for _ in range(MUTATION_TRIES if like is None else len(SITUATION_OPERATORS)):
-                operator = self._arm(rng, tried, fresh_allowed=like is None)
+                context = self._parent_context(parent.variant)
+                operator = self._arm(rng, tried, like is None, context)
                 if operator == "fresh":
                     break
                 tried.add(operator)
@@ -585,23 +599,37 @@ class Archive:
             if self.screen.wants(key):
                 self.screen.test(store, int(run["id"]), key, 0, RERUNS)
 
-    def _arm(self, rng: np.random.Generator, tried: set[str], fresh_allowed: bool) -> str:
-        """Curiosity over the ways to make a child (``fresh`` and each situation operator):
-        Thompson sampling on the share of each one's runs that found a new variant (robust,
-        where runs are screened; Beta(prior + found, prior + runs - found), :data:`ARM_PRIOR`),
-        so the search spends its runs on what finds new failures, whichever that turns out to
-        be for the controller under test; ``tried``: ways already tried for this child."""
-        arms = [a for a in ("fresh", *SITUATION_OPERATORS) if a not in tried]
-        if not fresh_allowed:
-            arms.remove("fresh")
-        a0, b0 = ARM_PRIOR
+    def _parent_context(self, key: str | None) -> str:
+        """The :data:`ARM_CONTEXTS` context of a child of a parent of variant ``key``."""
+        return "confirmed" if key in self.confirmed_at_ask else "unconfirmed"
+
+    def _arm_context(self, run: dict[str, Any]) -> str:
+        """The context a told run was made in (its parent's, as when it was made)."""
+        if run["operator"] in ("fresh", "like", None) or not run["parents"]:
+            return "fresh"
+        return self._parent_context(self.variant_of.get(run["parents"][0]))
+
+    def _arm(
+        self, rng: np.random.Generator, tried: set[str], fresh_allowed: bool, context: str
+    ) -> str:
+        """Curiosity over the ways to make a child (``fresh`` and each situation operator on a
+        parent in ``context``): Thompson sampling on the share of each one's runs that found
+        a new variant (robust, where runs are screened), Beta(prior + found, prior + runs -
+        found) with an empirical prior (:data:`ARM_PRIOR_RUNS`), so the search spends its runs
+        on what finds new failures, whichever that turns out to be for the controller under
+        test; ``tried``: ways already tried for this child."""
+        arms = [("fresh", "fresh")] if fresh_allowed else []
+        arms += [(context, a) for a in SITUATION_OPERATORS if a not in tried]
+        found, runs = sum(self.arm_new.values()), sum(self.arm_runs.values())
+        share = (found + 1) / (runs + 2)
+        a0, b0 = ARM_PRIOR_RUNS * share, ARM_PRIOR_RUNS * (1 - share)
         draws = [
             rng.beta(
                 a0 + self.arm_new.get(a, 0), b0 + self.arm_runs.get(a, 0) - self.arm_new.get(a, 0)
             )
             for a in arms
         ]
-        return arms[int(np.argmax(draws))]
+        return arms[int(np.argmax(draws))][1]
 
     def _target(self, parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
         """For a targeted operator, a neighbour of the parent's variant (its interaction or its
@@ -656,13 +684,15 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
     marks = ", ".join("?" for _ in ids)
     rows = store.db.execute(
         "SELECT r.id, r.outcome, r.score, r.failure_class, r.failure, r.min_clearance_m, "
-        "r.genes, r.coverage, s.terrain, s.peers FROM runs r "
+        "r.genes, r.coverage, r.parents, s.terrain, s.peers FROM runs r "
         "JOIN situations s ON s.id = r.situation_id "
         f"WHERE r.id IN ({marks}) ORDER BY r.id",
         list(ids),
     )
     out = []
-    for run_id, outcome, score, cls, failure, clearance, genes, coverage, terrain, peers in rows:
+    for row in rows:
+        run_id, outcome, score, cls, failure, clearance, genes, coverage, parents = row[:9]
+        terrain, peers = row[9:]
         features = json.loads(failure)["features"] if failure else {}
         gene_data = None if genes is None else json.loads(genes)
         record = unpack_json(coverage) if coverage else None
@@ -678,6 +708,7 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "cells": tuple(record["cells"]) if record else (),
                 "variant": variant(cls, record),
                 "operator": None if gene_data is None else gene_data.get("operator"),
+                "parents": json.loads(parents) if parents else [],
                 "terrain": terrain,
                 "peers": peers,
             }
