@@ -30,6 +30,8 @@ from sitgen.generation.mutation import (
 )
 from sitgen.generation.search import BATCH, INITIAL, Archive, SearchPlan, run_search
 from sitgen.store import Store
+from sitgen.triage.recall import stored_run
+from sitgen.triage.robustness import copies, copy_class, copy_jobs
 from sitgen.triage.variants import Screen, robust_variants, variant, variants_of
 from tests.conftest import run_cli
 from tests.test_campaign import start_command, wait_for_runs, write_spec
@@ -196,6 +198,19 @@ def test_a_mutation_search_is_the_same_on_one_and_two_workers(tmp_path: Path) ->
     assert found and tally.spent <= 80 + 8
     assert tally.runs + tally.copies == tally.spent
     assert tally.at_budget[40] <= tally.at_budget[80] == len(tally.robust)
+    # A test stops once its verdict is decided, and it is the verdict of all 8 copies.
+    assert tally.trials
+    for trial in tally.trials[:3]:
+        with Store(one) as store:
+            every = [
+                copy_class(r) for r in copies(copy_jobs(stored_run(store, trial.run_id), 8, 0), 2)
+            ]
+        cls = trial.key.split("/", 1)[0]
+        hits = [c == cls for c in every]
+        assert trial.classes == tuple(every[: len(trial.classes)])
+        assert trial.robust == (sum(hits) >= 6)
+        decided = [sum(hits[:n]) >= 6 or n - sum(hits[:n]) >= 3 for n in range(1, 9)]
+        assert len(trial.classes) == 1 + decided.index(True)
 
 
 @pytest.mark.parametrize("how", [signal.SIGKILL])

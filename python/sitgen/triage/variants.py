@@ -13,9 +13,10 @@ are different things for an engineer to fix.
 The yardstick (:func:`robust_variants`) is the same for every strategy and counts every rerun
 against the budget: it walks a store's runs in the order they were made, each costing one
 evaluation; a failing run whose variant is not yet confirmed is rerun in perturbed copies
-(:mod:`sitgen.triage.robustness`) in two stages, 4 copies and then 4 more unless 3 already
-missed (6 of 8 must recur with the run's class, the robustness rule), each copy costing one; a
-variant is tried at most :data:`ATTEMPTS` times. It stops when the budget is spent. The rule
+(:mod:`sitgen.triage.robustness`; 6 of 8 must recur with the run's class, the robustness
+rule) until the verdict is decided — 6 recurred or 3 missed — each copy costing one, so the
+verdict is the one all 8 copies would give (copy ``k`` is the same whenever it runs) and no
+copy is run that could not change it; a variant is tried at most :data:`ATTEMPTS` times. It stops when the budget is spent. The rule
 for one run is :class:`Screen`, which a search uses on its own runs as it makes them.
 """
 
@@ -35,8 +36,6 @@ NO_PEER = "no_peer"
 UNKNOWN = "unknown"
 ATTEMPTS = 2
 """Runs of one variant the yardstick reruns before it gives the variant up as knife-edge."""
-STAGES = (4, 8)
-"""Copies after which a variant's test may stop: 4, then all 8."""
 
 
 def variant(failure_class: str | None, coverage: dict[str, Any] | None) -> str | None:
@@ -156,23 +155,24 @@ def robust_variants(
 
 
 def _trial(store: Store, run_id: int, key: str, spent: int, most: int, workers: int) -> Trial:
-    """The run's copies, stage by stage, stopping once robustness is decided."""
+    """The run's copies (at most ``most``) until robustness is decided (curtailed: each batch
+    is the fewest further copies that could decide it, so a batch never holds a copy the
+    verdict did not need, and the copies run together)."""
     row = stored_run(store, run_id)
     cls = key.split("/", 1)[0]
     need = math.ceil(ROBUST_SHARE * RERUNS - 1e-9)
+    may_miss = RERUNS - need
     jobs = copy_jobs(row, RERUNS, 0)
     classes: list[str | None] = []
-    done = 0
-    for stage in STAGES:
-        upto = min(stage, most)
-        batch = jobs[done:upto]
-        classes += [copy_class(r) for r in copies(batch, workers)]
-        done = upto
-        hits = sum(c == cls for c in classes)
+    hits = 0
+    while len(classes) < min(most, RERUNS):
         misses = len(classes) - hits
-        if hits >= need or misses > RERUNS - need or done >= most:
+        if hits >= need or misses > may_miss:
             break
-    hits = sum(c == cls for c in classes)
+        batch = min(need - hits, may_miss + 1 - misses, most - len(classes))
+        done = len(classes)
+        classes += [copy_class(r) for r in copies(jobs[done : done + batch], workers)]
+        hits = sum(c == cls for c in classes)
     return Trial(run_id, key, tuple(classes), hits >= need, spent)
 
 
