@@ -16,8 +16,9 @@ evaluation; a failing run whose variant is not yet confirmed is rerun in perturb
 (:mod:`sitgen.triage.robustness`; 6 of 8 must recur with the run's class, the robustness
 rule) until the verdict is decided — 6 recurred or 3 missed — each copy costing one, so the
 verdict is the one all 8 copies would give (copy ``k`` is the same whenever it runs) and no
-copy is run that could not change it; a variant is tried at most :data:`ATTEMPTS` times. It stops when the budget is spent. The rule
-for one run is :class:`Screen`, which a search uses on its own runs as it makes them.
+copy is run that could not change it; a variant is tried at most :data:`ATTEMPTS` times. It
+stops when the budget is spent. The rule for one run is :class:`Screen`, which a search uses
+on its own runs as it makes them.
 """
 
 from __future__ import annotations
