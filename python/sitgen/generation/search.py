@@ -139,8 +139,7 @@ FRESH_SHARE = 0.125
 ARM_PRIOR_RUNS = 2.0
 """Weight, in runs, of every arm's Beta prior, whose mean is the share of new finds pooled over
 all arms so far (empirical Bayes): a way not yet tried is drawn as about as good as the search
-is doing, not as a coin flip, so fourteen ways are not each tried many times before the search
-settles on the few that find something."""
+is doing, not as a coin flip."""
 SCREENED_WEIGHT = {"robust": 1.0, "untested": 0.5, "knife_edge": 0.1}
 """An elite's weight as a parent by what the screen knows of its variant."""
 ARM_CONTEXTS = ("fresh", "confirmed", "unconfirmed")
@@ -604,10 +603,15 @@ class Archive:
         return "confirmed" if key in self.confirmed_at_ask else "unconfirmed"
 
     def _arm_context(self, run: dict[str, Any]) -> str:
-        """The context a told run was made in (its parent's, as when it was made)."""
-        if run["operator"] in ("fresh", "like", None) or not run["parents"]:
+        """The context a told run was made in (its parent's, as when it was made: a stored
+        run, or the ``--like`` run for a child with none)."""
+        if run["operator"] not in SITUATION_OPERATORS:
             return "fresh"
-        return self._parent_context(self.variant_of.get(run["parents"][0]))
+        if run["parents"]:
+            return self._parent_context(self.variant_of.get(run["parents"][0]))
+        like = self.plan.like
+        assert like is not None
+        return self._parent_context(variant(like.failure_class, _like_coverage(like)))
 
     def _arm(
         self, rng: np.random.Generator, tried: set[str], fresh_allowed: bool, context: str
@@ -669,7 +673,7 @@ class Archive:
         assert like is not None
         return Parent.of(
             Situation(like.situation, check_start=False),
-            {"failure_at": like.failure_at, "failure_cell": like.failure_cell},
+            _like_coverage(like),
             {"class": like.failure_class, "features": {"start_s": like.failure_s}},
         )
 
@@ -677,6 +681,11 @@ class Archive:
         s = self.grid.stats
         best = s.obj_max if s.num_elites and s.obj_max is not None else 0.0
         return ArchiveStats(int(s.num_elites), float(s.qd_score), float(best))
+
+
+def _like_coverage(like: Like) -> dict[str, Any]:
+    """The part of the ``--like`` run's coverage record that places its failure."""
+    return {"failure_at": like.failure_at, "failure_cell": like.failure_cell}
 
 
 def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str, Any]]:
