@@ -561,9 +561,9 @@ class Archive:
                 genome = self.genomes[parent_id]
             child, operator = None, "fresh"
             tried: set[str] = set()
+            context = self._parent_context(parent.variant)
             # A directed search has no fresh jobs to fall back on: it tries every operator.
             for _ in range(MUTATION_TRIES if like is None else len(SITUATION_OPERATORS)):
-                context = self._parent_context(parent.variant)
                 operator = self._arm(rng, tried, like is None, context)
                 if operator == "fresh":
                     break
@@ -699,9 +699,19 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
         list(ids),
     )
     out = []
-    for row in rows:
-        run_id, outcome, score, cls, failure, clearance, genes, coverage, parents = row[:9]
-        terrain, peers = row[9:]
+    for (
+        run_id,
+        outcome,
+        score,
+        cls,
+        failure,
+        clearance,
+        genes,
+        coverage,
+        parents,
+        terrain,
+        peers,
+    ) in rows:
         features = json.loads(failure)["features"] if failure else {}
         gene_data = None if genes is None else json.loads(genes)
         record = unpack_json(coverage) if coverage else None
