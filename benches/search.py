@@ -13,9 +13,11 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
   each strategy's to random generation's;
 - evaluations to the first robust failure of each class that random generation finds in fewer
   than half of the seeds (its rare classes);
+- how many of each budget's evaluations were runs (the rest were copies);
 - for ``mutation``, each situation operator's locality (of its children, the share that failed
-  with their parent's failure class) and, for it and fresh runs, the share of runs that showed
-  a failure variant new to the store;
+  with their parent's failure class), the share that failed with their parent's very variant
+  (nothing new), and, for it and fresh runs, the share of runs that showed a failure variant
+  new to the store;
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
@@ -50,21 +52,25 @@ FAULT_SITUATIONS = 250
 
 def locality(db: Path) -> dict[str, list[int]]:
     """Per way of making a run (``fresh`` or an operator): [runs, children with their parent's
-    failure class, runs showing a failure variant not seen before in the store]."""
+    failure class, runs showing a failure variant not seen before in the store, children
+    failing with their parent's very variant]."""
     with Store(db) as store:
         rows = store.db.execute(
             "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id"
         ).fetchall()
     classes = {run_id: cls for run_id, cls, _, _, _ in rows}
+    variants: dict[int, str | None] = {}
     seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for _, cls, parents, genes, coverage in rows:
+    for run_id, cls, parents, genes, coverage in rows:
         key = variant(cls, unpack_json(coverage) if coverage else None)
-        tally = out.setdefault(json.loads(genes)["operator"], [0, 0, 0])
+        variants[run_id] = key
+        tally = out.setdefault(json.loads(genes)["operator"], [0, 0, 0, 0])
         tally[0] += 1
         first = json.loads(parents)[:1] if parents else []
         tally[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
         tally[2] += key is not None and key not in seen
+        tally[3] += key is not None and bool(first) and variants.get(first[0]) == key
         if key is not None:
             seen.add(key)
     return out
@@ -109,6 +115,7 @@ def main() -> None:
                     "seed": seed,
                     "robust": {str(b): tally.at_budget[b] for b in budgets},
                     "runs": tally.runs,
+                    "runs_at": {str(b): tally.runs_at[b] for b in budgets},
                     "copies": tally.copies,
                     "first_by_class": _first_by_class(tally.first_at),
                     "search_s": search_s,
@@ -116,7 +123,7 @@ def main() -> None:
                 }
                 if strategy == "mutation":
                     for operator, figures in locality(db).items():
-                        counts = kept.setdefault(operator, [0, 0, 0])
+                        counts = kept.setdefault(operator, [0, 0, 0, 0])
                         for i, figure in enumerate(figures):
                             counts[i] += figure
                 if with_faults and strategy in ("mutation", "random"):
@@ -152,6 +159,10 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
             medians.setdefault(s, {})[b] = m
             line += f"{m:>12g}"
         print(line)
+    print("runs among them (median; the rest are copies)")
+    for b in budgets:
+        runs = [statistics.median(r["runs_at"][str(b)] for r in per[s]) for s in strategies]
+        print(f"{b:>6}" + "".join(f"{m:>12g}" for m in runs))
     if "random" in strategies:
         for s in strategies:
             if s == "random":
@@ -196,11 +207,14 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
     if out["locality"]:
         print(
             "\nmutation, by way of making a run: runs; children failing with their parent's"
-            " failure class (locality); runs showing a variant new to the store"
+            " failure class (locality); runs showing a variant new to the store; children"
+            " failing with their parent's very variant"
         )
-        for operator, (n, same, new) in sorted(out["locality"].items()):
-            local = f"{same:>5} ({same / n:.0%})" if operator != "fresh" else f"{'-':>11}"
-            print(f"  {operator:16} {n:>5} {local:>11} {new:>5} ({new / n:.0%})")
+        for operator, (n, same, new, repeat) in sorted(out["locality"].items()):
+            fresh = operator == "fresh"
+            local = f"{same:>5} ({same / n:.0%})" if not fresh else f"{'-':>11}"
+            again = f"{repeat:>5} ({repeat / n:.0%})" if not fresh else f"{'-':>11}"
+            print(f"  {operator:16} {n:>5} {local:>11} {new:>5} ({new / n:.0%}) {again:>11}")
 
 
 if __name__ == "__main__":

@@ -85,6 +85,8 @@ class Tally:
     """Robust variants found within each checkpoint budget asked for."""
     first_at: dict[str, int] = field(default_factory=dict)
     """Each robust variant: evaluations spent when it was confirmed."""
+    runs_at: dict[int, int] = field(default_factory=dict)
+    """Runs walked within each checkpoint budget asked for (the rest of it went on copies)."""
 
 
 def runs_in_order(store: Store) -> Iterator[tuple[int, str | None, dict[str, Any] | None]]:
@@ -131,11 +133,13 @@ def robust_variants(
     evaluations; the robust variants found, and how many within each of ``checkpoints``."""
     screen = Screen(check_workers(workers, "local"))
     tally = Tally(budget, robust=screen.robust)
+    run_spent: list[int] = []
     for run_id, cls, coverage in runs_in_order(store):
         if tally.spent >= budget:
             break
         tally.spent += 1
         tally.runs += 1
+        run_spent.append(tally.spent)
         key = variant(cls, coverage)
         if key is None or not screen.wants(key):
             continue
@@ -152,6 +156,7 @@ def robust_variants(
         if mark <= budget:
             # Confirmed within the mark: a test whose copies cross it counts after it.
             tally.at_budget[mark] = sum(spent <= mark for spent in tally.first_at.values())
+            tally.runs_at[mark] = sum(spent <= mark for spent in run_spent)
     return tally
 
 
