@@ -75,7 +75,10 @@ def one_line_error(result: Result, code: int, starts: str) -> None:
 
 
 def stored_runs(db: Path) -> int:
+    """Runs stored so far; 0 while a starting campaign has made the file but not its tables."""
     with sqlite3.connect(db) as con:
+        if not con.execute("SELECT 1 FROM sqlite_master WHERE name = 'runs'").fetchone():
+            return 0
         count: int = con.execute("SELECT count(*) FROM runs").fetchone()[0]
     return count
 
