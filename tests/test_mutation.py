@@ -22,13 +22,16 @@ from sitgen.generation.mutation import (
     CONTEXTS,
     MEET_BACK_M,
     OPERATORS,
+    PEER_CLEAR_M,
     POINT_CLEAR_M,
     START_S_MAX,
+    TARGETED,
     Parent,
+    _Ground,
     focus_peer,
     mutate,
 )
-from sitgen.generation.search import BATCH, INITIAL, Archive, SearchPlan, run_search
+from sitgen.generation.search import BATCH, INITIAL, LOCAL, Archive, SearchPlan, run_search
 from sitgen.store import Store
 from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import copies, copy_class, copy_jobs
@@ -160,6 +163,56 @@ def test_reshape_terrain_makes_the_context_it_aims_at(parent: Parent) -> None:
             assert near.size == 0 or near.min() >= POINT_CLEAR_M - resolution, target
 
 
+def test_reshape_terrain_keeps_a_child_that_reads_as_another_context_it_may_make(
+    parent: Parent,
+) -> None:
+    assert parent.failure_pose is not None
+    own = parent.variant.split("/")[2] if parent.variant else None
+    for target in CONTEXTS:
+        accept = [c for c in CONTEXTS if c not in (target, own)][:2]
+        for seed in range(4):
+            child = mutate(parent, "reshape_terrain", np.random.default_rng(seed), target, accept)
+            if child is not None:
+                assert _core.agent_context(child, *parent.failure_pose) in (target, *accept)
+
+
+def test_a_staged_meeting_moves_back_along_the_agents_way_until_the_peer_has_room() -> None:
+    # 10 x 10 m at 0.1 m, a wall from x = 6 m: the agent failed at (5.8, 5) facing it.
+    occupied = np.zeros((100, 100), dtype=bool)
+    occupied[:, 60:] = True
+    ground = _Ground.of(occupied, 0.1)
+    start, back = (5.8, 5.0), math.pi
+    # From the left (the peer comes from +y and goes on to -y): the first point back from the
+    # wall with ground clear for the peer.
+    meeting = ground.meeting(start, back, MEET_BACK_M, math.pi / 2, 1.5, -math.pi / 2)
+    assert meeting is not None
+    (x, y), room = meeting
+    assert y == pytest.approx(5.0) and 6.0 - x == pytest.approx(PEER_CLEAR_M, abs=0.1)
+    assert room >= 1.5
+    # Head-on (from the wall's side) there is no room anywhere within MEET_BACK_M of it.
+    assert ground.meeting(start, back, MEET_BACK_M, 0.0, 1.5, math.pi) is None
+
+
+def test_approach_peer_brings_in_a_peer_where_the_situation_has_none(parent: Parent) -> None:
+    alone = json.loads(parent.situation.to_json())
+    alone["robots"] = alone["robots"][:1]
+    lone = Parent(
+        sitgen.Situation(json.dumps(alone), check_start=False),
+        parent.failure_pose,
+        parent.variant,
+        parent.failure_s,
+    )
+    child = mutate(lone, "approach_peer", np.random.default_rng(5), "crossing_left")
+    assert child is not None
+    assert _core.shrink_check(child, _core.shrink_leg_margin(json.dumps(alone))) is None
+    robots = json.loads(child)["robots"]
+    assert len(robots) == 2 and robots[1]["role"] == "peer" and robots[1]["id"] == 1
+    assert robots[1]["body"] == robots[0]["body"]
+    assert robots[1]["controller"]["name"] == "straight"
+    record = sitgen.run(sitgen.Situation(child), time_limit=200.0)
+    assert record.coverage is not None and record.coverage["encounters"] >= 1
+
+
 def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:
     for operator in OPERATORS:
         a = mutate(parent, operator, np.random.default_rng(11))
@@ -279,26 +332,33 @@ def test_a_directed_search_varies_the_run_it_is_given(tmp_path: Path) -> None:
 
 def test_curiosity_prefers_the_way_that_found_new_robust_variants() -> None:
     archive = Archive(spec_of(), 0, SearchPlan("mutation", ("failure_class", "variant")))
-    archive.arm_runs = {("fresh", "fresh"): 40} | {("confirmed", a): 40 for a in OPERATORS}
-    archive.arm_runs |= {("unconfirmed", a): 10 for a in OPERATORS}
+    families = (*TARGETED, LOCAL)
+    archive.arm_runs = {("fresh", "fresh"): 40} | {("confirmed", a): 40 for a in families}
+    archive.arm_runs |= {("unconfirmed", a): 10 for a in families}
     archive.arm_new = {("confirmed", "reshape_terrain"): 12, ("fresh", "fresh"): 4}
-    archive.arm_new[("unconfirmed", "shift_waypoint")] = 6
+    archive.arm_new[("unconfirmed", LOCAL)] = 6
     rng = np.random.default_rng(0)
+    local = [a for a in OPERATORS if a not in TARGETED]
     picks = Counter(archive._arm(rng, set(), True, "confirmed") for _ in range(400))
     assert picks.most_common(1)[0][0] == "reshape_terrain"
-    assert picks["reshape_terrain"] > 0.8 * 400 and picks["insert_waypoint"] < 0.05 * 400
-    # Each parent context keeps its own record: what keeps an unconfirmed variant differs.
+    assert picks["reshape_terrain"] > 0.8 * 400 and sum(picks[a] for a in local) < 0.05 * 400
+    # Each parent context keeps its own record: what keeps an unconfirmed variant differs. The
+    # local operators are one arm, and the one that runs is any of them.
     picks = Counter(archive._arm(rng, set(), True, "unconfirmed") for _ in range(400))
-    assert picks.most_common(1)[0][0] == "shift_waypoint"
-    # A way never tried is drawn from the pooled share, not a coin flip: rarely, here.
-    archive.arm_runs[("confirmed", "mirror")] = 0
+    assert sum(picks[a] for a in local) > 0.8 * 400
+    assert len([a for a in local if picks[a]]) == len(local)
+    # A way never tried is drawn from the pooled share (about 0.15 here), not a coin flip
+    # (which would beat reshape_terrain's 0.3 seven times in ten): now and then.
+    archive.arm_runs[("confirmed", "approach_peer")] = 0
     picks = Counter(archive._arm(rng, set(), True, "confirmed") for _ in range(400))
-    assert 0 < picks["mirror"] < picks["reshape_terrain"] / 4
-    # What was tried for this child is not drawn again; a directed search draws no fresh job.
+    assert 0 < picks["approach_peer"] < 0.4 * 400 < picks["reshape_terrain"]
+    # What was tried for this child is not drawn again, nor a family all of whose operators
+    # were; a directed search draws no fresh job.
     assert archive._arm(rng, {"reshape_terrain"}, False, "confirmed") not in (
         "reshape_terrain",
         "fresh",
     )
+    assert archive._arm(rng, {"approach_peer", *local}, False, "unconfirmed") == "reshape_terrain"
 
 
 def test_the_screen_tests_a_variant_on_two_runs_at_most_and_never_once_confirmed() -> None:

@@ -31,14 +31,17 @@ parent's failure the search has not seen yet (drawn at random when none is given
   It starts up to ``APPROACH_M`` from there, as far as the ground is clear, on a straight leg
   through it, and departs (``straight``'s ``start_s``) early enough to be moving when the agent
   comes in range, at the speed that brings it there about when the failure began; a stopped one
-  never departs;
+  never departs. The meeting point is the first one back along the agent's way (up to
+  ``MEET_BACK_M``) with room for the peer to come from its side and go on. A situation without
+  peers gets one, of the agent's build under the peers' controller;
 - ``reshape_terrain``: the walls round where the failure began are redrawn to make another
   terrain context (:data:`CONTEXTS`): two walls along the agent's route leg there
   (``corridor``), a narrow opening across it (``gap``), walls on three sides (``dead_end``), a
   wall beside it that ends just ahead (``blind_corner``), or the walls within a few metres
   cleared (``open``); a peer's leg that crosses a new wall gets a doorway and the agent's route
-  points stay clear. The core's own classifier (``agent_context``) must read the target there,
-  or the draw is tried again.
+  points stay clear. The core's own classifier (``agent_context``) must read the target there
+  (or another context the caller accepts: a draw aimed at a dead end that makes a gap the
+  search has not seen is as good), or the draw is tried again.
 
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that
@@ -60,7 +63,7 @@ import copy
 import itertools
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -111,9 +114,13 @@ START_S_MAX = 3600.0
 """``straight``'s largest ``start_s``: a peer that never departs in any run sitgen makes."""
 WALL_M = 0.2
 """Thickness of a drawn wall."""
-LEG_CLEAR_M = 0.7
-"""A drawn wall keeps this far from every peer's route legs (a robot's reach, 0.45 m, and a
-margin): where a peer's leg crosses one, the wall has a doorway."""
+DOORWAY_SLACK_M = 0.1
+"""How much farther than the leg margin the checks ask for (the mission's ``plan_margin_m``) a
+drawn wall keeps from every peer's route legs: where a peer's leg crosses one, the wall has a
+doorway just wide enough, so that a narrow gap stays one."""
+DEFAULT_LEG_MARGIN_M = 0.4
+"""The mission's default ``plan_margin_m``: the doorway's margin where the parent's peers keep
+no leg rule."""
 POINT_CLEAR_M = 0.45
 """A drawn wall keeps this far from the points of the agent's route (a robot's reach)."""
 MOVE_SD_M = 0.5
@@ -171,19 +178,26 @@ class Parent:
 
 
 def mutate(
-    parent: Parent, operator: str, rng: np.random.Generator, target: str | None = None
+    parent: Parent,
+    operator: str,
+    rng: np.random.Generator,
+    target: str | None = None,
+    accept: Collection[str] = (),
 ) -> str | None:
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of
     :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``) or
-    terrain context (``reshape_terrain``) to make; drawn from the others if None."""
+    terrain context (``reshape_terrain``) to make; drawn from the others if None. ``accept``:
+    other terrain contexts a ``reshape_terrain`` child may read as and be kept (a draw aimed at
+    one context that makes another the search wants is as good)."""
     original = parent.situation.to_json()
     robots: list[dict[str, Any]] = json.loads(original)["robots"]
     grid = parent.situation.grid
     occupied = np.ascontiguousarray(grid.occupied, dtype=bool)
     focus = _focus(parent, robots, rng)
     margin = _core.shrink_leg_margin(original)
-    if operator in TARGETED:
-        target = target or _other_target(parent, operator, rng)
+    if operator in TARGETED and target is None:
+        target = _other_target(parent, operator, rng)
+        accept = list(neighbours(parent.variant, operator))
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
     for _ in range(TRIES):
         if operator == "approach_peer":
@@ -191,7 +205,9 @@ def mutate(
             changed = _approach_peer(copy.deepcopy(robots), occupied, ground, parent, target, rng)
         elif operator == "reshape_terrain":
             assert target is not None
-            changed = _reshape_terrain(robots, occupied, grid.resolution, parent, target, rng)
+            changed = _reshape_terrain(
+                robots, occupied, grid.resolution, parent, target, rng, margin
+            )
         else:
             changed = _apply(
                 operator, copy.deepcopy(robots), occupied, grid.resolution, focus, parent, rng
@@ -204,7 +220,7 @@ def mutate(
         )
         if _core.shrink_check(child, margin) is not None:
             continue
-        if operator == "reshape_terrain" and not _reads_as(child, parent, target):
+        if operator == "reshape_terrain" and _read_at(child, parent) not in {target, *accept}:
             continue
         return child
     return None
@@ -242,7 +258,17 @@ def _approach_peer(
     x, y, heading = parent.failure_pose
     peer = focus_peer(robots, (x, y))
     if peer is None:
-        return None
+        # A failure no peer took part in, in a situation with none: one is brought in, a
+        # robot of the agent's build under the peers' controller.
+        peer = len(robots)
+        robots.append(
+            {
+                "id": peer,
+                "role": "peer",
+                "body": dict(robots[0]["body"]),
+                "controller": {"name": "straight", "params": {}},
+            }
+        )
     robot = robots[peer]
     params = dict(robot["controller"].get("params") or {})
     # Where the peer comes from (bearing from the place) and the course it drives.
@@ -255,17 +281,20 @@ def _approach_peer(
         "stopped": (0.0, 0.0),
     }[target]
     bearing, course = heading + side[0], heading + side[1]
-    # Where they meet: the failure's place, or the nearest point the agent drove through on the
-    # way there with room for the peer's leg (a failure against a wall leaves none).
-    back = ground.first((x, y), heading + math.pi, MEET_BACK_M)
-    if back is None:
-        return None
-    x, y = x - back * math.cos(heading), y - back * math.sin(heading)
-    room = ground.run((x, y), bearing, APPROACH_M[1])
     near = 0.8 if target in ("stopped", "overtaking") else APPROACH_M[0]
-    if room < near:
+    # An overtaken peer starts ahead on the agent's way and goes on along it: room for both.
+    onward_m = 0.5 if target == "overtaking" else 0.0
+    # Where they meet: the failure's place, or the nearest point the agent drove through on the
+    # way there with room for the peer to come from its side and go on (a failure against a
+    # wall leaves none at the place itself).
+    meeting = ground.meeting(
+        (x, y), heading + math.pi, MEET_BACK_M, bearing, near + onward_m, course
+    )
+    if meeting is None:
         return None
-    distance = float(rng.uniform(near, min(room, 2.0 if target == "stopped" else APPROACH_M[1])))
+    (x, y), room = meeting
+    farthest = min(room - onward_m, 2.0 if target == "stopped" else APPROACH_M[1])
+    distance = float(rng.uniform(near, farthest))
     sx, sy = x + distance * math.cos(bearing), y + distance * math.sin(bearing)
     if target == "overtaking":
         on = (sx, sy)
@@ -334,10 +363,26 @@ class _Ground:
                 return max(0.0, d - self.resolution / 2)
         return most
 
-    def first(self, start: tuple[float, float], heading: float, most: float) -> float | None:
-        """How far from ``start`` along ``heading`` the ground first is clear (None: not
-        within ``most``)."""
-        return next((d for d, is_clear in self._along(start, heading, most) if is_clear), None)
+    def meeting(
+        self,
+        start: tuple[float, float],
+        back: float,
+        most: float,
+        bearing: float,
+        near: float,
+        course: float,
+    ) -> tuple[tuple[float, float], float] | None:
+        """The first point from ``start`` along ``back`` (up to ``most``) with clear ground
+        at least ``near`` along ``bearing`` (where a peer comes from) and half a metre along
+        ``course`` (where it goes on), and the room along ``bearing`` there; None if none."""
+        for d, is_clear in self._along(start, back, most):
+            if not is_clear:
+                continue
+            point = (start[0] + d * math.cos(back), start[1] + d * math.sin(back))
+            room = self.run(point, bearing, APPROACH_M[1])
+            if room >= near and self.run(point, course, 0.5) >= 0.5:
+                return point, room
+        return None
 
 
 def _reshape_terrain(
@@ -347,14 +392,21 @@ def _reshape_terrain(
     parent: Parent,
     target: str,
     rng: np.random.Generator,
+    leg_margin: float | None,
 ) -> Edit | None:
     """The walls round the failure's place redrawn for terrain context ``target``; robots'
-    routes keep their points clear."""
+    routes keep their points clear, and peers' legs ``leg_margin`` (the checks' margin; None:
+    the mission's default) and :data:`DOORWAY_SLACK_M`."""
     if parent.failure_pose is None:
         return None
-    x, y, _ = parent.failure_pose
+    x, y, facing = parent.failure_pose
     before, occupied = occupied, occupied.copy()
-    frame = _Frame(occupied, resolution, (x, y), _leg_heading(robots[0], (x, y)))
+    # Walls along the way the agent was facing when the failure began or along its route there
+    # (either; peers' doorways spoil one more often than the other); a blind corner's edge is
+    # "ahead" of the way it faced, as the classifier reads it.
+    along = _leg_heading(robots[0], (x, y))
+    heading = facing if target == "blind_corner" or rng.random() < 0.5 else along
+    frame = _Frame(occupied, resolution, (x, y), heading)
     if target == "open":
         frame.disc(float(rng.uniform(2.5, 4.0)), False)
     elif target == "corridor":
@@ -400,9 +452,10 @@ def _reshape_terrain(
     )
     for point in _route(robots[0]):
         _restore_near(occupied, before, window, (point, point), POINT_CLEAR_M)
+    doorway = (DEFAULT_LEG_MARGIN_M if leg_margin is None else leg_margin) + DOORWAY_SLACK_M
     for robot in robots[1:]:
         for leg in itertools.pairwise(_route(robot)):
-            _restore_near(occupied, before, window, leg, LEG_CLEAR_M)
+            _restore_near(occupied, before, window, leg, doorway)
     return robots, occupied
 
 
@@ -448,10 +501,10 @@ def _leg_heading(robot: dict[str, Any], point: tuple[float, float]) -> float:
     return math.atan2(b[1] - a[1], b[0] - a[0])
 
 
-def _reads_as(child: str, parent: Parent, target: str | None) -> bool:
-    """Whether the core reads terrain context ``target`` at the parent's failure pose."""
+def _read_at(child: str, parent: Parent) -> str:
+    """The terrain context the core reads at the parent's failure pose in ``child``."""
     assert parent.failure_pose is not None
-    return _core.agent_context(child, *parent.failure_pose) == target
+    return str(_core.agent_context(child, *parent.failure_pose))
 
 
 @dataclass(frozen=True)

@@ -146,6 +146,11 @@ ARM_CONTEXTS = ("fresh", "confirmed", "unconfirmed")
 """What an arm's record is kept per: a fresh job, or an operator on a parent whose variant the
 screen had confirmed robust when the child was made (a child that keeps that variant finds
 nothing new) or had not (it may be the run that confirms it)."""
+LOCAL = "local"
+"""The arm of the local operators (every situation operator but the targeted ones), drawn as
+one: each changes the situation a little and mostly keeps its parent's variant, so their
+yields of new variants are alike, and thirteen arms learned one by one cost a few hundred runs
+more exploration than three do."""
 MUTATION_TRIES = 3
 """Operators the mutation strategy tries on one parent before it runs a fresh job instead (a
 directed search, which has none, tries them all)."""
@@ -309,6 +314,7 @@ class SearchPlan:
                     "situation_operators": list(SITUATION_OPERATORS),
                     "arm_prior_runs": ARM_PRIOR_RUNS,
                     "arm_contexts": list(ARM_CONTEXTS),
+                    "arm_families": [*TARGETED, LOCAL],
                     "screened_weight": SCREENED_WEIGHT,
                     "mutation_tries": MUTATION_TRIES,
                     "target_class": self.target_class,
@@ -469,7 +475,7 @@ class Archive:
                 self.cell_of[run["id"]] = cell
                 self.variant_of[run["id"]] = run["variant"]
                 self.cell_runs[cell] = self.cell_runs.get(cell, 0) + 1
-                key, arm = run["variant"], (self._arm_context(run), run["operator"])
+                key, arm = run["variant"], (self._arm_context(run), _family(run["operator"]))
                 self.arm_runs[arm] = self.arm_runs.get(arm, 0) + 1
                 if self._new_find(run["id"], key):
                     self.arm_new[arm] = self.arm_new.get(arm, 0) + 1
@@ -568,7 +574,7 @@ class Archive:
                 if operator == "fresh":
                     break
                 tried.add(operator)
-                child = mutate(parent, operator, rng, self._target(parent, operator, rng))
+                child = mutate(parent, operator, rng, *self._targets(parent, operator, rng))
                 if child is not None:
                     break
             run_seed = None if like is None else like.run_seed
@@ -622,8 +628,9 @@ class Archive:
         found) with an empirical prior (:data:`ARM_PRIOR_RUNS`), so the search spends its runs
         on what finds new failures, whichever that turns out to be for the controller under
         test; ``tried``: ways already tried for this child."""
+        untried = [a for a in SITUATION_OPERATORS if a not in tried]
         arms = [("fresh", "fresh")] if fresh_allowed else []
-        arms += [(context, a) for a in SITUATION_OPERATORS if a not in tried]
+        arms += [(context, f) for f in dict.fromkeys(map(_family, untried))]
         found, runs = sum(self.arm_new.values()), sum(self.arm_runs.values())
         share = (found + 1) / (runs + 2)
         a0, b0 = ARM_PRIOR_RUNS * share, ARM_PRIOR_RUNS * (1 - share)
@@ -633,16 +640,26 @@ class Archive:
             )
             for a in arms
         ]
-        return arms[int(np.argmax(draws))][1]
+        family = arms[int(np.argmax(draws))][1]
+        if family != LOCAL:
+            return family
+        local = [a for a in untried if _family(a) == LOCAL]
+        return local[int(rng.integers(len(local)))]
 
-    def _target(self, parent: Parent, operator: str, rng: np.random.Generator) -> str | None:
+    def _targets(
+        self, parent: Parent, operator: str, rng: np.random.Generator
+    ) -> tuple[str | None, list[str]]:
         """For a targeted operator, a neighbour of the parent's variant (its interaction or its
-        terrain context changed) not seen yet, if there is one; None lets it draw."""
+        terrain context changed) not seen yet, if there is one (None lets it draw), and the
+        other unseen ones, which a child may make instead."""
         if parent.variant is None or operator not in TARGETED:
-            return None
+            return None, []
         targets = neighbours(parent.variant, operator)
         unseen = [t for t, key in targets.items() if key not in self.variants_seen]
-        return unseen[int(rng.integers(len(unseen)))] if unseen else None
+        if not unseen:
+            return None, []
+        aim = int(rng.integers(len(unseen)))
+        return unseen[aim], unseen[:aim] + unseen[aim + 1 :]
 
     def _novel(self, elites: list[int], rng: np.random.Generator) -> int:
         """An elite's position, drawn with weight 1/runs of its cell (novelty: the rarer a
@@ -681,6 +698,12 @@ class Archive:
         s = self.grid.stats
         best = s.obj_max if s.num_elites and s.obj_max is not None else 0.0
         return ArchiveStats(int(s.num_elites), float(s.qd_score), float(best))
+
+
+def _family(operator: str) -> str:
+    """The arm a way of making a run is drawn and recorded under: :data:`LOCAL` for a local
+    operator, else the way itself (``fresh``, a targeted operator)."""
+    return LOCAL if operator in SITUATION_OPERATORS and operator not in TARGETED else operator
 
 
 def _like_coverage(like: Like) -> dict[str, Any]:
