@@ -14,10 +14,11 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
 - evaluations to the first robust failure of each class that random generation finds in fewer
   than half of the seeds (its rare classes);
 - how many of each budget's evaluations were runs (the rest were copies);
-- for ``mutation``, each situation operator's locality (of its children, the share that failed
-  with their parent's failure class), the share that failed with their parent's very variant
-  (nothing new), and, for it and fresh runs, the share of runs that showed a failure variant
-  new to the store;
+- for ``mutation``, over the runs within the largest budget, each situation operator's
+  locality (of its children, the share that failed with their parent's failure class), the
+  share that failed with their parent's very variant (nothing new), and, for it and fresh runs,
+  the share of runs that showed a failure variant new to the store and the share that
+  confirmed a new robust variant;
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
@@ -42,7 +43,7 @@ from sitgen.generation.fault_report import report_from
 from sitgen.generation.faults import is_harder, run_faults
 from sitgen.generation.search import SearchPlan, run_search
 from sitgen.store import Store, unpack_json
-from sitgen.triage.variants import robust_variants, variant
+from sitgen.triage.variants import Tally, robust_variants, variant
 
 RESULTS = Path(__file__).resolve().parent / "results"
 BUDGETS = (250, 500, 1000)
@@ -50,14 +51,17 @@ STRATEGIES = ("mutation", "map-elites", "coverage", "random")
 FAULT_SITUATIONS = 250
 
 
-def locality(db: Path) -> dict[str, list[int]]:
-    """Per way of making a run (``fresh`` or an operator): [runs, children with their parent's
-    failure class, runs showing a failure variant not seen before in the store, children
-    failing with their parent's very variant]."""
+def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
+    """Per way of making a run (``fresh`` or an operator), over the runs ``tally`` walked:
+    [runs, children with their parent's failure class, runs showing a failure variant not seen
+    before in the store, children failing with their parent's very variant, runs that
+    confirmed a new robust variant]."""
     with Store(db) as store:
         rows = store.db.execute(
-            "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id"
+            "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
+            (tally.runs,),
         ).fetchall()
+    confirmed = set(tally.robust.values())
     classes = {run_id: cls for run_id, cls, _, _, _ in rows}
     variants: dict[int, str | None] = {}
     seen: set[str] = set()
@@ -65,12 +69,13 @@ def locality(db: Path) -> dict[str, list[int]]:
     for run_id, cls, parents, genes, coverage in rows:
         key = variant(cls, unpack_json(coverage) if coverage else None)
         variants[run_id] = key
-        tally = out.setdefault(json.loads(genes)["operator"], [0, 0, 0, 0])
-        tally[0] += 1
+        counts = out.setdefault(json.loads(genes)["operator"], [0, 0, 0, 0, 0])
+        counts[0] += 1
         first = json.loads(parents)[:1] if parents else []
-        tally[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
-        tally[2] += key is not None and key not in seen
-        tally[3] += key is not None and bool(first) and variants.get(first[0]) == key
+        counts[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
+        counts[2] += key is not None and key not in seen
+        counts[3] += key is not None and bool(first) and variants.get(first[0]) == key
+        counts[4] += run_id in confirmed
         if key is not None:
             seen.add(key)
     return out
@@ -122,8 +127,8 @@ def main() -> None:
                     "yardstick_s": time.perf_counter() - started,
                 }
                 if strategy == "mutation":
-                    for operator, figures in locality(db).items():
-                        counts = kept.setdefault(operator, [0, 0, 0, 0])
+                    for operator, figures in locality(db, tally).items():
+                        counts = kept.setdefault(operator, [0, 0, 0, 0, 0])
                         for i, figure in enumerate(figures):
                             counts[i] += figure
                 if with_faults and strategy in ("mutation", "random"):
@@ -206,15 +211,20 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
                 print(f"  {s:12} {statistics.median(kills):g} of {per[s][0]['harder']}")
     if out["locality"]:
         print(
-            "\nmutation, by way of making a run: runs; children failing with their parent's"
-            " failure class (locality); runs showing a variant new to the store; children"
-            " failing with their parent's very variant"
+            f"\nmutation, by way of making a run, over the runs within {budgets[-1]}"
+            " evaluations: runs; children failing with their parent's failure class"
+            " (locality); runs showing a variant new to the store; children failing with their"
+            " parent's very variant; runs that confirmed a new robust variant"
         )
-        for operator, (n, same, new, repeat) in sorted(out["locality"].items()):
+        rows = sorted(out["locality"].items(), key=lambda kv: -kv[1][0])
+        for operator, (n, same, new, repeat, robust) in rows:
             fresh = operator == "fresh"
             local = f"{same:>5} ({same / n:.0%})" if not fresh else f"{'-':>11}"
             again = f"{repeat:>5} ({repeat / n:.0%})" if not fresh else f"{'-':>11}"
-            print(f"  {operator:16} {n:>5} {local:>11} {new:>5} ({new / n:.0%}) {again:>11}")
+            print(
+                f"  {operator:20} {n:>5} {local:>11} {new:>5} ({new / n:.0%}) {again:>11}"
+                f" {robust:>5} ({robust / n:.0%})"
+            )
 
 
 if __name__ == "__main__":

@@ -75,6 +75,10 @@ def test_every_operator_makes_a_valid_child_that_differs_where_it_should(
     ]
     if operator in ("add_obstacle", "remove_obstacle", "move_obstacle", "reshape_terrain"):
         assert not same_map and not robots_changed
+    elif operator == "reshape_and_approach":
+        assert parent.failure_pose is not None
+        assert not same_map
+        assert robots_changed == [focus_peer(before["robots"], parent.failure_pose[:2])]
     elif operator == "mirror":
         width = parent.situation.grid.size_m[0]
         assert not same_map
@@ -174,6 +178,34 @@ def test_reshape_terrain_keeps_a_child_that_reads_as_another_context_it_may_make
             child = mutate(parent, "reshape_terrain", np.random.default_rng(seed), target, accept)
             if child is not None:
                 assert _core.agent_context(child, *parent.failure_pose) in (target, *accept)
+
+
+def test_reshape_and_approach_stages_the_interaction_in_the_context_it_aims_at(
+    parent: Parent,
+) -> None:
+    assert parent.failure_pose is not None and parent.variant is not None
+    x, y, heading = parent.failure_pose
+    made = 0
+    for target in ("crossing_left/open", "head_on/corridor", "stopped/blind_corner"):
+        if target in (parent.variant.split("/", 1)[1],):
+            continue
+        interaction, context = target.split("/")
+        child = mutate(parent, "reshape_and_approach", np.random.default_rng(2), target)
+        if child is None:
+            continue
+        made += 1
+        assert _core.agent_context(child, *parent.failure_pose) == context
+        before, after = json.loads(parent.situation.to_json()), json.loads(child)
+        robot = after["robots"][focus_peer(before["robots"], (x, y)) or 0]
+        start = robot["start"]
+        bearing = math.remainder(math.atan2(start["y_m"] - y, start["x_m"] - x) - heading, math.tau)
+        if interaction == "crossing_left":
+            assert bearing == pytest.approx(math.pi / 2, abs=0.6)
+        elif interaction == "head_on":
+            assert abs(bearing) < 0.6
+        else:
+            assert robot["controller"]["params"]["start_s"] == START_S_MAX
+    assert made >= 2
 
 
 def test_a_staged_meeting_moves_back_along_the_agents_way_until_the_peer_has_room() -> None:

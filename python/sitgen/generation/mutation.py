@@ -21,7 +21,7 @@ peer whose route passes nearest it):
 - ``mirror``: the whole situation mirrored left to right, so a crossing from the left becomes
   one from the right;
 
-and two that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
+and three that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
 parent's failure the search has not seen yet (drawn at random when none is given):
 
 - ``approach_peer``: the peer is sent through where the failure began (or the nearest point
@@ -41,7 +41,11 @@ parent's failure the search has not seen yet (drawn at random when none is given
   cleared (``open``); a peer's leg that crosses a new wall gets a doorway and the agent's route
   points stay clear. The core's own classifier (``agent_context``) must read the target there
   (or another context the caller accepts: a draw aimed at a dead end that makes a gap the
-  search has not seen is as good), or the draw is tried again.
+  search has not seen is as good), or the draw is tried again;
+- ``reshape_and_approach``: both at once, the walls redrawn and then a peer staged through
+  the place in them (target ``INTERACTION/CONTEXT``): a staged meeting or new walls often
+  change the failure's class as well, and a class met in a new interaction *and* a new context
+  is less often one already seen than with one of them changed.
 
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that
@@ -50,11 +54,12 @@ cannot make a valid child in ``TRIES`` draws gives None, and the search draws af
 Why: varying a campaign spec's parameters and seeds redraws the whole situation, so a child
 keeps its parent's failure class only 16-19 % of the time (``make bench-search``); an operator
 on the situation leaves the rest of the encounter as it was. The local operators mostly repeat
-their parent's variant, too; the targeted two change one coordinate of it on purpose (the
-interaction or the terrain context) and leave the rest, so that a search for distinct failures
-gets new ones at a higher rate than random generation. Sources: the situation operators of
-search-based testing of automated vehicles (e.g. Gambi et al., AsFault; Riccio & Tonella,
-DeepJanus' local mutations of the input) applied to sitgen's situations.
+their parent's variant, too; the targeted three change one or two coordinates of it on
+purpose (the interaction, the terrain context, or both) and leave the rest, so that a search
+for distinct failures gets new ones at a higher rate than random generation. Sources: the
+situation operators of search-based testing of automated vehicles (e.g. Gambi et al.,
+AsFault; Riccio & Tonella, DeepJanus' local mutations of the input) applied to sitgen's
+situations.
 """
 
 from __future__ import annotations
@@ -89,10 +94,18 @@ OPERATORS = (
     "mirror",
     "approach_peer",
     "reshape_terrain",
+    "reshape_and_approach",
 )
-TARGETED = ("approach_peer", "reshape_terrain")
+TARGETED = ("approach_peer", "reshape_terrain", "reshape_and_approach")
 """Operators aimed at a target variant's interaction or terrain context."""
-PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed", "approach_peer")
+PEER_OPERATORS = (
+    "move_peer",
+    "turn_peer",
+    "retime_peer",
+    "peer_speed",
+    "approach_peer",
+    "reshape_and_approach",
+)
 APPROACHES = ("head_on", "crossing_left", "crossing_right", "from_behind", "overtaking", "stopped")
 """Interactions ``approach_peer`` can stage (coverage's interaction types but ``hidden``)."""
 CONTEXTS = ("open", "corridor", "gap", "dead_end", "blind_corner")
@@ -185,10 +198,11 @@ def mutate(
     accept: Collection[str] = (),
 ) -> str | None:
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of
-    :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``) or
-    terrain context (``reshape_terrain``) to make; drawn from the others if None. ``accept``:
-    other terrain contexts a ``reshape_terrain`` child may read as and be kept (a draw aimed at
-    one context that makes another the search wants is as good)."""
+    :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``),
+    terrain context (``reshape_terrain``) or both (``reshape_and_approach``,
+    ``INTERACTION/CONTEXT``) to make, one of :func:`neighbours`; drawn from them if None.
+    ``accept``: other targets a child that redraws walls may make instead and be kept (a draw
+    aimed at one context that makes another the search wants is as good)."""
     original = parent.situation.to_json()
     robots: list[dict[str, Any]] = json.loads(original)["robots"]
     grid = parent.situation.grid
@@ -199,6 +213,12 @@ def mutate(
         target = _other_target(parent, operator, rng)
         accept = list(neighbours(parent.variant, operator))
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
+    # The terrain contexts a child may read as: the one aimed at, or another the caller wants.
+    contexts = {target, *accept}
+    if operator == "reshape_and_approach":
+        assert target is not None
+        interaction = target.split("/")[0]
+        contexts = {t.split("/")[1] for t in (target, *accept) if t.split("/")[0] == interaction}
     for _ in range(TRIES):
         if operator == "approach_peer":
             assert target is not None and ground is not None
@@ -208,6 +228,25 @@ def mutate(
             changed = _reshape_terrain(
                 robots, occupied, grid.resolution, parent, target, rng, margin
             )
+        elif operator == "reshape_and_approach":
+            assert target is not None
+            interaction, context = target.split("/")
+            walls = _reshape_terrain(
+                robots, occupied, grid.resolution, parent, context, rng, margin
+            )
+            if walls is None:
+                return None
+            reshaped = walls[1]
+            changed = _approach_peer(
+                copy.deepcopy(robots),
+                reshaped,
+                _Ground.of(reshaped, grid.resolution),
+                parent,
+                interaction,
+                rng,
+            )
+            if changed is None:
+                continue  # these walls leave the peer no room: other walls may
         else:
             changed = _apply(
                 operator, copy.deepcopy(robots), occupied, grid.resolution, focus, parent, rng
@@ -220,7 +259,8 @@ def mutate(
         )
         if _core.shrink_check(child, margin) is not None:
             continue
-        if operator == "reshape_terrain" and _read_at(child, parent) not in {target, *accept}:
+        reshapes = operator in ("reshape_terrain", "reshape_and_approach")
+        if reshapes and _read_at(child, parent) not in contexts:
             continue
         return child
     return None
@@ -229,10 +269,19 @@ def mutate(
 def neighbours(key: str | None, operator: str) -> dict[str, str]:
     """The targets a targeted ``operator`` can aim at from variant ``key``
     (``CLASS/INTERACTION/CONTEXT``; None: any), each with the variant it would make: every
-    other interaction (``approach_peer``) or terrain context (``reshape_terrain``)."""
+    other interaction (``approach_peer``), terrain context (``reshape_terrain``), or
+    ``INTERACTION/CONTEXT`` with both other (``reshape_and_approach``)."""
     cls, interaction, context = (key or "//").split("/")
     if operator == "approach_peer":
         return {i: f"{cls}/{i}/{context}" for i in APPROACHES if i != interaction}
+    if operator == "reshape_and_approach":
+        return {
+            f"{i}/{c}": f"{cls}/{i}/{c}"
+            for i in APPROACHES
+            if i != interaction
+            for c in CONTEXTS
+            if c != context
+        }
     return {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
 
 
