@@ -24,7 +24,8 @@ and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill 
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
 (``sitgen faults --strategy stored``). Writes ``benches/results/search.json``.
 ``SITGEN_BENCH_SEARCH_SEEDS`` (default 5), ``SITGEN_BENCH_SEARCH_BUDGET`` (default 1000) and
-``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look.
+``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look; ``SITGEN_BENCH_SEARCH_FIRST_SEED``
+(default 1) measures other seeds.
 """
 
 from __future__ import annotations
@@ -97,7 +98,8 @@ def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, floa
 
 
 def main() -> None:
-    seeds = range(1, 1 + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
+    first = int(os.environ.get("SITGEN_BENCH_SEARCH_FIRST_SEED", "1"))
+    seeds = range(first, first + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
     largest = int(os.environ.get("SITGEN_BENCH_SEARCH_BUDGET", str(BUDGETS[-1])))
     budgets = [b for b in BUDGETS if b <= largest] or [largest]
     strategies = os.environ.get("SITGEN_BENCH_SEARCH_STRATEGIES", ",".join(STRATEGIES)).split(",")

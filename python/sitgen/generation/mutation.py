@@ -35,13 +35,14 @@ parent's failure the search has not seen yet (drawn at random when none is given
   ``MEET_BACK_M``) with room for the peer to come from its side and go on. A situation without
   peers gets one, of the agent's build under the peers' controller;
 - ``reshape_terrain``: the walls round where the failure began are redrawn to make another
-  terrain context (:data:`CONTEXTS`): two walls along the agent's route leg there
-  (``corridor``), a narrow opening across it (``gap``), walls on three sides (``dead_end``), a
-  wall beside it that ends just ahead (``blind_corner``), or the walls within a few metres
-  cleared (``open``); a peer's leg that crosses a new wall gets a doorway and the agent's route
-  points stay clear. The core's own classifier (``agent_context``) must read the target there
-  (or another context the caller accepts: a draw aimed at a dead end that makes a gap the
-  search has not seen is as good), or the draw is tried again;
+  terrain context (:data:`CONTEXTS`): two walls along the way the agent faced or its route
+  leg there (``corridor``), a narrow opening across it (``gap``), walls on three sides
+  (``dead_end``), a wall beside it that ends just ahead (``blind_corner``), or the walls within
+  a few metres cleared (``open``); a peer's leg that crosses a new wall gets a doorway as wide
+  as the leg check needs and the agent's route points stay clear. The core's own classifier
+  (``agent_context``) must read the target there (or another context the caller accepts: a
+  draw aimed at a dead end that makes a gap the search has not seen is as good), or the draw
+  is tried again;
 - ``reshape_and_approach``: both at once, the walls redrawn and then a peer staged through
   the place in them (target ``INTERACTION/CONTEXT``): a staged meeting or new walls often
   change the failure's class as well, and a class met in a new interaction *and* a new context
@@ -97,7 +98,7 @@ OPERATORS = (
     "reshape_and_approach",
 )
 TARGETED = ("approach_peer", "reshape_terrain", "reshape_and_approach")
-"""Operators aimed at a target variant's interaction or terrain context."""
+"""Operators aimed at a target variant's interaction, terrain context, or both."""
 PEER_OPERATORS = (
     "move_peer",
     "turn_peer",
