@@ -149,7 +149,7 @@ nothing new) or had not (it may be the run that confirms it)."""
 LOCAL = "local"
 """The arm of the local operators (every situation operator but the targeted ones), drawn as
 one: each changes the situation a little and mostly keeps its parent's variant, so their
-yields of new variants are alike and low, and learned as an arm each they took about 40 % of a
+yields of new variants are alike and low, and learned as an arm each they took over half of a
 500-evaluation search's runs before curiosity had told them apart (docs/search.md)."""
 MUTATION_TRIES = 3
 """Operators the mutation strategy tries on one parent before it runs a fresh job instead (a
