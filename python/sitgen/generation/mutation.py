@@ -99,14 +99,9 @@ OPERATORS = (
 )
 TARGETED = ("approach_peer", "reshape_terrain", "reshape_and_approach")
 """Operators aimed at a target variant's interaction, terrain context, or both."""
-PEER_OPERATORS = (
-    "move_peer",
-    "turn_peer",
-    "retime_peer",
-    "peer_speed",
-    "approach_peer",
-    "reshape_and_approach",
-)
+PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed")
+"""Local operators on a peer: none applies to a situation without peers (a staged approach
+brings one in)."""
 APPROACHES = ("head_on", "crossing_left", "crossing_right", "from_behind", "overtaking", "stopped")
 """Interactions ``approach_peer`` can stage (coverage's interaction types but ``hidden``)."""
 CONTEXTS = ("open", "corridor", "gap", "dead_end", "blind_corner")
