@@ -11,6 +11,7 @@ import math
 import signal
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -92,6 +93,20 @@ def test_every_operator_makes_a_valid_child_that_differs_where_it_should(
                 assert robots_changed == [focus_peer(before["robots"], focus)]
 
 
+def _staged_peer(parent: Parent, child: str) -> tuple[dict[str, Any], float, float]:
+    """The child's focus peer, and the bearing of its start and its course seen from the agent
+    at the parent's failure (radians, 0 ahead, positive to the left)."""
+    assert parent.failure_pose is not None
+    x, y, heading = parent.failure_pose
+    peer = focus_peer(json.loads(parent.situation.to_json())["robots"], (x, y))
+    assert peer is not None
+    robot: dict[str, Any] = json.loads(child)["robots"][peer]
+    start = robot["start"]
+    bearing = math.remainder(math.atan2(start["y_m"] - y, start["x_m"] - x) - heading, math.tau)
+    course = math.remainder(start["heading_rad"] - heading, math.tau)
+    return robot, bearing, course
+
+
 @pytest.mark.parametrize("target", APPROACHES)
 def test_approach_peer_sends_the_peer_through_the_failure_in_the_interaction_asked(
     parent: Parent, target: str
@@ -100,14 +115,7 @@ def test_approach_peer_sends_the_peer_through_the_failure_in_the_interaction_ask
     assert child is not None
     assert parent.failure_pose is not None and parent.failure_s is not None
     x, y, heading = parent.failure_pose
-    before, after = json.loads(parent.situation.to_json()), json.loads(child)
-    peer = focus_peer(before["robots"], (x, y))
-    assert peer is not None
-    robot = after["robots"][peer]
-    start = robot["start"]
-    # Where it starts, seen from the agent at the failure: ahead, left, right or behind.
-    bearing = math.remainder(math.atan2(start["y_m"] - y, start["x_m"] - x) - heading, math.tau)
-    course = math.remainder(start["heading_rad"] - heading, math.tau)
+    robot, bearing, course = _staged_peer(parent, child)
     side = {"head_on": 0, "crossing_left": 1, "crossing_right": -1, "from_behind": 2}
     if target in side and target != "from_behind":
         assert bearing == pytest.approx(side[target] * math.pi / 2, abs=0.6)
@@ -172,19 +180,21 @@ def test_reshape_terrain_keeps_a_child_that_reads_as_another_context_it_may_make
 ) -> None:
     assert parent.failure_pose is not None
     own = parent.variant.split("/")[2] if parent.variant else None
+    made = 0
     for target in CONTEXTS:
         accept = [c for c in CONTEXTS if c not in (target, own)][:2]
         for seed in range(4):
             child = mutate(parent, "reshape_terrain", np.random.default_rng(seed), target, accept)
             if child is not None:
+                made += 1
                 assert _core.agent_context(child, *parent.failure_pose) in (target, *accept)
+    assert made >= len(CONTEXTS)
 
 
 def test_reshape_and_approach_stages_the_interaction_in_the_context_it_aims_at(
     parent: Parent,
 ) -> None:
     assert parent.failure_pose is not None
-    x, y, heading = parent.failure_pose
     made = 0
     for target in ("crossing_left/open", "head_on/corridor", "stopped/blind_corner"):
         interaction, context = target.split("/")
@@ -193,12 +203,7 @@ def test_reshape_and_approach_stages_the_interaction_in_the_context_it_aims_at(
             continue
         made += 1
         assert _core.agent_context(child, *parent.failure_pose) == context
-        before, after = json.loads(parent.situation.to_json()), json.loads(child)
-        peer = focus_peer(before["robots"], (x, y))
-        assert peer is not None
-        robot = after["robots"][peer]
-        start = robot["start"]
-        bearing = math.remainder(math.atan2(start["y_m"] - y, start["x_m"] - x) - heading, math.tau)
+        robot, bearing, _ = _staged_peer(parent, child)
         if interaction == "crossing_left":
             assert bearing == pytest.approx(math.pi / 2, abs=0.6)
         elif interaction == "head_on":

@@ -127,9 +127,9 @@ DOORWAY_SLACK_M = 0.1
 """How much farther than the leg margin the checks ask for (the mission's ``plan_margin_m``) a
 drawn wall keeps from every peer's route legs: where a peer's leg crosses one, the wall has a
 doorway just wide enough, so that a narrow gap stays one."""
-DEFAULT_LEG_MARGIN_M = 0.4
-"""The mission's default ``plan_margin_m``: the doorway's margin where the parent's peers keep
-no leg rule."""
+ONWARD_M = 0.5
+"""How far a staged peer's leg must go on past where it meets the agent (an overtaken one: past
+where it starts, ahead of the agent)."""
 POINT_CLEAR_M = 0.45
 """A drawn wall keeps this far from the points of the agent's route (a robot's reach)."""
 MOVE_SD_M = 0.5
@@ -205,6 +205,7 @@ def mutate(
     occupied = np.ascontiguousarray(grid.occupied, dtype=bool)
     focus = _focus(parent, robots, rng)
     margin = _core.shrink_leg_margin(original)
+    doorway = float(parent.situation.spec["mission"]["plan_margin_m"]) + DOORWAY_SLACK_M
     if operator in TARGETED and target is None:
         target = _other_target(parent, operator, rng)
         accept = list(neighbours(parent.variant, operator))
@@ -222,13 +223,13 @@ def mutate(
         elif operator == "reshape_terrain":
             assert target is not None
             changed = _reshape_terrain(
-                robots, occupied, grid.resolution, parent, target, rng, margin
+                robots, occupied, grid.resolution, parent, target, rng, doorway
             )
         elif operator == "reshape_and_approach":
             assert target is not None
             interaction, context = target.split("/")
             walls = _reshape_terrain(
-                robots, occupied, grid.resolution, parent, context, rng, margin
+                robots, occupied, grid.resolution, parent, context, rng, doorway
             )
             if walls is None:
                 return None
@@ -328,7 +329,7 @@ def _approach_peer(
     bearing, course = heading + side[0], heading + side[1]
     near = 0.8 if target in ("stopped", "overtaking") else APPROACH_M[0]
     # An overtaken peer starts ahead on the agent's way and goes on along it: room for both.
-    onward_m = 0.5 if target == "overtaking" else 0.0
+    onward_m = ONWARD_M if target == "overtaking" else 0.0
     # Where they meet: the failure's place, or the nearest point the agent drove through on the
     # way there with room for the peer to come from its side and go on (a failure against a
     # wall leaves none at the place itself).
@@ -348,9 +349,9 @@ def _approach_peer(
         on = (x, y)
         waypoints = [[x, y]]
     onward = ground.run(on, course, APPROACH_M[1])
-    if onward < 0.5:
+    if onward < ONWARD_M:
         return None
-    beyond = float(rng.uniform(0.5, onward))
+    beyond = float(rng.uniform(ONWARD_M, onward))
     waypoints.append([on[0] + beyond * math.cos(course), on[1] + beyond * math.sin(course)])
     # Timing: the peer sets off before the agent comes within range of where it waits (else
     # they meet with the peer standing), at the speed that brings it to the place when the
@@ -418,14 +419,15 @@ class _Ground:
         course: float,
     ) -> tuple[tuple[float, float], float] | None:
         """The first point from ``start`` along ``back`` (up to ``most``) with clear ground
-        at least ``near`` along ``bearing`` (where a peer comes from) and half a metre along
-        ``course`` (where it goes on), and the room along ``bearing`` there; None if none."""
+        at least ``near`` along ``bearing`` (where a peer comes from) and :data:`ONWARD_M`
+        along ``course`` (where it goes on), and the room along ``bearing`` there; None if
+        none."""
         for d, is_clear in self._along(start, back, most):
             if not is_clear:
                 continue
             point = (start[0] + d * math.cos(back), start[1] + d * math.sin(back))
             room = self.run(point, bearing, APPROACH_M[1])
-            if room >= near and self.run(point, course, 0.5) >= 0.5:
+            if room >= near and self.run(point, course, ONWARD_M) >= ONWARD_M:
                 return point, room
         return None
 
@@ -437,11 +439,10 @@ def _reshape_terrain(
     parent: Parent,
     target: str,
     rng: np.random.Generator,
-    leg_margin: float | None,
+    doorway: float,
 ) -> Edit | None:
     """The walls round the failure's place redrawn for terrain context ``target``; robots'
-    routes keep their points clear, and peers' legs ``leg_margin`` (the checks' margin; None:
-    the mission's default) and :data:`DOORWAY_SLACK_M`."""
+    routes keep their points clear, and new walls keep ``doorway`` (metres) from peers' legs."""
     if parent.failure_pose is None:
         return None
     x, y, facing = parent.failure_pose
@@ -497,7 +498,6 @@ def _reshape_terrain(
     )
     for point in _route(robots[0]):
         _restore_near(occupied, before, window, (point, point), POINT_CLEAR_M)
-    doorway = (DEFAULT_LEG_MARGIN_M if leg_margin is None else leg_margin) + DOORWAY_SLACK_M
     for robot in robots[1:]:
         for leg in itertools.pairwise(_route(robot)):
             _restore_near(occupied, before, window, leg, doorway)
