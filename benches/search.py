@@ -22,7 +22,9 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
-(``sitgen faults --strategy stored``). Writes ``benches/results/search.json``.
+(``sitgen faults --strategy stored``): per seed, which faults each kills and which way made
+the killing situation (a fresh job or an operator), and how many trials spared a fault whose
+copies showed the failure because the correct controller's copies showed it too. Writes ``benches/results/search.json``.
 ``SITGEN_BENCH_SEARCH_SEEDS`` (default 5), ``SITGEN_BENCH_SEARCH_BUDGET`` (default 1000) and
 ``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look; ``SITGEN_BENCH_SEARCH_FIRST_SEED``
 (default 1) measures other seeds.
@@ -36,6 +38,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -82,8 +85,10 @@ def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     return out
 
 
-def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, float]:
-    """Robust kills of the harder faults on the store's first situations."""
+def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, Any]:
+    """Robust kills of the harder faults on the store's first situations: how many, which,
+    the way each killing situation was made, and the trials that spared a fault although its
+    copies showed the failure, because the correct controller's copies showed it too."""
     from sitgen import _core
 
     harder = [f["id"] for f in _core.fault_catalogue() if is_harder(f["id"])]
@@ -94,7 +99,24 @@ def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, floa
     )  # fmt: skip
     report = report_from(faults_db)
     killed = [f for f in report.faults if f.id in harder and f.run is not None]
-    return {"harder_killed": len(killed), "harder": len(harder)}
+    with Store(db) as store, Store(faults_db) as evaluation:
+        order = sorted(store.done_ids())
+        ways = {
+            run_id: json.loads(genes)["operator"] if genes else "fresh"
+            for run_id, genes in store.db.execute("SELECT id, genes FROM runs")
+        }
+        trials = evaluation.db.execute(
+            "SELECT fault, faulty_recurs, correct_recurs FROM fault_trials WHERE NOT killed"
+        ).fetchall()
+    spared = [(faulty, correct) for fault, faulty, correct in trials if fault in harder]
+    by_way = {f.id: ways[order[f.runs_to_first_kill - 1]] for f in killed if f.runs_to_first_kill}
+    return {
+        "harder_killed": len(killed),
+        "harder": len(harder),
+        "killed_by": by_way,
+        "spared": len(spared),
+        "spared_both_shown": sum(faulty > 0 and correct > 0 for faulty, correct in spared),
+    }
 
 
 def main() -> None:
@@ -210,7 +232,28 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
         for s in strategies:
             kills = [r["harder_killed"] for r in per[s] if "harder_killed" in r]
             if kills:
-                print(f"  {s:12} {statistics.median(kills):g} of {per[s][0]['harder']}")
+                print(
+                    f"  {s:12} {statistics.median(kills):g} of {per[s][0]['harder']}"
+                    f" (per seed {', '.join(map(str, kills))})"
+                )
+        faults = sorted({f for s in strategies for r in per[s] for f in r.get("killed_by", {})})
+        print(
+            "  seeds killing each fault, and the ways that made the killing situations;"
+            " trials spared with both sides' copies showing the failure"
+        )
+        for f in faults:
+            line = f"    {f:30}"
+            for s in strategies:
+                ways = [r["killed_by"][f] for r in per[s] if f in r.get("killed_by", {})]
+                made = ", ".join(f"{w} {n}" for w, n in Counter(ways).most_common())
+                line += f"  {s} {len(ways)} ({made})" if ways else f"  {s} 0"
+            print(line)
+        for s in strategies:
+            rows = [r for r in per[s] if "spared" in r]
+            if rows:
+                spared = sum(r["spared"] for r in rows)
+                both = sum(r["spared_both_shown"] for r in rows)
+                print(f"    {s}: {both} of {spared} spared trials ({both / max(spared, 1):.0%})")
     if out["locality"]:
         print(
             f"\nmutation, by way of making a run, over the runs within {budgets[-1]}"
