@@ -24,7 +24,8 @@ and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill 
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
 (``sitgen faults --strategy stored``): per seed, which faults each kills and which way made
 the killing situation (a fresh job or an operator), and how many trials spared a fault whose
-copies showed the failure because the correct controller's copies showed it too. Writes ``benches/results/search.json``.
+copies showed the failure because the correct controller's copies showed it too. Writes
+``benches/results/search.json``.
 ``SITGEN_BENCH_SEARCH_SEEDS`` (default 5), ``SITGEN_BENCH_SEARCH_BUDGET`` (default 1000) and
 ``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look; ``SITGEN_BENCH_SEARCH_FIRST_SEED``
 (default 1) measures other seeds.

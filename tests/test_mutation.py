@@ -29,6 +29,7 @@ from sitgen.generation.mutation import (
     TARGETED,
     Parent,
     _Ground,
+    extended,
     focus_peer,
     mutate,
 )
@@ -248,6 +249,70 @@ def test_approach_peer_brings_in_a_peer_where_the_situation_has_none(parent: Par
     assert robots[1]["controller"]["name"] == "straight"
     record = sitgen.run(sitgen.Situation(child), time_limit=200.0)
     assert record.coverage is not None and record.coverage["encounters"] >= 1
+
+
+def test_a_crowd_meets_the_agent_from_every_side_at_once(parent: Parent) -> None:
+    lone = json.loads(parent.situation.to_json())
+    lone["robots"] = lone["robots"][:1]
+    alone = Parent(
+        sitgen.Situation(json.dumps(lone), check_start=False),
+        parent.failure_pose,
+        parent.variant,
+        parent.failure_s,
+    )
+    assert parent.failure_pose is not None
+    x, y, heading = parent.failure_pose
+    for who in (parent, alone):
+        for seed in range(4):
+            rng = np.random.default_rng(seed)
+            child = mutate(who, "approach_peer", rng, "crossing_left", crowd=1.0)
+            assert child is not None
+            original = who.situation.to_json()
+            assert _core.shrink_check(child, _core.shrink_leg_margin(original)) is None
+            before, robots = json.loads(original)["robots"], json.loads(child)["robots"]
+            # Never more peers than the spec's peers_max (4 here): its own, or new ones.
+            assert len(robots) - 1 <= 4
+            sides = []
+            for robot in robots[1:]:
+                start = robot["start"]
+                bearing = math.atan2(start["y_m"] - y, start["x_m"] - x) - heading
+                course = math.remainder(start["heading_rad"] - heading, math.tau)
+                meets = robot["waypoints"] and math.dist(robot["waypoints"][0], (x, y)) <= 1.5
+                if not meets:
+                    # A peer of the situation left where it was (its side had no room).
+                    assert robot == before[robot["id"]]
+                    continue
+                ahead = abs(math.remainder(bearing, math.tau)) < math.pi / 4
+                stopped = robot["controller"]["params"]["start_s"] == START_S_MAX
+                sides.append("stopped" if stopped else "head_on" if ahead else round(course))
+            # The staged peer and at least two more, each from its own side of the crowd.
+            assert len(sides) >= 3 and len(set(sides)) == len(sides)
+            assert set(sides) <= {"stopped", "head_on", -2, 2}
+    # Without a crowd the same draw stages one peer.
+    one = mutate(parent, "approach_peer", np.random.default_rng(5), "crossing_left")
+    assert one == mutate(
+        parent, "approach_peer", np.random.default_rng(5), "crossing_left", (), 0.0
+    )
+
+
+def test_an_extended_child_goes_on_past_its_goal(parent: Parent) -> None:
+    child = mutate(parent, "add_obstacle", np.random.default_rng(2))
+    assert child is not None
+    longer = extended(child, np.random.default_rng(4))
+    assert longer == extended(child, np.random.default_rng(4))
+    assert _core.shrink_check(longer, _core.shrink_leg_margin(child)) is None
+    before, after = json.loads(child)["robots"], json.loads(longer)["robots"]
+    kept = len(before[0]["waypoints"])
+    assert after[0]["waypoints"][:kept] == before[0]["waypoints"]
+    assert len(after[0]["waypoints"]) > kept and after[1:] == before[1:]
+    new = np.array([before[0]["waypoints"][-1], *after[0]["waypoints"][kept:]])
+    length = float(np.linalg.norm(np.diff(new, axis=0), axis=1).sum())
+    # The mission goes on at least as far again as the spec asks of a route (RDP cuts
+    # corners, so a little less than the planned length is allowed).
+    assert length >= 0.9 * parent.situation.spec["mission"]["min_route_length_m"]
+    assert np.array_equal(
+        sitgen.Situation(longer).grid.occupied, sitgen.Situation(child).grid.occupied
+    )
 
 
 def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:

@@ -2,7 +2,11 @@
 
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sitgen_core::mission::astar;
+use sitgen_core::mission::{self, astar};
+use sitgen_core::rng::ChoiceSource;
+use sitgen_core::situation::Situation;
+
+use crate::SpecError;
 
 /// Cells (column, row) from start to goal, and the length in cells.
 type PathAndLength = (Vec<(usize, usize)>, f64);
@@ -44,7 +48,29 @@ fn shortest_path_lengths(
     })
 }
 
+/// The agent's route of situation `situation_json` continued past its last waypoint as the
+/// mission plans routes, with the situation's own mission spec and a choice stream seeded by
+/// `seed`: the new waypoints, or None where no route goes on from there.
+#[pyfunction]
+fn continued_route(situation_json: &str, seed: u64) -> PyResult<Option<Vec<(f64, f64)>>> {
+    let situation =
+        Situation::from_json(situation_json).map_err(|e| SpecError::new_err(e.to_string()))?;
+    let map = situation
+        .map
+        .decode()
+        .map_err(|e| SpecError::new_err(e.to_string()))?;
+    let agent = &situation.robots[0];
+    let from = agent
+        .waypoints
+        .last()
+        .map_or((agent.start.x_m, agent.start.y_m), |w| (w[0], w[1]));
+    let spec = &situation.provenance.spec.mission;
+    let mut choices = ChoiceSource::stream(seed, "continued route");
+    Ok(mission::continue_agent_route(&map, spec, from, &mut choices).ok())
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(continued_route, m)?)?;
     m.add_function(wrap_pyfunction!(shortest_path, m)?)?;
     m.add_function(wrap_pyfunction!(shortest_path_lengths, m)?)?;
     Ok(())

@@ -48,6 +48,19 @@ parent's failure the search has not seen yet (drawn at random when none is given
   change the failure's class as well, and a class met in a new interaction *and* a new context
   is less often one already seen than with one of them changed.
 
+Two additions make a child more demanding without moving the encounter it aims at, each
+drawn with a fixed chance by the search (``sitgen.generation.search``'s ``CROWD_SHARE`` and
+``STRETCH_SHARE``):
+
+- a *crowd* (``mutate``'s ``crowd``): a staged approach is met by more peers through the same
+  place, one from each other side of :data:`CROWD` (the situation's peers whose routes pass
+  nearest first, then new ones up to its spec's ``peers_max``), so that four robots come into
+  the agent's view at once; a side with no room to start is left out;
+- :func:`extended`: the agent's mission goes on past its goal, planned by the core as the
+  generator plans a route (``continued_route``: goals on the dilated map, A*, RDP, until the
+  continuation is ``min_route_length_m`` long), so a child drives longer and more winding
+  routes than its parent.
+
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that
 cannot make a valid child in ``TRIES`` draws gives None, and the search draws afresh.
@@ -106,6 +119,11 @@ APPROACHES = ("head_on", "crossing_left", "crossing_right", "from_behind", "over
 """Interactions ``approach_peer`` can stage (coverage's interaction types but ``hidden``)."""
 CONTEXTS = ("open", "corridor", "gap", "dead_end", "blind_corner")
 """Terrain contexts ``reshape_terrain`` can draw (coverage's)."""
+CROWD = ("head_on", "crossing_left", "crossing_right", "stopped")
+"""The sides a crowd comes from: the staged peer's and one more peer from each other one, so
+that four robots come into the agent's view at once."""
+CROWD_TRIES = 6
+"""Draws of each further peer of a crowd before its side is left out."""
 APPROACH_M = (1.5, 6.0)
 """How far from where they meet a staged peer may start, metres."""
 AGENT_M_S = 0.4
@@ -186,19 +204,36 @@ class Parent:
         )
 
 
+def extended(child: str, rng: np.random.Generator) -> str:
+    """``child`` with the agent's mission going on past its goal (:func:`_core.continued_route`
+    from the child's last waypoint, on the child's own map), or ``child`` as it is where no
+    route goes on from there."""
+    route = _core.continued_route(child, int(rng.integers(2**63)))
+    if not route:
+        return child
+    data = json.loads(child)
+    robots = data["robots"]
+    robots[0]["waypoints"] = [*robots[0]["waypoints"], *([x, y] for x, y in route)]
+    situation = Situation(child, check_start=False)
+    occupied = np.ascontiguousarray(situation.grid.occupied, dtype=bool)
+    return _core.mutated_situation(child, occupied, situation.grid.resolution, json.dumps(robots))
+
+
 def mutate(
     parent: Parent,
     operator: str,
     rng: np.random.Generator,
     target: str | None = None,
     accept: Collection[str] = (),
+    crowd: float = 0.0,
 ) -> str | None:
     """A valid child of ``parent`` by ``operator`` (situation JSON), or None if none of
     :data:`TRIES` draws made a valid one. ``target``: the interaction (``approach_peer``),
     terrain context (``reshape_terrain``) or both (``reshape_and_approach``,
     ``INTERACTION/CONTEXT``) to make, one of :func:`neighbours`; drawn from them if None.
     ``accept``: other targets a child that redraws walls may make instead and be kept (a draw
-    aimed at one context that makes another the search wants is as good)."""
+    aimed at one context that makes another the search wants is as good). ``crowd``: the
+    chance that a staged approach is met by a crowd (:func:`_crowd`)."""
     original = parent.situation.to_json()
     robots: list[dict[str, Any]] = json.loads(original)["robots"]
     grid = parent.situation.grid
@@ -210,6 +245,9 @@ def mutate(
         target = _other_target(parent, operator, rng)
         accept = list(neighbours(parent.variant, operator))
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
+    staged_peer = (
+        None if parent.failure_pose is None else focus_peer(robots, parent.failure_pose[:2])
+    )
     # The terrain contexts a child may read as: the one aimed at, or another the caller wants.
     contexts = {target, *accept}
     if operator == "reshape_and_approach":
@@ -234,13 +272,9 @@ def mutate(
             if walls is None:
                 return None
             reshaped = walls[1]
+            ground = _Ground.of(reshaped, grid.resolution)
             changed = _approach_peer(
-                copy.deepcopy(robots),
-                reshaped,
-                _Ground.of(reshaped, grid.resolution),
-                parent,
-                interaction,
-                rng,
+                copy.deepcopy(robots), reshaped, ground, parent, interaction, rng
             )
             if changed is None:
                 continue  # these walls leave the peer no room: other walls may
@@ -259,8 +293,69 @@ def mutate(
         reshapes = operator in ("reshape_terrain", "reshape_and_approach")
         if reshapes and _read_at(child, parent) not in contexts:
             continue
+        if ground is not None and crowd and rng.random() < crowd:
+            assert target is not None
+            interaction = target.split("/")[0]
+            crowd_at = _Placing(original, new_occupied, grid.resolution, margin)
+            return crowd_at.situation(
+                _crowd(new_robots, ground, parent, interaction, staged_peer, rng, crowd_at)
+            )
         return child
     return None
+
+
+@dataclass(frozen=True)
+class _Placing:
+    """Robots placed on a child's map: the situation they make, and whether it passes the
+    checks (everyone starts clear)."""
+
+    original: str
+    occupied: npt.NDArray[np.bool_]
+    resolution: float
+    margin: float | None
+
+    def situation(self, robots: list[dict[str, Any]]) -> str:
+        return _core.mutated_situation(
+            self.original, self.occupied, self.resolution, json.dumps(robots)
+        )
+
+    def fits(self, robots: list[dict[str, Any]]) -> bool:
+        return _core.shrink_check(self.situation(robots), self.margin) is None
+
+
+def _crowd(
+    robots: list[dict[str, Any]],
+    ground: _Ground,
+    parent: Parent,
+    staged: str,
+    staged_peer: int | None,
+    rng: np.random.Generator,
+    placing: _Placing,
+) -> list[dict[str, Any]]:
+    """``robots`` with more peers sent through the failure's place beside the one staged
+    there in interaction ``staged`` (``staged_peer``; None: the peer brought in): one from
+    each other side of :data:`CROWD`, the peers whose routes pass nearest first, then new ones
+    while the situation has fewer than its spec's ``peers_max``. Each must leave a situation
+    that fits the map (everyone starts clear), in :data:`CROWD_TRIES` draws, or its side is
+    left out."""
+    assert parent.failure_pose is not None
+    place = parent.failure_pose[:2]
+    staged_peer = len(robots) - 1 if staged_peer is None else staged_peer
+    others = [i for i in peers_by_distance(robots, place) if i != staged_peer]
+    most = max(len(robots) - 1, int(parent.situation.spec["mission"].get("peers_max", 0)))
+    for interaction in (i for i in CROWD if i != staged):
+        peer = others[0] if others else len(robots)
+        if peer == len(robots) and len(robots) - 1 >= most:
+            break
+        for _ in range(CROWD_TRIES):
+            changed = _approach_peer(
+                copy.deepcopy(robots), placing.occupied, ground, parent, interaction, rng, peer
+            )
+            if changed is not None and placing.fits(changed[0]):
+                robots = changed[0]
+                others = others[1:]
+                break
+    return robots
 
 
 def neighbours(key: str | None, operator: str) -> dict[str, str]:
@@ -295,15 +390,18 @@ def _approach_peer(
     parent: Parent,
     target: str,
     rng: np.random.Generator,
+    peer: int | None = None,
 ) -> Edit | None:
-    """The focus peer sent through the failure's place in interaction ``target``: a start up to
-    ``APPROACH_M`` away on the side the interaction comes from, as far as the ground is clear,
-    a leg through the place and on, and a departure timed to arrive when the agent did."""
+    """The focus peer (or peer ``peer``; ``len(robots)``: a new one) sent through the
+    failure's place in interaction ``target``: a start up to ``APPROACH_M`` away on the side
+    the interaction comes from, as far as the ground is clear, a leg through the place and on,
+    and a departure timed to arrive when the agent did."""
     if parent.failure_pose is None:
         return None
     x, y, heading = parent.failure_pose
-    peer = focus_peer(robots, (x, y))
     if peer is None:
+        peer = focus_peer(robots, (x, y))
+    if peer is None or peer == len(robots):
         # A failure no peer took part in, in a situation with none: one is brought in, a
         # robot of the agent's build under the peers' controller.
         peer = len(robots)
@@ -617,16 +715,21 @@ def _segment_distance(
 def focus_peer(robots: list[dict[str, Any]], focus: tuple[float, float]) -> int | None:
     """The peer (index into ``robots``) whose route passes nearest ``focus``; None without
     peers."""
-    best, nearest = None, math.inf
+    nearest = peers_by_distance(robots, focus)
+    return nearest[0] if nearest else None
+
+
+def peers_by_distance(robots: list[dict[str, Any]], focus: tuple[float, float]) -> list[int]:
+    """The peers (indices into ``robots``), the one whose route passes nearest ``focus``
+    first."""
+    distance = {}
     for i, robot in enumerate(robots[1:], start=1):
         route = _route(robot)
-        d = min(
+        distance[i] = min(
             (_segment_distance(focus, a, b) for a, b in itertools.pairwise(route)),
             default=math.hypot(focus[0] - route[0][0], focus[1] - route[0][1]),
         )
-        if d < nearest:
-            best, nearest = i, d
-    return best
+    return sorted(distance, key=lambda i: (distance[i], i))
 
 
 def _apply(

@@ -77,7 +77,13 @@ from sitgen.generation.guidance import (
     guided_genes,
 )
 from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
-from sitgen.generation.mutation import TARGETED, Parent, mutate, neighbours
+from sitgen.generation.mutation import (
+    TARGETED,
+    Parent,
+    extended,
+    mutate,
+    neighbours,
+)
 from sitgen.store import KINDS, Store, StoreError, unpack_json
 from sitgen.triage.failures import check_class
 from sitgen.triage.failures import classes as failure_classes
@@ -165,6 +171,17 @@ CLEARANCE_CELLS = 5
 
 CLEARANCE_STEP_M = 0.5 / CLEARANCE_CELLS
 
+
+STRETCH_SHARE = 0.25
+"""Share of an undirected mutation search's children whose mission also goes on past its goal
+(:func:`sitgen.generation.mutation.extended`). The operators change the walls and peers round
+the place a parent failed at, so without it no child drives a route longer or more winding
+than its parent's, and what shows only late in a long mission (a heading that drifts with the
+turning done, a long route's bookkeeping) is met no more often than in fresh jobs."""
+CROWD_SHARE = 0.25
+"""Chance that an undirected mutation search's staged approach is met by a crowd, one more
+peer from each other side (``mutate``'s ``crowd``): a single staged peer never puts four
+robots in the agent's view at once."""
 
 MAX_BUDGET = 1_000_000
 
@@ -317,6 +334,8 @@ class SearchPlan:
                     "arm_families": [*TARGETED, LOCAL],
                     "screened_weight": SCREENED_WEIGHT,
                     "mutation_tries": MUTATION_TRIES,
+                    "stretch_share": STRETCH_SHARE,
+                    "crowd_share": CROWD_SHARE,
                     "target_class": self.target_class,
                     "like": None if self.like is None else dataclasses.asdict(self.like),
                 }
@@ -574,7 +593,9 @@ class Archive:
                 if operator == "fresh":
                     break
                 tried.add(operator)
-                child = mutate(parent, operator, rng, *self._targets(parent, operator, rng))
+                crowd = CROWD_SHARE if like is None else 0.0
+                aim, others = self._targets(parent, operator, rng)
+                child = mutate(parent, operator, rng, aim, others, crowd)
                 if child is not None:
                     break
             run_seed = None if like is None else like.run_seed
@@ -584,6 +605,8 @@ class Archive:
             if child is None:
                 children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
             else:
+                if like is None and rng.random() < STRETCH_SHARE:
+                    child = extended(child, rng)
                 parents = (parent_id,) if parent_id >= 0 else ()
                 children.append(Child(index, genome, parents, operator, child, run_seed))
         return children

@@ -25,7 +25,7 @@ pub mod astar;
 pub mod rdp;
 mod routes;
 
-pub use routes::{check_peer_legs, generate};
+pub use routes::{check_peer_legs, continue_agent_route, generate};
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

@@ -345,6 +345,31 @@ fn plan_agent_route(
     Ok(waypoints)
 }
 
+/// The agent's route continued from `from` as [`generate`] plans one (step 2 of the module
+/// doc, on `map` with `spec`): goals drawn from the free cells of the dilated map, each
+/// reached by A* from the last and simplified by RDP, until the continuation is
+/// `min_route_length_m` long. A mission that goes on past its goal (the search's
+/// `extend_route`) is planned as the generator plans one, not by a copy of its rules.
+pub fn continue_agent_route(
+    map: &Map,
+    spec: &MissionSpec,
+    from: (f64, f64),
+    choices: &mut ChoiceSource,
+) -> Result<Vec<(f64, f64)>, GenerationFailed> {
+    let g = &map.grid;
+    let to_occupied = crate::grid::distance::squared_distance_to(&g.cells, g.rows, g.cols);
+    let plan = Plan::new(map, &to_occupied, spec);
+    match plan.cell_at(from) {
+        Some((c, r)) if !plan.blocked[r * g.cols + c] => {
+            plan_agent_route(&plan, spec, from, choices)
+        }
+        _ => Err(failed(format!(
+            "({:.2}, {:.2}) is not free ground of the dilated map: no route goes on from there",
+            from.0, from.1
+        ))),
+    }
+}
+
 /// Straight legs, each clear on the dilated map.
 fn plan_peer_route(
     plan: &Plan<'_>,

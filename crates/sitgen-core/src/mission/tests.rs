@@ -230,6 +230,50 @@ mod situations {
     }
 
     #[test]
+    fn a_continued_route_goes_on_from_the_goal_as_the_generator_plans_routes() {
+        use crate::mission::continue_agent_route;
+        use crate::rng::ChoiceSource;
+        for name in presets::NAMES {
+            for seed in 0..10 {
+                let s = generate(name, seed, "");
+                let spec = &s.provenance.spec.mission;
+                let map = s.map.decode().unwrap();
+                let g = &map.grid;
+                let goal = s.robots[0].waypoints.last().unwrap();
+                let from = (goal[0], goal[1]);
+                let go_on = |k| {
+                    let mut choices = ChoiceSource::stream(k, "test");
+                    continue_agent_route(&map, spec, from, &mut choices)
+                        .unwrap_or_else(|e| panic!("{name} {seed}: {}", e.reason))
+                };
+                let route = go_on(7);
+                assert_eq!(route, go_on(7), "{name} {seed}: same seed, same route");
+                // Every new leg is plannable from the old goal on, and long enough.
+                let blocked = dilated(&map, spec.plan_margin_m);
+                let mut search = PathSearch::new(&blocked, g.rows, g.cols);
+                let (mut at, mut planned) = (from, 0.0);
+                for &next in &route {
+                    let path = search.shortest_path(cell(&map, at), cell(&map, next));
+                    planned += path.expect("a new leg is plannable").length * map.resolution_m;
+                    at = next;
+                }
+                assert!(planned >= spec.min_route_length_m - 1e-9, "{name} {seed}");
+            }
+        }
+        // No route goes on from inside an obstacle.
+        let s = generate("urban", 1, "");
+        let map = s.map.decode().unwrap();
+        let g = &map.grid;
+        let inside = (0..g.rows * g.cols)
+            .find(|&i| g.cells[i])
+            .map(|i| map.cell_centre(i / g.cols, i % g.cols))
+            .unwrap();
+        let mut choices = ChoiceSource::stream(1, "test");
+        let spec = &s.provenance.spec.mission;
+        assert!(continue_agent_route(&map, spec, inside, &mut choices).is_err());
+    }
+
+    #[test]
     fn the_same_seed_gives_the_same_situation_and_hash() {
         let a = generate("caves", 4, "");
         let b = generate("caves", 4, "");
