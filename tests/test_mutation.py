@@ -231,18 +231,24 @@ def test_a_staged_meeting_moves_back_along_the_agents_way_until_the_peer_has_roo
     assert ground.meeting(start, back, MEET_BACK_M, 0.0, 1.5, math.pi) is None
 
 
-def test_approach_peer_brings_in_a_peer_where_the_situation_has_none(parent: Parent) -> None:
+def _without_peers(parent: Parent) -> Parent:
+    """``parent`` with its peers taken out (its failure where it was)."""
     alone = json.loads(parent.situation.to_json())
     alone["robots"] = alone["robots"][:1]
-    lone = Parent(
+    return Parent(
         sitgen.Situation(json.dumps(alone), check_start=False),
         parent.failure_pose,
         parent.variant,
         parent.failure_s,
     )
+
+
+def test_approach_peer_brings_in_a_peer_where_the_situation_has_none(parent: Parent) -> None:
+    lone = _without_peers(parent)
     child = mutate(lone, "approach_peer", np.random.default_rng(5), "crossing_left")
     assert child is not None
-    assert _core.shrink_check(child, _core.shrink_leg_margin(json.dumps(alone))) is None
+    margin = _core.shrink_leg_margin(lone.situation.to_json())
+    assert _core.shrink_check(child, margin) is None
     robots = json.loads(child)["robots"]
     assert len(robots) == 2 and robots[1]["role"] == "peer" and robots[1]["id"] == 1
     assert robots[1]["body"] == robots[0]["body"]
@@ -252,14 +258,7 @@ def test_approach_peer_brings_in_a_peer_where_the_situation_has_none(parent: Par
 
 
 def test_a_crowd_meets_the_agent_from_every_side_at_once(parent: Parent) -> None:
-    lone = json.loads(parent.situation.to_json())
-    lone["robots"] = lone["robots"][:1]
-    alone = Parent(
-        sitgen.Situation(json.dumps(lone), check_start=False),
-        parent.failure_pose,
-        parent.variant,
-        parent.failure_s,
-    )
+    alone = _without_peers(parent)
     assert parent.failure_pose is not None
     x, y, heading = parent.failure_pose
     for who in (parent, alone):
