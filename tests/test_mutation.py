@@ -287,11 +287,6 @@ def test_a_crowd_meets_the_agent_from_every_side_at_once(parent: Parent) -> None
             # The staged peer and at least two more, each from its own side of the crowd.
             assert len(sides) >= 3 and len(set(sides)) == len(sides)
             assert set(sides) <= {"stopped", "head_on", -2, 2}
-    # Without a crowd the same draw stages one peer.
-    one = mutate(parent, "approach_peer", np.random.default_rng(5), "crossing_left")
-    assert one == mutate(
-        parent, "approach_peer", np.random.default_rng(5), "crossing_left", (), 0.0
-    )
 
 
 def test_an_extended_child_goes_on_past_its_goal(parent: Parent) -> None:

@@ -245,9 +245,6 @@ def mutate(
         target = _other_target(parent, operator, rng)
         accept = list(neighbours(parent.variant, operator))
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
-    staged_peer = (
-        None if parent.failure_pose is None else focus_peer(robots, parent.failure_pose[:2])
-    )
     # The terrain contexts a child may read as: the one aimed at, or another the caller wants.
     contexts = {target, *accept}
     if operator == "reshape_and_approach":
@@ -296,6 +293,9 @@ def mutate(
         if ground is not None and crowd and rng.random() < crowd:
             assert target is not None
             interaction = target.split("/")[0]
+            # The peer staged is the one the approach took: the parent's focus peer, if any.
+            assert parent.failure_pose is not None
+            staged_peer = focus_peer(robots, parent.failure_pose[:2])
             crowd_at = _Placing(original, new_occupied, grid.resolution, margin)
             return crowd_at.situation(
                 _crowd(new_robots, ground, parent, interaction, staged_peer, rng, crowd_at)
