@@ -33,6 +33,8 @@ from sitgen.generation.mutation import (
     focus_peer,
     mutate,
 )
+from sitgen.execution.jobs import build_job
+from sitgen.generation.genome import fresh
 from sitgen.generation.search import BATCH, INITIAL, LOCAL, Archive, SearchPlan, run_search
 from sitgen.store import Store
 from sitgen.triage.recall import stored_run
@@ -307,6 +309,30 @@ def test_an_extended_child_goes_on_past_its_goal(parent: Parent) -> None:
     assert np.array_equal(
         sitgen.Situation(longer).grid.occupied, sitgen.Situation(child).grid.occupied
     )
+
+
+def test_a_share_of_a_mutation_searchs_fresh_jobs_go_on_past_their_goal() -> None:
+    spec = spec_of()
+    children = Archive(spec, 3, SearchPlan("mutation")).ask(0)
+    assert children == Archive(spec, 3, SearchPlan("mutation")).ask(0)
+    assert [c.index for c in children] == list(range(INITIAL))
+    stretched = [c for c in children if c.situation is not None]
+    # A draw per job: some go on, some are the campaign's jobs as they are.
+    assert 0 < len(stretched) < len(children)
+    for child in children:
+        assert (child.operator, child.parents) == ("fresh", ())
+        assert child.genome == fresh(spec, 3, child.index)
+    for child in stretched:
+        assert child.situation is not None
+        job = build_job(spec, 3, child.index)
+        made = sitgen.generate_situation(job.situation, seed=job.seed)
+        before = json.loads(made.to_json())["robots"]
+        after = json.loads(child.situation)["robots"]
+        kept = len(before[0]["waypoints"])
+        assert len(after[0]["waypoints"]) > kept
+        assert after[0]["waypoints"][:kept] == before[0]["waypoints"]
+        assert after[1:] == before[1:]
+        assert np.array_equal(sitgen.Situation(child.situation).grid.occupied, made.grid.occupied)
 
 
 def test_the_same_draw_makes_the_same_child(parent: Parent) -> None:

@@ -90,7 +90,7 @@ from sitgen.triage.failures import classes as failure_classes
 from sitgen.triage.recall import regenerate, stored_run
 from sitgen.triage.robustness import RERUNS
 from sitgen.triage.variants import NO_PEER, Screen, interaction_context, variant
-from sitgen.world.situation import Situation
+from sitgen.world.situation import Situation, generate_situation
 
 if TYPE_CHECKING:
     from ribs.archives import GridArchive
@@ -178,6 +178,12 @@ STRETCH_SHARE = 0.25
 the place a parent failed at, so without it no child drives a route longer or more winding
 than its parent's, and what shows only late in a long mission (a heading that drifts with the
 turning done, a long route's bookkeeping) is met no more often than in fresh jobs."""
+FRESH_STRETCH_SHARE = 0.5
+"""Share of an undirected mutation search's fresh jobs whose mission also goes on past its
+goal, as :data:`STRETCH_SHARE` does for children. A fresh job aims at no variant, so a later,
+more severe failure in the longer mission hides nothing it was made to show, while the
+longer mission meets what shows only late (a heading that drifts with the turning done, a
+long route's bookkeeping, a route that doubles back)."""
 CROWD_SHARE = 0.25
 """Chance that an undirected mutation search's staged approach is met by a crowd, one more
 peer from each other side (``mutate``'s ``crowd``): a single staged peer never puts four
@@ -335,6 +341,7 @@ class SearchPlan:
                     "screened_weight": SCREENED_WEIGHT,
                     "mutation_tries": MUTATION_TRIES,
                     "stretch_share": STRETCH_SHARE,
+                    "fresh_stretch_share": FRESH_STRETCH_SHARE,
                     "crowd_share": CROWD_SHARE,
                     "target_class": self.target_class,
                     "like": None if self.like is None else dataclasses.asdict(self.like),
@@ -575,7 +582,7 @@ class Archive:
                 children.append(Child(index, genome, (), "like", like.situation, like.run_seed))
                 continue
             if like is None and (generation == 0 or not elites):
-                children.append(Child(index, genome, (), "fresh"))
+                children.append(self._fresh(index))
                 continue
             if like is not None and (generation == 0 or not elites):
                 parent_id, parent = -1, self.like_parent()
@@ -603,13 +610,33 @@ class Archive:
                 # No operator could change this parent: it is run again as it is.
                 child, operator = parent.situation.to_json(), "like"
             if child is None:
-                children.append(Child(index, fresh(self.spec, self.seed, index), (), "fresh"))
+                children.append(self._fresh(index))
             else:
                 if like is None and rng.random() < STRETCH_SHARE:
                     child = extended(child, rng)
                 parents = (parent_id,) if parent_id >= 0 else ()
                 children.append(Child(index, genome, parents, operator, child, run_seed))
         return children
+
+    def _fresh(self, index: int) -> Child:
+        """Run ``index``'s fresh job for an undirected mutation search: the campaign's job,
+        its mission going on past its goal in :data:`FRESH_STRETCH_SHARE` of them (the job
+        as it is where it cannot be made here or no route goes on)."""
+        genome = fresh(self.spec, self.seed, index)
+        plain = Child(index, genome, (), "fresh")
+        rng = np.random.Generator(np.random.PCG64([self.seed, index, 3]))
+        if rng.random() >= FRESH_STRETCH_SHARE:
+            return plain
+        job = _job(self.spec, plain)
+        if job.error is not None:
+            return plain
+        try:
+            situation = generate_situation(job.situation, seed=job.seed)
+        except (_core.GenerationFailed, _core.SpecError):
+            return plain
+        made = situation.to_json()
+        stretched = extended(made, rng)
+        return plain if stretched == made else Child(index, genome, (), "fresh", stretched)
 
     def _new_find(self, run_id: int, key: str | None) -> bool:
         if key is None:
