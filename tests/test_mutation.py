@@ -6,6 +6,7 @@ the yardstick counts every copy against the budget."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import signal
@@ -21,6 +22,7 @@ from sitgen import _core
 from sitgen.generation.mutation import (
     APPROACHES,
     CONTEXTS,
+    KEPT_PAST,
     MEET_BACK_M,
     OPERATORS,
     PEER_CLEAR_M,
@@ -29,6 +31,7 @@ from sitgen.generation.mutation import (
     TARGETED,
     Parent,
     _Ground,
+    cut_past_failure,
     extended,
     focus_peer,
     mutate,
@@ -309,6 +312,30 @@ def test_an_extended_child_goes_on_past_its_goal(parent: Parent) -> None:
     assert np.array_equal(
         sitgen.Situation(longer).grid.occupied, sitgen.Situation(child).grid.occupied
     )
+
+
+def test_a_child_s_mission_ends_a_waypoint_past_where_its_parent_failed(parent: Parent) -> None:
+    child = mutate(parent, "add_obstacle", np.random.default_rng(2))
+    assert child is not None
+    waypoints = json.loads(child)["robots"][0]["waypoints"]
+    start = json.loads(child)["robots"][0]["start"]
+    assert len(waypoints) >= 3
+    # A failure that began on the second leg (from waypoint 0 to waypoint 1).
+    a, b = np.array(waypoints[0]), np.array(waypoints[1])
+    x, y = (a + b) / 2
+    early = dataclasses.replace(parent, failure_pose=(float(x), float(y), 0.0))
+    cut = cut_past_failure(child, early)
+    assert json.loads(cut)["robots"][0]["waypoints"] == waypoints[: 2 + KEPT_PAST]
+    assert json.loads(cut)["robots"][0]["start"] == start
+    assert json.loads(cut)["robots"][1:] == json.loads(child)["robots"][1:]
+    assert _core.shrink_check(cut, _core.shrink_leg_margin(child)) is None
+    # Nothing to cut: a failure on the last leg, no failure, a failure of the whole mission.
+    x, y = waypoints[-1]
+    assert cut_past_failure(child, dataclasses.replace(parent, failure_pose=(x, y, 0.0))) == child
+    assert cut_past_failure(child, dataclasses.replace(parent, failure_pose=None)) == child
+    assert early.variant is not None
+    whole = "route_not_completed/" + early.variant.split("/", 1)[1]
+    assert cut_past_failure(child, dataclasses.replace(early, variant=whole)) == child
 
 
 def test_a_share_of_a_mutation_searchs_fresh_jobs_go_on_past_their_goal() -> None:

@@ -158,6 +158,12 @@ NEAR_SD_M = 1.5
 BLOB_MAX_CELLS = 2500
 """Largest obstacle a remove or move takes whole (25 m² at 0.1 m cells): a larger one is
 terrain, not an obstacle near the failure."""
+KEPT_PAST = 1
+"""Waypoints a child's mission keeps past the route leg its parent's failure began on
+(:func:`cut_past_failure`): enough to drive on through the place, not so many that a later,
+more severe failure of a class already found becomes the run's failure and hides the variant
+the child was made to show."""
+NOT_COMPLETED = "route_not_completed"
 TRIES = 8
 SPEED_RANGE = (0.1, 1.5)
 
@@ -211,9 +217,33 @@ def extended(child: str, rng: np.random.Generator) -> str:
     route = _core.continued_route(child, int(rng.integers(2**63)))
     if not route:
         return child
-    data = json.loads(child)
-    robots = data["robots"]
-    robots[0]["waypoints"] = [*robots[0]["waypoints"], *([x, y] for x, y in route)]
+    waypoints = json.loads(child)["robots"][0]["waypoints"]
+    return _with_agent_route(child, [*waypoints, *([x, y] for x, y in route)])
+
+
+def cut_past_failure(child: str, parent: Parent) -> str:
+    """``child`` with the agent's mission ending :data:`KEPT_PAST` waypoints past the route
+    leg nearest where its parent's failure began, or ``child`` as it is where the route ends
+    there anyway, or the parent did not fail or failed for not completing its route (a
+    failure of the whole mission)."""
+    key = parent.variant
+    if parent.failure_pose is None or key is None or key.startswith(f"{NOT_COMPLETED}/"):
+        return child
+    waypoints = json.loads(child)["robots"][0]["waypoints"]
+    route = _route(json.loads(child)["robots"][0])
+    place = parent.failure_pose[:2]
+    leg = min(range(len(route) - 1), key=lambda i: _segment_distance(place, route[i], route[i + 1]))
+    # Leg i ends at waypoint i.
+    kept = leg + 1 + KEPT_PAST
+    if kept >= len(waypoints):
+        return child
+    return _with_agent_route(child, waypoints[:kept])
+
+
+def _with_agent_route(child: str, waypoints: list[Any]) -> str:
+    """``child`` with the agent driving ``waypoints`` after its start, on the child's map."""
+    robots = json.loads(child)["robots"]
+    robots[0]["waypoints"] = waypoints
     situation = Situation(child, check_start=False)
     occupied = np.ascontiguousarray(situation.grid.occupied, dtype=bool)
     return _core.mutated_situation(child, occupied, situation.grid.resolution, json.dumps(robots))

@@ -80,6 +80,7 @@ from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
 from sitgen.generation.mutation import (
     TARGETED,
     Parent,
+    cut_past_failure,
     extended,
     mutate,
     neighbours,
@@ -148,6 +149,9 @@ all arms so far (empirical Bayes): a way not yet tried is drawn as about as good
 is doing, not as a coin flip."""
 SCREENED_WEIGHT = {"robust": 1.0, "untested": 0.5, "knife_edge": 0.1}
 """An elite's weight as a parent by what the screen knows of its variant."""
+FRONTIER_FLOOR = 0.1
+"""An elite's weight as a parent where every variant the targeted operators could aim at from
+its own has been shown (:meth:`Archive._frontier`), against 1.1 where none has."""
 ARM_CONTEXTS = ("fresh", "confirmed", "unconfirmed")
 """What an arm's record is kept per: a fresh job, or an operator on a parent whose variant the
 screen had confirmed robust when the child was made (a child that keeps that variant finds
@@ -339,6 +343,7 @@ class SearchPlan:
                     "arm_contexts": list(ARM_CONTEXTS),
                     "arm_families": [*TARGETED, LOCAL],
                     "screened_weight": SCREENED_WEIGHT,
+                    "frontier_floor": FRONTIER_FLOOR,
                     "mutation_tries": MUTATION_TRIES,
                     "stretch_share": STRETCH_SHARE,
                     "fresh_stretch_share": FRESH_STRETCH_SHARE,
@@ -612,6 +617,8 @@ class Archive:
             if child is None:
                 children.append(self._fresh(index))
             else:
+                if operator != "like":
+                    child = cut_past_failure(child, parent)
                 if like is None and rng.random() < STRETCH_SHARE:
                     child = extended(child, rng)
                 parents = (parent_id,) if parent_id >= 0 else ()
@@ -715,14 +722,28 @@ class Archive:
         """An elite's position, drawn with weight 1/runs of its cell (novelty: the rarer a
         failure variant has been, the more often it is varied), times its variant's
         robustness where runs are screened (:data:`SCREENED_WEIGHT`): a knife-edge failure's
-        children mostly fail otherwise or not at all."""
+        children mostly fail otherwise or not at all; and times its frontier
+        (:meth:`_frontier`)."""
         weights = np.array(
             [
-                self._robust_weight(e) / self.cell_runs.get(self.cell_of.get(e, ()), 1)
+                self._robust_weight(e)
+                * self._frontier(e)
+                / self.cell_runs.get(self.cell_of.get(e, ()), 1)
                 for e in elites
             ]
         )
         return int(rng.choice(len(elites), p=weights / weights.sum()))
+
+    def _frontier(self, run_id: int) -> float:
+        """:data:`FRONTIER_FLOOR` + the share of the variants the targeted operators can aim
+        at from the elite's variant (:func:`neighbours`) that no run has shown yet: a parent
+        all of whose neighbours are known gives children aimed at nothing new."""
+        key = self.variant_of.get(run_id)
+        if key is None:
+            return 1.0
+        targets = {v for op in TARGETED for v in neighbours(key, op).values()}
+        unseen = sum(v not in self.variants_seen for v in targets)
+        return FRONTIER_FLOOR + unseen / len(targets)
 
     def _robust_weight(self, run_id: int) -> float:
         key = self.variant_of.get(run_id)
