@@ -19,6 +19,8 @@ import pytest
 
 import sitgen
 from sitgen import _core
+from sitgen.execution.jobs import build_job
+from sitgen.generation.genome import fresh
 from sitgen.generation.mutation import (
     APPROACHES,
     CONTEXTS,
@@ -35,10 +37,17 @@ from sitgen.generation.mutation import (
     extended,
     focus_peer,
     mutate,
+    neighbours,
 )
-from sitgen.execution.jobs import build_job
-from sitgen.generation.genome import fresh
-from sitgen.generation.search import BATCH, INITIAL, LOCAL, Archive, SearchPlan, run_search
+from sitgen.generation.search import (
+    BATCH,
+    FRONTIER_FLOOR,
+    INITIAL,
+    LOCAL,
+    Archive,
+    SearchPlan,
+    run_search,
+)
 from sitgen.store import Store
 from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import copies, copy_class, copy_jobs
@@ -508,6 +517,22 @@ def test_curiosity_prefers_the_way_that_found_new_robust_variants() -> None:
         "fresh",
     )
     assert archive._arm(rng, {"approach_peer", *local}, False, "unconfirmed") == "reshape_terrain"
+
+
+def test_parents_whose_neighbouring_variants_are_all_known_are_drawn_seldom() -> None:
+    archive = Archive(spec_of(), 0, SearchPlan("mutation", ("failure_class", "variant")))
+    known, open_ = "drove_into_wall/no_peer/corridor", "turned_into_wall/head_on/gap"
+    archive.variant_of = {1: known, 2: open_}
+    archive.variants_seen = {v for op in TARGETED for v in neighbours(known, op).values()} | {
+        known,
+        open_,
+    }
+    assert archive._frontier(1) == pytest.approx(FRONTIER_FLOOR)
+    assert archive._frontier(2) == pytest.approx(FRONTIER_FLOOR + 1.0)
+    rng = np.random.default_rng(0)
+    picks = Counter(archive._novel([1, 2], rng) for _ in range(600))
+    # Same cell runs, no screen: weights 0.1 against 1.1.
+    assert 0 < picks[0] < 0.15 * 600 < picks[1]
 
 
 def test_the_screen_tests_a_variant_on_two_runs_at_most_and_never_once_confirmed() -> None:

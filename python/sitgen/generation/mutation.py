@@ -59,7 +59,12 @@ drawn with a fixed chance by the search (``sitgen.generation.search``'s ``CROWD_
 - :func:`extended`: the agent's mission goes on past its goal, planned by the core as the
   generator plans a route (``continued_route``: goals on the dilated map, A*, RDP, until the
   continuation is ``min_route_length_m`` long), so a child drives longer and more winding
-  routes than its parent.
+  routes than its parent (the search applies it to a share of its fresh jobs as well).
+
+:func:`cut_past_failure` ends a child's mission :data:`KEPT_PAST` waypoint past the route leg
+nearest where its parent's failure began (before any stretch): what the parent drove after that
+cannot change the encounter the child aims at, and a later, more severe failure there (the run's
+failure is its most severe class) would hide the variant the child was made to show.
 
 Every child is checked as a shrink's candidates are (the core's ``shrink_check``: a valid
 situation, every robot starting clear, peer legs clear on the dilated map); an operator that

@@ -569,9 +569,10 @@ class Archive:
     def _ask_mutation(self, generation: int) -> list[Child]:
         """The mutation strategy: each child is a fresh job or one situation operator away
         from an elite, the choice a curious one (:meth:`_arm`); elites drawn by novelty (of the
-        target class's cells, once there are any). Generation 0 is the campaign's first jobs,
-        or the ``--like`` run and mutants of it (no fresh jobs in a directed search from
-        ``--like``)."""
+        target class's cells, once there are any) and frontier. Generation 0 is the campaign's
+        first jobs (:meth:`_fresh`: some stretched), or the ``--like`` run and mutants of it (no
+        fresh jobs in a directed search from ``--like``). A child's mission ends a waypoint past
+        where its parent failed (:func:`cut_past_failure`), then may go on anew."""
         like = self.plan.like
         elites = self.elites()
         if self.screen is not None:
