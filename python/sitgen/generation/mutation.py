@@ -234,8 +234,8 @@ def cut_past_failure(child: str, parent: Parent) -> str:
     key = parent.variant
     if parent.failure_pose is None or key is None or key.startswith(f"{NOT_COMPLETED}/"):
         return child
-    waypoints = json.loads(child)["robots"][0]["waypoints"]
-    route = _route(json.loads(child)["robots"][0])
+    agent = json.loads(child)["robots"][0]
+    waypoints, route = agent["waypoints"], _route(agent)
     place = parent.failure_pose[:2]
     leg = min(range(len(route) - 1), key=lambda i: _segment_distance(place, route[i], route[i + 1]))
     # Leg i ends at waypoint i.

@@ -177,21 +177,21 @@ CLEARANCE_STEP_M = 0.5 / CLEARANCE_CELLS
 
 
 STRETCH_SHARE = 0.25
-"""Share of an undirected mutation search's children whose mission also goes on past its goal
-(:func:`sitgen.generation.mutation.extended`). The operators change the walls and peers round
-the place a parent failed at, so without it no child drives a route longer or more winding
+"""Share of a mutation search's children (not one from ``--like``) whose mission also goes on past
+its goal (:func:`sitgen.generation.mutation.extended`). The operators change the walls and peers
+round the place a parent failed at, so without it no child drives a route longer or more winding
 than its parent's, and what shows only late in a long mission (a heading that drifts with the
 turning done, a long route's bookkeeping) is met no more often than in fresh jobs."""
 FRESH_STRETCH_SHARE = 0.5
-"""Share of an undirected mutation search's fresh jobs whose mission also goes on past its
-goal, as :data:`STRETCH_SHARE` does for children. A fresh job aims at no variant, so a later,
-more severe failure in the longer mission hides nothing it was made to show, while the
-longer mission meets what shows only late (a heading that drifts with the turning done, a
-long route's bookkeeping, a route that doubles back)."""
+"""Share of a mutation search's fresh jobs (one from ``--like`` has none) whose mission also
+goes on past its goal, as :data:`STRETCH_SHARE` does for children. A fresh job aims at no
+variant, so a later, more severe failure in the longer mission hides nothing it was made to
+show, while the longer mission meets what shows only late (a heading that drifts with the
+turning done, a long route's bookkeeping, a route that doubles back)."""
 CROWD_SHARE = 0.25
-"""Chance that an undirected mutation search's staged approach is met by a crowd, one more
-peer from each other side (``mutate``'s ``crowd``): a single staged peer never puts four
-robots in the agent's view at once."""
+"""Chance that a mutation search's staged approach (not one from ``--like``) is met by a crowd, one
+more peer from each other side (``mutate``'s ``crowd``): a single staged peer never puts four robots
+in the agent's view at once."""
 
 MAX_BUDGET = 1_000_000
 
@@ -627,8 +627,8 @@ class Archive:
         return children
 
     def _fresh(self, index: int) -> Child:
-        """Run ``index``'s fresh job for an undirected mutation search: the campaign's job,
-        its mission going on past its goal in :data:`FRESH_STRETCH_SHARE` of them (the job
+        """Run ``index``'s fresh job for a mutation search not from ``--like``: the campaign's
+        job, its mission going on past its goal in :data:`FRESH_STRETCH_SHARE` of them (the job
         as it is where it cannot be made here or no route goes on)."""
         genome = fresh(self.spec, self.seed, index)
         plain = Child(index, genome, (), "fresh")
@@ -738,7 +738,8 @@ class Archive:
     def _frontier(self, run_id: int) -> float:
         """:data:`FRONTIER_FLOOR` + the share of the variants the targeted operators can aim
         at from the elite's variant (:func:`neighbours`) that no run has shown yet: a parent
-        all of whose neighbours are known gives children aimed at nothing new."""
+        all of whose neighbours are known gives children aimed at nothing new (1 for a run
+        that did not fail: it has no variant to aim from)."""
         key = self.variant_of.get(run_id)
         if key is None:
             return 1.0
