@@ -36,6 +36,7 @@ later generation draws each ``[vary]`` gene level by level, in proportion to the
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import time
@@ -743,7 +744,7 @@ class Archive:
         key = self.variant_of.get(run_id)
         if key is None:
             return 1.0
-        targets = {v for op in TARGETED for v in neighbours(key, op).values()}
+        targets = _aimable(key)
         unseen = sum(v not in self.variants_seen for v in targets)
         return FRONTIER_FLOOR + unseen / len(targets)
 
@@ -854,6 +855,13 @@ class SearchResult:
     wall_s: float
     cells: int
     qd_score: float
+
+
+@functools.cache
+def _aimable(key: str) -> frozenset[str]:
+    """The variants the targeted operators can aim at from variant ``key`` (fixed per key, and
+    asked for every elite at every draw of a parent)."""
+    return frozenset(v for op in TARGETED for v in neighbours(key, op).values())
 
 
 def _job(spec: CampaignSpec, child: Child) -> Job:
