@@ -18,7 +18,9 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
   locality (of its children, the share that failed with their parent's failure class), the
   share that failed with their parent's very variant (nothing new), and, for it and fresh runs,
   the share of runs that showed a failure variant new to the store and the share that
-  confirmed a new robust variant;
+  confirmed a new robust variant; and for a targeted operator, of its failing children aimed at
+  a target, the share whose failure began in the interaction, context or both aimed at (*aim
+  met*);
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
@@ -46,6 +48,7 @@ from typing import Any
 from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.fault_report import report_from
 from sitgen.generation.faults import is_harder, run_faults
+from sitgen.generation.mutation import target_of
 from sitgen.generation.search import SearchPlan, run_search
 from sitgen.store import Store, unpack_json
 from sitgen.triage.variants import Tally, robust_variants, variant
@@ -60,7 +63,8 @@ def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     """Per way of making a run (``fresh`` or an operator), over the runs ``tally`` walked:
     [runs, children with their parent's failure class, runs showing a failure variant not seen
     before in the store, children failing with their parent's very variant, runs that
-    confirmed a new robust variant]."""
+    confirmed a new robust variant, failing children aimed at a target, those whose failure
+    began where they were aimed (:func:`target_of`)]."""
     with Store(db) as store:
         rows = store.db.execute(
             "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
@@ -74,13 +78,17 @@ def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     for run_id, cls, parents, genes, coverage in rows:
         key = variant(cls, unpack_json(coverage) if coverage else None)
         variants[run_id] = key
-        counts = out.setdefault(json.loads(genes)["operator"], [0, 0, 0, 0, 0])
+        how = json.loads(genes)
+        counts = out.setdefault(how["operator"], [0] * 7)
         counts[0] += 1
         first = json.loads(parents)[:1] if parents else []
         counts[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
         counts[2] += key is not None and key not in seen
         counts[3] += key is not None and bool(first) and variants.get(first[0]) == key
         counts[4] += run_id in confirmed
+        if key is not None and how.get("aim") is not None:
+            counts[5] += 1
+            counts[6] += target_of(key, how["operator"]) == how["aim"]
         if key is not None:
             seen.add(key)
     return out
@@ -153,7 +161,7 @@ def main() -> None:
                 }
                 if strategy == "mutation":
                     for operator, figures in locality(db, tally).items():
-                        counts = kept.setdefault(operator, [0, 0, 0, 0, 0])
+                        counts = kept.setdefault(operator, [0] * 7)
                         for i, figure in enumerate(figures):
                             counts[i] += figure
                 if with_faults and strategy in ("mutation", "random"):
@@ -260,16 +268,18 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
             f"\nmutation, by way of making a run, over the runs within {budgets[-1]}"
             " evaluations: runs; children failing with their parent's failure class"
             " (locality); runs showing a variant new to the store; children failing with their"
-            " parent's very variant; runs that confirmed a new robust variant"
+            " parent's very variant; runs that confirmed a new robust variant; failing children"
+            " aimed at a target whose failure began where they were aimed (aim met)"
         )
         rows = sorted(out["locality"].items(), key=lambda kv: -kv[1][0])
-        for operator, (n, same, new, repeat, robust) in rows:
+        for operator, (n, same, new, repeat, robust, aimed, met) in rows:
             fresh = operator == "fresh"
             local = f"{same:>5} ({same / n:.0%})" if not fresh else f"{'-':>11}"
             again = f"{repeat:>5} ({repeat / n:.0%})" if not fresh else f"{'-':>11}"
+            hit = f"{met:>5} of {aimed:<5} ({met / aimed:.0%})" if aimed else ""
             print(
                 f"  {operator:20} {n:>5} {local:>11} {new:>5} ({new / n:.0%}) {again:>11}"
-                f" {robust:>5} ({robust / n:.0%})"
+                f" {robust:>5} ({robust / n:.0%}) {hit}"
             )
 
 

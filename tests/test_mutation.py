@@ -38,6 +38,7 @@ from sitgen.generation.mutation import (
     focus_peer,
     mutate,
     neighbours,
+    target_of,
 )
 from sitgen.generation.search import (
     BATCH,
@@ -48,7 +49,7 @@ from sitgen.generation.search import (
     SearchPlan,
     run_search,
 )
-from sitgen.store import Store
+from sitgen.store import Store, unpack_json
 from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import copies, copy_class, copy_jobs
 from sitgen.triage.variants import Screen, robust_variants, variant, variants_of
@@ -542,3 +543,32 @@ def test_the_screen_tests_a_variant_on_two_runs_at_most_and_never_once_confirmed
     assert not screen.wants("a/no_peer/open")
     screen.robust["b/head_on/gap"] = 7
     assert not screen.wants("b/head_on/gap")
+
+
+@pytest.mark.parametrize("operator", TARGETED)
+def test_a_target_is_where_the_variant_it_makes_stands(operator: str) -> None:
+    key = "drove_into_wall/head_on/corridor"
+    for target, made in neighbours(key, operator).items():
+        assert target_of(made, operator) == target
+    assert target_of(key, operator) not in neighbours(key, operator)
+
+
+def test_a_targeted_child_keeps_the_target_it_was_aimed_at(tmp_path: Path) -> None:
+    db = tmp_path / "aims.db"
+    run_search(spec_of(), db, seed=2, budget=INITIAL + 3 * BATCH, plan=SearchPlan("mutation"))
+    with Store(db) as store:
+        rows = store.db.execute(
+            "SELECT id, parents, genes, failure_class, coverage FROM runs ORDER BY id"
+        ).fetchall()
+    variants = {r[0]: variant(r[3], unpack_json(r[4]) if r[4] else None) for r in rows}
+    aimed = 0
+    for _, parents, genes, _, _ in rows:
+        how = json.loads(genes)
+        if how["operator"] not in TARGETED:
+            assert "aim" not in how
+            continue
+        if "aim" in how:
+            parent = json.loads(parents)[0]
+            assert how["aim"] in neighbours(variants[parent], how["operator"])
+            aimed += 1
+    assert aimed, "no targeted child was aimed"

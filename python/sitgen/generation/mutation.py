@@ -412,6 +412,19 @@ def neighbours(key: str | None, operator: str) -> dict[str, str]:
     return {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
 
 
+def target_of(key: str, operator: str) -> str:
+    """The target of a targeted ``operator`` that variant ``key`` stands at: its interaction
+    (``approach_peer``), its terrain context (``reshape_terrain``), or both
+    (``reshape_and_approach``, ``INTERACTION/CONTEXT``) — what a child aimed there should
+    show."""
+    _, interaction, context = key.split("/")
+    if operator == "approach_peer":
+        return interaction
+    if operator == "reshape_terrain":
+        return context
+    return f"{interaction}/{context}"
+
+
 def _other_target(parent: Parent, operator: str, rng: np.random.Generator) -> str:
     """A target other than the parent's own interaction or context."""
     others = list(neighbours(parent.variant, operator))

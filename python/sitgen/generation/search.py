@@ -424,9 +424,14 @@ class Child:
     run_seed: int | None = None
     """Its sensor-noise seed where it is not the genome's (a directed search's: the run it
     started from)."""
+    aim: str | None = None
+    """A targeted operator's target (interaction, terrain context or both; None: drawn by
+    the operator), kept so that whether children meet what they were aimed at can be
+    counted (``make bench-search``)."""
 
     def stored_genes(self, spec: CampaignSpec) -> dict[str, Any]:
-        return {"operator": self.operator, **self.genome.as_dict(spec)}
+        aim = {} if self.aim is None else {"aim": self.aim}
+        return {"operator": self.operator, **aim, **self.genome.as_dict(spec)}
 
 
 @dataclass(frozen=True)
@@ -598,7 +603,7 @@ class Archive:
                 assert self.parent_of is not None
                 parent = self.parent_of(parent_id)
                 genome = self.genomes[parent_id]
-            child, operator = None, "fresh"
+            child, operator, aim = None, "fresh", None
             tried: set[str] = set()
             context = self._parent_context(parent.variant)
             # A directed search has no fresh jobs to fall back on: it tries every operator.
@@ -624,7 +629,8 @@ class Archive:
                 if like is None and rng.random() < STRETCH_SHARE:
                     child = extended(child, rng)
                 parents = (parent_id,) if parent_id >= 0 else ()
-                children.append(Child(index, genome, parents, operator, child, run_seed))
+                aimed = aim if operator in TARGETED else None
+                children.append(Child(index, genome, parents, operator, child, run_seed, aimed))
         return children
 
     def _fresh(self, index: int) -> Child:
