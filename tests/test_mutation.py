@@ -545,12 +545,21 @@ def test_the_screen_tests_a_variant_on_two_runs_at_most_and_never_once_confirmed
     assert not screen.wants("b/head_on/gap")
 
 
-@pytest.mark.parametrize("operator", TARGETED)
-def test_a_target_is_where_the_variant_it_makes_stands(operator: str) -> None:
+def test_a_target_is_the_interaction_context_or_both_an_operator_changes() -> None:
     key = "drove_into_wall/head_on/corridor"
-    for target, made in neighbours(key, operator).items():
-        assert target_of(made, operator) == target
-    assert target_of(key, operator) not in neighbours(key, operator)
+    assert target_of(key, "approach_peer") == "head_on"
+    assert target_of(key, "reshape_terrain") == "corridor"
+    assert target_of(key, "reshape_and_approach") == "head_on/corridor"
+    assert neighbours(key, "approach_peer") == {
+        i: f"drove_into_wall/{i}/corridor" for i in APPROACHES if i != "head_on"
+    }
+    assert neighbours(key, "reshape_terrain") == {
+        c: f"drove_into_wall/head_on/{c}" for c in CONTEXTS if c != "corridor"
+    }
+    both = neighbours(key, "reshape_and_approach")
+    assert len(both) == (len(APPROACHES) - 1) * (len(CONTEXTS) - 1)
+    assert both["stopped/gap"] == "drove_into_wall/stopped/gap"
+    assert not any(t.startswith("head_on/") or t.endswith("/corridor") for t in both)
 
 
 def test_a_targeted_child_keeps_the_target_it_was_aimed_at(tmp_path: Path) -> None:

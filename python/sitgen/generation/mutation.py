@@ -399,17 +399,15 @@ def neighbours(key: str | None, operator: str) -> dict[str, str]:
     other interaction (``approach_peer``), terrain context (``reshape_terrain``), or
     ``INTERACTION/CONTEXT`` with both other (``reshape_and_approach``)."""
     cls, interaction, context = (key or "//").split("/")
+    interactions = [i for i in APPROACHES if i != interaction]
+    contexts = [c for c in CONTEXTS if c != context]
     if operator == "approach_peer":
-        return {i: f"{cls}/{i}/{context}" for i in APPROACHES if i != interaction}
-    if operator == "reshape_and_approach":
-        return {
-            f"{i}/{c}": f"{cls}/{i}/{c}"
-            for i in APPROACHES
-            if i != interaction
-            for c in CONTEXTS
-            if c != context
-        }
-    return {c: f"{cls}/{interaction}/{c}" for c in CONTEXTS if c != context}
+        made = [f"{cls}/{i}/{context}" for i in interactions]
+    elif operator == "reshape_and_approach":
+        made = [f"{cls}/{i}/{c}" for i in interactions for c in contexts]
+    else:
+        made = [f"{cls}/{interaction}/{c}" for c in contexts]
+    return {target_of(v, operator): v for v in made}
 
 
 def target_of(key: str, operator: str) -> str:
