@@ -22,16 +22,21 @@ from sitgen import _core
 from sitgen.execution.jobs import build_job
 from sitgen.generation.genome import fresh
 from sitgen.generation.mutation import (
+    AGENT_M_S,
     APPROACHES,
     CONTEXTS,
+    IN_RANGE_M,
     KEPT_PAST,
     MEET_BACK_M,
     OPERATORS,
     PEER_CLEAR_M,
     POINT_CLEAR_M,
+    SPEED_RANGE,
+    STAGED_MIN_M_S,
     START_S_MAX,
     TARGETED,
     Parent,
+    Track,
     _Ground,
     cut_past_failure,
     extended,
@@ -69,8 +74,15 @@ def parent() -> Parent:
     )
     record = sitgen.run(situation, time_limit=200.0)
     assert record.coverage is not None and record.coverage["failure_cell"] is not None
-    parent = Parent.of(situation, record.coverage, record.failure)
+    parent = Parent.of(
+        situation,
+        record.coverage,
+        record.failure,
+        record.trajectory,
+        record.time_s / record.steps,
+    )
     assert parent.failure_pose is not None and parent.failure_s is not None
+    assert parent.track is not None
     assert record.failure is not None
     assert parent.variant == variant(record.failure["class"], record.coverage)
     return parent
@@ -150,6 +162,56 @@ def test_approach_peer_sends_the_peer_through_the_failure_in_the_interaction_ask
         (mx, my) = robot["waypoints"][0]
         assert math.hypot(mx - x, my - y) <= MEET_BACK_M + 1e-9
         assert (mx - x) * math.cos(heading) + (my - y) * math.sin(heading) <= 1e-9
+
+
+def test_a_track_says_when_the_agent_came_where() -> None:
+    # 0.2 m/s along x for 30 s, back to the start and out again.
+    out = np.stack([np.linspace(0, 6, 301), np.zeros(301)], axis=1)
+    track = Track(np.concatenate([out, out[::-1], out]), 0.1)
+    assert track.arrival_s((2.0, 0.0)) == pytest.approx(8.5, abs=0.11)  # within 0.3 m
+    assert track.arrival_s((2.0, 5.0)) == pytest.approx(10.0)  # nearest, never within reach
+    # In range of (6, 1) from x = 6 - sqrt(3.5² - 1) on; the pass out and back ended by 70 s.
+    assert track.in_range_s((6.0, 1.0), 30.0) == pytest.approx(13.3, abs=0.1)
+    assert track.in_range_s((6.0, 1.0), 89.0) == pytest.approx(60.2 + 13.3, abs=0.1)
+    assert track.in_range_s((6.0, 1.0), 40.0) == pytest.approx(13.3, abs=0.1)
+    assert track.in_range_s((60.0, 0.0), 89.0) is None
+    assert track.speed_m_s(20.0) == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("target", ["head_on", "crossing_left", "crossing_right"])
+def test_a_staged_peer_is_timed_by_where_the_parents_agent_was(parent: Parent, target: str) -> None:
+    track = parent.track
+    assert track is not None
+    for seed in range(6):
+        child = mutate(parent, "approach_peer", np.random.default_rng(seed), target)
+        assert child is not None
+        robot, _, _ = _staged_peer(parent, child)
+        params, start = robot["controller"]["params"], robot["start"]
+        meeting = tuple(robot["waypoints"][0])
+        leg_m = math.hypot(meeting[0] - start["x_m"], meeting[1] - start["y_m"])
+        meet_s = track.arrival_s(meeting)
+        seen_s = track.in_range_s((start["x_m"], start["y_m"]), meet_s)
+        # It reaches the meeting when the agent did (or as soon as it can), having set off
+        # before the agent came in range of where it waited, unless that would have it creep
+        # slower than it reads as moving or drive faster than a peer does.
+        arrives_s = params["start_s"] + leg_m / params["speed_m_s"]
+        assert arrives_s == pytest.approx(meet_s, abs=0.01) or params["start_s"] == 0
+        if STAGED_MIN_M_S < params["speed_m_s"] < SPEED_RANGE[1]:
+            assert seen_s is None or params["start_s"] <= seen_s
+
+
+def test_a_parent_without_a_track_is_timed_for_a_cruising_agent(parent: Parent) -> None:
+    blind = dataclasses.replace(parent, track=None)
+    assert parent.failure_s is not None
+    child = mutate(blind, "approach_peer", np.random.default_rng(3), "head_on")
+    assert child is not None
+    robot, _, _ = _staged_peer(parent, child)
+    params, start = robot["controller"]["params"], robot["start"]
+    meeting = robot["waypoints"][0]
+    leg_m = math.hypot(meeting[0] - start["x_m"], meeting[1] - start["y_m"])
+    arrives_s = params["start_s"] + leg_m / params["speed_m_s"]
+    assert arrives_s == pytest.approx(parent.failure_s, abs=0.01)
+    assert parent.failure_s - params["start_s"] >= (leg_m + IN_RANGE_M) / AGENT_M_S
 
 
 def test_a_peer_sent_head_on_meets_the_agent_head_on(parent: Parent) -> None:

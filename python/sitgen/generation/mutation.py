@@ -30,10 +30,14 @@ parent's failure the search has not seen yet (drawn at random when none is given
   (faster than the agent), overtaken (slow, ahead, going the same way), or stopped in the way.
   It starts up to ``APPROACH_M`` from there, as far as the ground is clear, on a straight leg
   through it, and departs (``straight``'s ``start_s``) early enough to be moving when the agent
-  comes in range, at the speed that brings it there about when the failure began; a stopped one
-  never departs. The meeting point is the first one back along the agent's way (up to
-  ``MEET_BACK_M``) with room for the peer to come from its side and go on. A situation without
-  peers gets one, of the agent's build under the peers' controller;
+  comes in range, at the speed that brings it there when the agent came there; a stopped one
+  never departs. Both times are read from the parent's :class:`Track` (the agent's run is its
+  parent's until it sees the peer, and it is slow where it fails: timed for a cruising
+  ``AGENT_M_S`` instead, half the staged peers stood in view as the agent came by, and most of
+  the children that missed their aim met a standing peer). The meeting point is the first one
+  back along the agent's way (up to ``MEET_BACK_M``) with room for the peer to come from its
+  side and go on. A situation without peers gets one, of the agent's build under the peers'
+  controller;
 - ``reshape_terrain``: the walls round where the failure began are redrawn to make another
   terrain context (:data:`CONTEXTS`): two walls along the way the agent faced or its route
   leg there (``corridor``), a narrow opening across it (``gap``), walls on three sides
@@ -88,7 +92,7 @@ import itertools
 import json
 import math
 from collections.abc import Collection, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -137,6 +141,17 @@ built-in agents; a guess: the encounter need only be about right)."""
 IN_RANGE_M = 3.5
 """Distance, centre to centre, at which the coverage observer starts an encounter (its 2 m
 footprint clearance and two robots' reach)."""
+ARRIVED_M = 0.3
+"""How near a point a parent's agent must have come to have been there (:class:`Track`)."""
+SPEED_WINDOW_S = 10.0
+"""Time over which the agent's speed where it met its parent's failure is measured."""
+MOVING_M_S = 0.05
+"""The least speed at which the coverage observer reads a peer as moving (the core's
+``MOVING_M_S``)."""
+STAGED_MIN_M_S = 2 * MOVING_M_S
+"""Least speed of a staged peer that drives to the meeting: one the agent came within range of
+long before the meeting sets off late, standing in view till then, rather than creeping along
+too slowly to read as moving."""
 MEET_BACK_M = 1.5
 """How far back along the agent's way to the failure a staged encounter may be placed."""
 PEER_CLEAR_M = 0.6
@@ -188,16 +203,22 @@ class Parent:
     """Its failure's variant (``CLASS/INTERACTION/CONTEXT``)."""
     failure_s: float | None = None
     """When its failure began, seconds into the run."""
+    track: Track | None = field(default=None, compare=False)
+    """Where its agent drove up to where its failure began (None: not known; a staged encounter
+    is then timed for :data:`AGENT_M_S`)."""
 
     @staticmethod
     def of(
         situation: Situation,
         coverage: dict[str, Any] | None,
         failure: dict[str, Any] | None = None,
+        trajectory: npt.NDArray[np.floating[Any]] | None = None,
+        dt_s: float | None = None,
     ) -> Parent:
         """``situation`` as a parent, with where its run failed from the run's coverage record
         (``failure_at``; ``failure_cell`` for its variant) and when from its failure
-        (``class``, ``features.start_s``)."""
+        (``class``, ``features.start_s``); ``trajectory`` (the store's: every robot's pose at
+        every step, ``dt_s`` apart) gives its agent's track."""
         coverage = coverage or {}
         at = coverage.get("failure_at")
         pose = (
@@ -207,12 +228,56 @@ class Parent:
         )
         failure = failure or {}
         start_s = (failure.get("features") or {}).get("start_s")
-        return Parent(
-            situation,
-            pose,
-            variant(failure.get("class"), coverage),
-            None if start_s is None else float(start_s),
-        )
+        failure_s = None if start_s is None else float(start_s)
+        track = None
+        if trajectory is not None and dt_s is not None and failure_s is not None and dt_s > 0:
+            steps = min(len(trajectory), math.floor(failure_s / dt_s) + 1)
+            track = Track(np.asarray(trajectory[:steps, 0, :2], dtype=np.float64), dt_s)
+        return Parent(situation, pose, variant(failure.get("class"), coverage), failure_s, track)
+
+
+@dataclass(frozen=True)
+class Track:
+    """A parent's agent's positions (x, y, metres) every ``dt_s`` from the start of its run to
+    where its failure began: when it came where, so that a staged encounter is timed by where
+    the agent really was rather than by a typical speed (it is slowest where it fails: a median
+    0.14 m/s over the 20 s before a failure in a search's runs, against a cruising 0.4)."""
+
+    positions: npt.NDArray[np.float64]
+    dt_s: float
+
+    def arrival_s(self, point: tuple[float, float]) -> float:
+        """When the agent first came within :data:`ARRIVED_M` of ``point`` (or, where it never
+        did, when it came nearest)."""
+        near = self._distances(point)
+        within = np.flatnonzero(near <= ARRIVED_M)
+        step = int(within[0]) if within.size else int(np.argmin(near))
+        return step * self.dt_s
+
+    def in_range_s(self, point: tuple[float, float], until_s: float) -> float | None:
+        """When the agent last came within :data:`IN_RANGE_M` of ``point`` before ``until_s``
+        (an encounter ends when the two part, so an earlier pass does not count; None: it
+        was not within range by then)."""
+        steps = math.floor(until_s / self.dt_s) + 1
+        within = self._distances(point)[:steps] <= IN_RANGE_M
+        if not within.any():
+            return None
+        outside = np.flatnonzero(~within[: int(np.flatnonzero(within)[-1]) + 1])
+        return float(outside[-1] + 1 if outside.size else 0) * self.dt_s
+
+    def speed_m_s(self, until_s: float) -> float:
+        """The agent's mean speed (path length over time) over the :data:`SPEED_WINDOW_S`
+        before ``until_s``."""
+        last = min(len(self.positions) - 1, math.floor(until_s / self.dt_s))
+        first = max(0, last - round(SPEED_WINDOW_S / self.dt_s))
+        if last <= first:
+            return 0.0
+        legs = np.diff(self.positions[first : last + 1], axis=0)
+        return float(np.hypot(legs[:, 0], legs[:, 1]).sum()) / ((last - first) * self.dt_s)
+
+    def _distances(self, point: tuple[float, float]) -> npt.NDArray[np.float64]:
+        d = self.positions - np.asarray(point, dtype=np.float64)
+        return np.asarray(np.hypot(d[:, 0], d[:, 1]), dtype=np.float64)
 
 
 def extended(child: str, rng: np.random.Generator) -> str:
@@ -497,19 +562,7 @@ def _approach_peer(
         return None
     beyond = float(rng.uniform(ONWARD_M, onward))
     waypoints.append([on[0] + beyond * math.cos(course), on[1] + beyond * math.sin(course)])
-    # Timing: the peer sets off before the agent comes within range of where it waits (else
-    # they meet with the peer standing), at the speed that brings it to the place when the
-    # agent's failure began.
-    failure_s = parent.failure_s or 0.0
-    start_s = max(0.0, failure_s - (distance + IN_RANGE_M) / AGENT_M_S - float(rng.uniform(0, 2)))
-    travel_s = max(failure_s - start_s, 1e-3)
-    if target == "overtaking":
-        speed = float(rng.uniform(SPEED_RANGE[0] / 5, AGENT_M_S / 2))
-    elif target == "from_behind":
-        speed = float(rng.uniform(2 * AGENT_M_S, SPEED_RANGE[1]))
-        start_s = max(0.0, failure_s - distance / (speed - AGENT_M_S))
-    else:
-        speed = distance / travel_s
+    start_s, speed = _timing(parent, (x, y), (sx, sy), distance, target, rng)
     params["speed_m_s"] = min(SPEED_RANGE[1], max(SPEED_RANGE[0] / 5, speed))
     params["start_s"] = START_S_MAX if target == "stopped" else round(start_s, 3)
     robot["controller"]["params"] = params
@@ -517,6 +570,50 @@ def _approach_peer(
     robot["waypoints"] = waypoints
     robot["at_end"] = "stop"
     return robots, occupied
+
+
+def _timing(
+    parent: Parent,
+    meeting: tuple[float, float],
+    start: tuple[float, float],
+    distance: float,
+    target: str,
+    rng: np.random.Generator,
+) -> tuple[float, float]:
+    """When a peer staged from ``start``, ``distance`` from ``meeting``, departs and how fast
+    it drives (seconds into the run, m/s): it sets off before the agent comes within range of
+    where it waits (else they meet with the peer standing) and reaches the meeting when the
+    agent does — by the parent's track where it has one (the agent's run is its parent's until
+    it sees the peer), else for an agent cruising at :data:`AGENT_M_S` that reached it when
+    the failure began."""
+    failure_s = parent.failure_s or 0.0
+    track = parent.track
+    if track is None:
+        meet_s, agent_m_s = failure_s, AGENT_M_S
+        seen_s = failure_s - (distance + IN_RANGE_M) / AGENT_M_S
+    else:
+        meet_s = track.arrival_s(meeting)
+        agent_m_s = max(track.speed_m_s(meet_s), STAGED_MIN_M_S)
+        in_range = track.in_range_s(start, meet_s)
+        seen_s = meet_s - (distance + IN_RANGE_M) / agent_m_s if in_range is None else in_range
+    start_s = max(0.0, seen_s - float(rng.uniform(0, 2)))
+    if target == "overtaking":
+        # Slower than the agent, and still moving as it reads to the observer.
+        top = AGENT_M_S / 2 if track is None else max(agent_m_s / 2, STAGED_MIN_M_S)
+        low = SPEED_RANGE[0] / 5 if track is None else 1.2 * MOVING_M_S
+        return start_s, float(rng.uniform(low, top))
+    if target == "from_behind":
+        speed = float(rng.uniform(2 * agent_m_s, SPEED_RANGE[1]))
+        if track is None:
+            return max(0.0, failure_s - distance / (speed - AGENT_M_S)), speed
+        # It catches the agent up at the meeting.
+        return max(0.0, meet_s - distance / speed), speed
+    speed = distance / max(meet_s - start_s, 1e-3)
+    if track is not None and not STAGED_MIN_M_S <= speed <= SPEED_RANGE[1]:
+        # Too slow to read as moving, or faster than a peer drives: it stands in view a while.
+        speed = min(max(speed, STAGED_MIN_M_S), SPEED_RANGE[1])
+        start_s = max(0.0, meet_s - distance / speed)
+    return start_s, speed
 
 
 @dataclass(frozen=True)

@@ -997,11 +997,18 @@ def stored_parent(store: Store, run_id: int) -> tuple[dict[str, Any], Parent, di
         situation = Situation(row["situation"], check_start=False)
     else:
         situation = regenerate(row)
-    coverage, failure = store.db.execute(
-        "SELECT coverage, failure FROM runs WHERE id = ?", (run_id,)
+    coverage, failure, time_s, steps = store.db.execute(
+        "SELECT coverage, failure, time_s, steps FROM runs WHERE id = ?", (run_id,)
     ).fetchone()
     record: dict[str, Any] = unpack_json(coverage) if coverage else {}
-    return row, Parent.of(situation, record, json.loads(failure) if failure else None), record
+    parent = Parent.of(
+        situation,
+        record,
+        json.loads(failure) if failure else None,
+        store.trajectory(run_id) if failure else None,
+        time_s / steps if steps else None,
+    )
+    return row, parent, record
 
 
 def _check_stored(store: Store, children: list[Child], views: list[dict[str, Any]]) -> None:
