@@ -50,7 +50,7 @@ def runs(db: Path) -> list[tuple[Any, ...]]:
 @pytest.fixture(scope="module")
 def ros2_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("ros2")
-    spec = example_campaign(folder, 50, 40.0)
+    spec = example_campaign(folder, 20, 40.0)
     for name, workers in (("two", "2"), ("one", "1"), ("again", "2")):
         args = ("--db", str(folder / f"{name}.db"), "--workers", workers, "--reruns", "0")
         done = run_cli("campaign", str(spec), *args, cwd=ROOT)
@@ -62,7 +62,7 @@ def test_a_ros2_node_drives_a_campaign_the_same_on_1_and_2_workers_and_on_a_repe
     ros2_campaign: Path,
 ) -> None:
     two = runs(ros2_campaign / "two.db")
-    assert len(two) == 50
+    assert len(two) == 20
     assert runs(ros2_campaign / "one.db") == two
     assert runs(ros2_campaign / "again.db") == two
     outcomes = {r[2] for r in two}
