@@ -2,12 +2,12 @@
 
 For each of 5 seeds, the paper's campaign spec is searched with every strategy — ``mutation``
 (situation operators, archive over failure class × variant), ``map-elites`` (spec genes and
-seeds), ``coverage`` (coverage-guided) and ``random`` (the campaign's own jobs) — for the
-largest budget of runs; then the same yardstick is applied to every store
-(:func:`sitgen.triage.variants.robust_variants`): its runs in the order they were made, and
-perturbed copies of each failing run whose variant (class × interaction × terrain context) is
-new, every copy counted against the same budget. At budgets of 250, 500 and 1000 evaluations
-(runs plus copies) it prints the median over seeds of
+seeds), ``coverage`` (coverage-guided) and ``random`` (the campaign's own jobs) — as deep
+as the largest budget's yardstick walks (:func:`deep_enough`); then the same yardstick is
+applied to every store (:func:`sitgen.triage.variants.robust_variants`): its runs in the
+order they were made, and perturbed copies of each failing run whose variant (class ×
+interaction × terrain context) is new, every copy counted against the same budget. At
+budgets of 250, 500 and 1000 evaluations (runs plus copies) it prints the median over seeds of
 
 - robust distinct failures (variants confirmed robust within the budget), and the ratio of
   each strategy's to random generation's;
@@ -20,7 +20,9 @@ new, every copy counted against the same budget. At budgets of 250, 500 and 1000
   the share of runs that showed a failure variant new to the store and the share that
   confirmed a new robust variant; and for a targeted operator, of its failing children aimed at
   a target, the share whose failure began in the interaction, context or both aimed at (*aim
-  met*);
+  met*); per operator and target, the children aimed there, aim met, and the shares showing a
+  new variant and confirming a new robust one; and the yardstick's trials by failure class
+  (how many, how many robust, the copies spent on knife-edge ones);
 
 and (``SITGEN_BENCH_SEARCH_FAULTS=1``, about 3 minutes a store) the robust kill rate of the
 harder seeded faults on the first 250 situations of the ``mutation`` and ``random`` stores
@@ -59,6 +61,31 @@ STRATEGIES = ("mutation", "map-elites", "coverage", "random")
 FAULT_SITUATIONS = 250
 
 
+def deep_enough(
+    spec: Any, db: Path, seed: int, strategy: str, budgets: list[int], least: int
+) -> tuple[Tally, int, float, float]:
+    """The yardstick on a store searched only as deep as it walks within the largest budget
+    (and at least ``least`` runs); how many runs were searched, and the seconds spent searching
+    and on the yardstick. A search's runs do not
+    depend on its budget (a budget truncates it, and a larger one resumes it), so the figures
+    are those of a search as deep as the budget; most of a store's budget goes on copies, so
+    searching to the budget would make about twice the runs the yardstick walks."""
+    largest = budgets[-1]
+    depth = max(least, largest // 2)
+    search_s = yardstick_s = 0.0
+    while True:
+        started = time.perf_counter()
+        run_search(spec, db, seed=seed, budget=depth, plan=SearchPlan(strategy))
+        search_s += time.perf_counter() - started
+        started = time.perf_counter()
+        with Store(db) as store:
+            tally = robust_variants(store, largest, budgets, workers=2)
+        yardstick_s += time.perf_counter() - started
+        if tally.runs < depth or depth >= largest:
+            return tally, depth, search_s, yardstick_s
+        depth = min(largest, depth + largest // 4)
+
+
 def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     """Per way of making a run (``fresh`` or an operator), over the runs ``tally`` walked:
     [runs, children with their parent's failure class, runs showing a failure variant not seen
@@ -92,6 +119,51 @@ def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
         if key is not None:
             seen.add(key)
     return out
+
+
+def by_aim(db: Path, tally: Tally) -> dict[str, list[int]]:
+    """Per ``OPERATOR:TARGET`` a targeted operator aimed at, over the runs ``tally`` walked:
+    [children aimed there, those whose failure began where they were aimed (aim met), those
+    showing a variant new to the store, those that confirmed a new robust variant]."""
+    with Store(db) as store:
+        rows = store.db.execute(
+            "SELECT id, failure_class, genes, coverage FROM runs ORDER BY id LIMIT ?",
+            (tally.runs,),
+        ).fetchall()
+    confirmed = set(tally.robust.values())
+    seen: set[str] = set()
+    out: dict[str, list[int]] = {}
+    for run_id, cls, genes, coverage in rows:
+        key = variant(cls, unpack_json(coverage) if coverage else None)
+        how = json.loads(genes)
+        if how.get("aim") is not None:
+            counts = out.setdefault(f"{how['operator']}:{how['aim']}", [0] * 4)
+            counts[0] += 1
+            counts[1] += key is not None and target_of(key, how["operator"]) == how["aim"]
+            counts[2] += key is not None and key not in seen
+            counts[3] += run_id in confirmed
+        if key is not None:
+            seen.add(key)
+    return out
+
+
+def trials_by_class(tally: Tally) -> dict[str, list[int]]:
+    """Per failure class, the yardstick's trials: [trials, robust, copies spent on knife-edge
+    ones]."""
+    out: dict[str, list[int]] = {}
+    for trial in tally.trials:
+        counts = out.setdefault(trial.key.split("/", 1)[0], [0] * 3)
+        counts[0] += 1
+        counts[1] += trial.robust
+        counts[2] += 0 if trial.robust else len(trial.classes)
+    return out
+
+
+def _add(into: dict[str, list[int]], figures: dict[str, list[int]]) -> None:
+    for name, counts in figures.items():
+        total = into.setdefault(name, [0] * len(counts))
+        for i, figure in enumerate(counts):
+            total[i] += figure
 
 
 def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, Any]:
@@ -138,17 +210,19 @@ def main() -> None:
     spec = parse_campaign(None)
     out: dict[str, Any] = {"budgets": budgets, "seeds": list(seeds), "strategies": {}}
     kept: dict[str, list[int]] = {}
+    aims: dict[str, list[int]] = {}
+    trials: dict[str, list[int]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for strategy in strategies:
             rows: list[dict[str, Any]] = []
             for seed in seeds:
                 db = Path(tmp) / f"{strategy}-{seed}.db"
-                started = time.perf_counter()
-                run_search(spec, db, seed=seed, budget=largest, plan=SearchPlan(strategy))
-                search_s = time.perf_counter() - started
-                started = time.perf_counter()
-                with Store(db) as store:
-                    tally = robust_variants(store, largest, budgets, workers=2)
+                least = (
+                    FAULT_SITUATIONS if with_faults and strategy in ("mutation", "random") else 0
+                )
+                tally, searched, search_s, yardstick_s = deep_enough(
+                    spec, db, seed, strategy, budgets, least
+                )
                 row: dict[str, Any] = {
                     "seed": seed,
                     "robust": {str(b): tally.at_budget[b] for b in budgets},
@@ -156,20 +230,20 @@ def main() -> None:
                     "runs_at": {str(b): tally.runs_at[b] for b in budgets},
                     "copies": tally.copies,
                     "first_by_class": _first_by_class(tally.first_at),
+                    "searched": searched,
                     "search_s": search_s,
-                    "yardstick_s": time.perf_counter() - started,
+                    "yardstick_s": yardstick_s,
                 }
                 if strategy == "mutation":
-                    for operator, figures in locality(db, tally).items():
-                        counts = kept.setdefault(operator, [0] * 7)
-                        for i, figure in enumerate(figures):
-                            counts[i] += figure
+                    _add(kept, locality(db, tally))
+                    _add(aims, by_aim(db, tally))
+                    _add(trials, trials_by_class(tally))
                 if with_faults and strategy in ("mutation", "random"):
                     row |= harder_kills(spec, db, Path(tmp), seed)
                 rows.append(row)
                 print(f"{strategy} seed {seed}: {row}", file=sys.stderr)
             out["strategies"][strategy] = {"per_seed": rows}
-    out["locality"] = kept
+    out["locality"], out["aims"], out["trials_by_class"] = kept, aims, trials
     report(out, strategies, budgets, seeds)
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "search.json").write_text(json.dumps(out, indent=2) + "\n")
@@ -281,6 +355,25 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
                 f"  {operator:20} {n:>5} {local:>11} {new:>5} ({new / n:.0%}) {again:>11}"
                 f" {robust:>5} ({robust / n:.0%}) {hit}"
             )
+    if out["aims"]:
+        print(
+            f"\nmutation, by operator and target aimed at, over the runs within {budgets[-1]}"
+            " evaluations: children aimed there; aim met; showing a variant new to the store;"
+            " confirming a new robust variant"
+        )
+        for name, (n, met, new, robust) in sorted(out["aims"].items()):
+            print(
+                f"  {name:40} {n:>5} {met:>5} ({met / n:.0%}) {new:>5} ({new / n:.0%})"
+                f" {robust:>5} ({robust / n:.0%})"
+            )
+    if out["trials_by_class"]:
+        print(
+            f"\nmutation, the yardstick's trials by failure class within {budgets[-1]}"
+            " evaluations: trials; robust; copies spent on knife-edge trials"
+        )
+        rows = sorted(out["trials_by_class"].items(), key=lambda kv: -kv[1][0])
+        for cls, (n, robust, wasted) in rows:
+            print(f"  {cls:34} {n:>5} {robust:>5} ({robust / n:.0%}) {wasted:>6}")
 
 
 if __name__ == "__main__":
