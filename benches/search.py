@@ -86,17 +86,22 @@ def deep_enough(
         depth = min(largest, depth + largest // 4)
 
 
+def _walked(db: Path, tally: Tally) -> list[tuple[Any, ...]]:
+    """(id, failure class, parents, genes, coverage) of the runs ``tally`` walked, in order."""
+    with Store(db) as store:
+        return store.db.execute(
+            "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
+            (tally.runs,),
+        ).fetchall()
+
+
 def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     """Per way of making a run (``fresh`` or an operator), over the runs ``tally`` walked:
     [runs, children with their parent's failure class, runs showing a failure variant not seen
     before in the store, children failing with their parent's very variant, runs that
     confirmed a new robust variant, failing children aimed at a target, those whose failure
     began where they were aimed (:func:`target_of`)]."""
-    with Store(db) as store:
-        rows = store.db.execute(
-            "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
-            (tally.runs,),
-        ).fetchall()
+    rows = _walked(db, tally)
     confirmed = set(tally.robust.values())
     classes = {run_id: cls for run_id, cls, _, _, _ in rows}
     variants: dict[int, str | None] = {}
@@ -125,15 +130,10 @@ def by_aim(db: Path, tally: Tally) -> dict[str, list[int]]:
     """Per ``OPERATOR:TARGET`` a targeted operator aimed at, over the runs ``tally`` walked:
     [children aimed there, those whose failure began where they were aimed (aim met), those
     showing a variant new to the store, those that confirmed a new robust variant]."""
-    with Store(db) as store:
-        rows = store.db.execute(
-            "SELECT id, failure_class, genes, coverage FROM runs ORDER BY id LIMIT ?",
-            (tally.runs,),
-        ).fetchall()
     confirmed = set(tally.robust.values())
     seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for run_id, cls, genes, coverage in rows:
+    for run_id, cls, _, genes, coverage in _walked(db, tally):
         key = variant(cls, unpack_json(coverage) if coverage else None)
         how = json.loads(genes)
         if how.get("aim") is not None:
