@@ -39,8 +39,8 @@ lint:
 rust-test:
 	cargo test -p sitgen-core
 
-# Two processes share the suite a test file each; the ROS 2 tests run alone after them, since
-# their nodes answer on wall-clock timeouts, which a loaded machine could make them miss.
+# A process a core (up to four) shares out the suite a test file each; the ROS 2 tests run alone
+# after them, since their nodes answer on wall-clock timeouts, which a loaded machine could miss.
 py-test:
 	$(BIN)/pytest -n auto --maxprocesses 4 --dist loadfile --ignore=tests/test_ros2.py
 	$(BIN)/pytest tests/test_ros2.py
