@@ -66,10 +66,11 @@ def deep_enough(
 ) -> tuple[Tally, int, float, float]:
     """The yardstick on a store searched only as deep as it walks within the largest budget
     (and at least ``least`` runs); how many runs were searched, and the seconds spent searching
-    and on the yardstick. A search's runs do not
-    depend on its budget (a budget truncates it, and a larger one resumes it), so the figures
-    are those of a search as deep as the budget; most of a store's budget goes on copies, so
-    searching to the budget would make about twice the runs the yardstick walks."""
+    and on the yardstick. A search's runs do not depend on its budget (a budget truncates it,
+    and a larger one resumes it), so the figures are those of a search as deep as the budget;
+    about half a store's budget goes on copies, so searching to the budget would make about
+    twice the runs the yardstick walks. A deeper step applies the yardstick again; the first,
+    half the budget, is deep enough for the mutation strategy at 500 evaluations."""
     largest = budgets[-1]
     depth = max(least, largest // 2)
     search_s = yardstick_s = 0.0
@@ -86,13 +87,25 @@ def deep_enough(
         depth = min(largest, depth + largest // 4)
 
 
-def _walked(db: Path, tally: Tally) -> list[tuple[Any, ...]]:
-    """(id, failure class, parents, genes, coverage) of the runs ``tally`` walked, in order."""
+def _walked(
+    db: Path, tally: Tally
+) -> list[tuple[int, str | None, list[int], dict[str, Any], str | None]]:
+    """(id, failure class, parents, genes, variant) of the runs ``tally`` walked, in order."""
     with Store(db) as store:
-        return store.db.execute(
+        rows = store.db.execute(
             "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
             (tally.runs,),
         ).fetchall()
+    return [
+        (
+            run_id,
+            cls,
+            json.loads(parents) if parents else [],
+            json.loads(genes),
+            variant(cls, unpack_json(coverage) if coverage else None),
+        )
+        for run_id, cls, parents, genes, coverage in rows
+    ]
 
 
 def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
@@ -107,13 +120,11 @@ def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
     variants: dict[int, str | None] = {}
     seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for run_id, cls, parents, genes, coverage in rows:
-        key = variant(cls, unpack_json(coverage) if coverage else None)
+    for run_id, cls, parents, how, key in rows:
         variants[run_id] = key
-        how = json.loads(genes)
         counts = out.setdefault(how["operator"], [0] * 7)
         counts[0] += 1
-        first = json.loads(parents)[:1] if parents else []
+        first = parents[:1]
         counts[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
         counts[2] += key is not None and key not in seen
         counts[3] += key is not None and bool(first) and variants.get(first[0]) == key
@@ -133,9 +144,7 @@ def by_aim(db: Path, tally: Tally) -> dict[str, list[int]]:
     confirmed = set(tally.robust.values())
     seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for run_id, cls, _, genes, coverage in _walked(db, tally):
-        key = variant(cls, unpack_json(coverage) if coverage else None)
-        how = json.loads(genes)
+    for run_id, _, _, how, key in _walked(db, tally):
         if how.get("aim") is not None:
             counts = out.setdefault(f"{how['operator']}:{how['aim']}", [0] * 4)
             counts[0] += 1
