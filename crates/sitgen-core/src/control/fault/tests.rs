@@ -226,19 +226,16 @@ fn every_fault_changes_what_each_of_its_controllers_does_on_a_hand_built_situati
     let mut reference = BTreeMap::new();
     for info in &CATALOGUE {
         for &controller in info.controllers {
-            let changed: Vec<&str> = situations
-                .iter()
-                .filter(|(name, s, steps)| {
-                    let correct = reference
-                        .entry((controller, *name))
-                        .or_insert_with(|| poses(s, &spec(controller, None), *steps, None));
-                    let faulty = poses(s, &spec(controller, Some(info.id)), *steps, Some(correct));
-                    faulty != *correct
-                })
-                .map(|(name, _, _)| *name)
-                .collect();
+            // The first situation it changes is enough: the later ones need not be run.
+            let changes_one = situations.iter().any(|(name, s, steps)| {
+                let correct = reference
+                    .entry((controller, *name))
+                    .or_insert_with(|| poses(s, &spec(controller, None), *steps, None));
+                let faulty = poses(s, &spec(controller, Some(info.id)), *steps, Some(correct));
+                faulty != *correct
+            });
             assert!(
-                !changed.is_empty(),
+                changes_one,
                 "`{}` changes nothing `{controller}` does on any hand-built situation",
                 info.id
             );
