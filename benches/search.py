@@ -44,6 +44,7 @@ import sys
 import tempfile
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -87,72 +88,91 @@ def deep_enough(
         depth = min(largest, depth + largest // 4)
 
 
-def _walked(
-    db: Path, tally: Tally
-) -> list[tuple[int, str | None, list[int], dict[str, Any], str | None]]:
-    """(id, failure class, parents, genes, variant) of the runs ``tally`` walked, in order."""
+@dataclass(frozen=True)
+class Walked:
+    """One run the yardstick walked, as the bench's tables read it."""
+
+    run_id: int
+    failure_class: str | None
+    parents: list[int]
+    genes: dict[str, Any]
+    key: str | None
+    """Its failure variant (None: it passed)."""
+    new: bool
+    """Its variant had not been shown by an earlier run of the store."""
+    confirmed: bool
+    """It is the run that confirmed a new robust variant."""
+
+
+def walked(db: Path, tally: Tally) -> list[Walked]:
+    """The runs ``tally`` walked, in order, read and decoded once for every table."""
     with Store(db) as store:
         rows = store.db.execute(
             "SELECT id, failure_class, parents, genes, coverage FROM runs ORDER BY id LIMIT ?",
             (tally.runs,),
         ).fetchall()
-    return [
-        (
-            run_id,
-            cls,
-            json.loads(parents) if parents else [],
-            json.loads(genes),
-            variant(cls, unpack_json(coverage) if coverage else None),
-        )
-        for run_id, cls, parents, genes, coverage in rows
-    ]
-
-
-def locality(db: Path, tally: Tally) -> dict[str, list[int]]:
-    """Per way of making a run (``fresh`` or an operator), over the runs ``tally`` walked:
-    [runs, children with their parent's failure class, runs showing a failure variant not seen
-    before in the store, children failing with their parent's very variant, runs that
-    confirmed a new robust variant, failing children aimed at a target, those whose failure
-    began where they were aimed (:func:`target_of`)]."""
-    rows = _walked(db, tally)
     confirmed = set(tally.robust.values())
-    classes = {run_id: cls for run_id, cls, _, _, _ in rows}
-    variants: dict[int, str | None] = {}
     seen: set[str] = set()
-    out: dict[str, list[int]] = {}
-    for run_id, cls, parents, how, key in rows:
-        variants[run_id] = key
-        counts = out.setdefault(how["operator"], [0] * 7)
-        counts[0] += 1
-        first = parents[:1]
-        counts[1] += bool(first) and first[0] in classes and cls == classes[first[0]]
-        counts[2] += key is not None and key not in seen
-        counts[3] += key is not None and bool(first) and variants.get(first[0]) == key
-        counts[4] += run_id in confirmed
-        if key is not None and how.get("aim") is not None:
-            counts[5] += 1
-            counts[6] += target_of(key, how["operator"]) == how["aim"]
+    out = []
+    for run_id, cls, parents, genes, coverage in rows:
+        key = variant(cls, unpack_json(coverage) if coverage else None)
+        out.append(
+            Walked(
+                run_id,
+                cls,
+                json.loads(parents) if parents else [],
+                json.loads(genes),
+                key,
+                key is not None and key not in seen,
+                run_id in confirmed,
+            )
+        )
         if key is not None:
             seen.add(key)
     return out
 
 
-def by_aim(db: Path, tally: Tally) -> dict[str, list[int]]:
-    """Per ``OPERATOR:TARGET`` a targeted operator aimed at, over the runs ``tally`` walked:
+def _aim_met(run: Walked) -> bool:
+    """A targeted child whose failure began in what it was aimed at (:func:`target_of`)."""
+    aim = run.genes.get("aim")
+    return (
+        run.key is not None and aim is not None and target_of(run.key, run.genes["operator"]) == aim
+    )
+
+
+def locality(runs: list[Walked]) -> dict[str, list[int]]:
+    """Per way of making a run (``fresh`` or an operator), over the :func:`walked` runs:
+    [runs, children with their parent's failure class, runs showing a failure variant not seen
+    before in the store, children failing with their parent's very variant, runs that
+    confirmed a new robust variant, failing children aimed at a target, those whose failure
+    began where they were aimed]."""
+    by_id = {run.run_id: run for run in runs}
+    out: dict[str, list[int]] = {}
+    for run in runs:
+        counts = out.setdefault(run.genes["operator"], [0] * 7)
+        parent = by_id.get(run.parents[0]) if run.parents else None
+        counts[0] += 1
+        counts[1] += parent is not None and run.failure_class == parent.failure_class
+        counts[2] += run.new
+        counts[3] += run.key is not None and parent is not None and parent.key == run.key
+        counts[4] += run.confirmed
+        counts[5] += run.key is not None and run.genes.get("aim") is not None
+        counts[6] += _aim_met(run)
+    return out
+
+
+def by_aim(runs: list[Walked]) -> dict[str, list[int]]:
+    """Per ``OPERATOR:TARGET`` a targeted operator aimed at, over the :func:`walked` runs:
     [children aimed there, those whose failure began where they were aimed (aim met), those
     showing a variant new to the store, those that confirmed a new robust variant]."""
-    confirmed = set(tally.robust.values())
-    seen: set[str] = set()
     out: dict[str, list[int]] = {}
-    for run_id, _, _, how, key in _walked(db, tally):
-        if how.get("aim") is not None:
-            counts = out.setdefault(f"{how['operator']}:{how['aim']}", [0] * 4)
+    for run in runs:
+        if run.genes.get("aim") is not None:
+            counts = out.setdefault(f"{run.genes['operator']}:{run.genes['aim']}", [0] * 4)
             counts[0] += 1
-            counts[1] += key is not None and target_of(key, how["operator"]) == how["aim"]
-            counts[2] += key is not None and key not in seen
-            counts[3] += run_id in confirmed
-        if key is not None:
-            seen.add(key)
+            counts[1] += _aim_met(run)
+            counts[2] += run.new
+            counts[3] += run.confirmed
     return out
 
 
@@ -244,8 +264,9 @@ def main() -> None:
                     "yardstick_s": yardstick_s,
                 }
                 if strategy == "mutation":
-                    _add(kept, locality(db, tally))
-                    _add(aims, by_aim(db, tally))
+                    runs = walked(db, tally)
+                    _add(kept, locality(runs))
+                    _add(aims, by_aim(runs))
                     _add(trials, trials_by_class(tally))
                 if with_faults and strategy in ("mutation", "random"):
                     row |= harder_kills(spec, db, Path(tmp), seed)
