@@ -38,6 +38,7 @@ from sitgen.generation.mutation import (
     Parent,
     Track,
     _Ground,
+    as_made_by,
     cut_past_failure,
     extended,
     focus_peer,
@@ -628,6 +629,36 @@ def test_a_target_is_the_interaction_context_or_both_an_operator_changes() -> No
     assert not any(t.startswith("head_on/") or t.endswith("/corridor") for t in both)
 
 
+def test_a_mirrored_child_aims_at_the_crossing_from_the_other_side() -> None:
+    assert neighbours("struck_while_stopped_seen/crossing_left/gap", "mirror") == {
+        "crossing_right": "struck_while_stopped_seen/crossing_right/gap"
+    }
+    assert target_of("drove_close_to_peer/crossing_right/open", "mirror") == "crossing_right"
+    # Every other interaction reads the same mirrored: nothing new to aim at.
+    for interaction in ("head_on", "from_behind", "overtaking", "stopped", "no_peer"):
+        assert neighbours(f"drove_close_to_peer/{interaction}/open", "mirror") == {}
+
+
+def test_a_mirrored_child_is_cut_past_where_its_parent_failed_mirrored(parent: Parent) -> None:
+    own = parent.situation.to_json()
+    waypoints = json.loads(own)["robots"][0]["waypoints"]
+    assert len(waypoints) >= 3
+    # A failure that began on the second leg, facing north-east.
+    x, y = (np.array(waypoints[0]) + np.array(waypoints[1])) / 2
+    early = dataclasses.replace(parent, failure_pose=(float(x), float(y), math.pi / 4))
+    child = mutate(early, "mirror", np.random.default_rng(0))
+    assert child is not None
+    mirrored = as_made_by(early, "mirror")
+    assert mirrored.failure_pose is not None
+    width = parent.situation.grid.size_m[0]
+    assert mirrored.failure_pose == pytest.approx((width - x, y, 3 * math.pi / 4))
+    kept = len(json.loads(cut_past_failure(own, early))["robots"][0]["waypoints"])
+    assert kept < len(waypoints), "nothing to cut: no test"
+    cut = json.loads(cut_past_failure(child, mirrored))["robots"][0]["waypoints"]
+    assert len(cut) == kept
+    assert as_made_by(parent, "add_obstacle") is parent
+
+
 def test_a_targeted_child_keeps_the_target_it_was_aimed_at(tmp_path: Path) -> None:
     db = tmp_path / "aims.db"
     run_search(spec_of(), db, seed=2, budget=INITIAL + 3 * BATCH, plan=SearchPlan("mutation"))
@@ -642,6 +673,8 @@ def test_a_targeted_child_keeps_the_target_it_was_aimed_at(tmp_path: Path) -> No
         if how["operator"] not in TARGETED:
             assert "aim" not in how
             continue
+        # A mirrored child is made only where the other side is a variant not seen yet.
+        assert how["operator"] != "mirror" or "aim" in how
         if "aim" in how:
             parent = json.loads(parents)[0]
             assert how["aim"] in neighbours(variants[parent], how["operator"])

@@ -21,8 +21,14 @@ peer whose route passes nearest it):
 - ``mirror``: the whole situation mirrored left to right, so a crossing from the left becomes
   one from the right;
 
-and three that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
+and four that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
 parent's failure the search has not seen yet (drawn at random when none is given):
+
+- ``mirror`` again, aimed: a failure met in a crossing from the left, mirrored, is met from the
+  right (:data:`MIRRORED`; every other interaction and context reads the same either way
+  round). It is the one operator whose child's variant can be told before it runs: the
+  encounter is the same with left and right swapped, and the agent's controller, the monitor
+  and the classes have no side of their own, so the child mostly fails as its parent did;
 
 - ``approach_peer``: the peer is sent through where the failure began (or the nearest point
   the agent drove through on its way there with room for it) in another interaction
@@ -77,9 +83,10 @@ cannot make a valid child in ``TRIES`` draws gives None, and the search draws af
 Why: varying a campaign spec's parameters and seeds redraws the whole situation, so a child
 keeps its parent's failure class only 16-19 % of the time (``make bench-search``); an operator
 on the situation leaves the rest of the encounter as it was. The local operators mostly repeat
-their parent's variant, too; the targeted three change one or two coordinates of it on
-purpose (the interaction, the terrain context, or both) and leave the rest, so that a search
-for distinct failures gets new ones at a higher rate than random generation. Sources: the
+their parent's variant, too; the targeted ones change one or two coordinates of it on
+purpose (the interaction, the terrain context, or both; ``mirror`` the side a crossing comes
+from) and leave the rest, so that a search for distinct failures gets new ones at a higher
+rate than random generation. Sources: the
 situation operators of search-based testing of automated vehicles (e.g. Gambi et al.,
 AsFault; Riccio & Tonella, DeepJanus' local mutations of the input) applied to sitgen's
 situations.
@@ -88,6 +95,7 @@ situations.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import json
 import math
@@ -119,8 +127,10 @@ OPERATORS = (
     "reshape_terrain",
     "reshape_and_approach",
 )
-TARGETED = ("approach_peer", "reshape_terrain", "reshape_and_approach")
+TARGETED = ("approach_peer", "reshape_terrain", "reshape_and_approach", "mirror")
 """Operators aimed at a target variant's interaction, terrain context, or both."""
+MIRRORED = {"crossing_left": "crossing_right", "crossing_right": "crossing_left"}
+"""The interaction a mirrored encounter is met in: every other reads the same either way."""
 PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed")
 """Local operators on a peer: none applies to a situation without peers (a staged approach
 brings one in)."""
@@ -310,6 +320,17 @@ def cut_past_failure(child: str, parent: Parent) -> str:
     return _with_agent_route(child, waypoints[:kept])
 
 
+def as_made_by(parent: Parent, operator: str) -> Parent:
+    """``parent`` with its failure where a child made by ``operator`` has it: mirrored left to
+    right for ``mirror``, else where it was."""
+    if operator != "mirror" or parent.failure_pose is None:
+        return parent
+    x, y, heading = parent.failure_pose
+    width = parent.situation.grid.occupied.shape[1] * parent.situation.grid.resolution
+    pose = (width - x, y, math.remainder(math.pi - heading, math.tau))
+    return dataclasses.replace(parent, failure_pose=pose, track=None)
+
+
 def _with_agent_route(child: str, waypoints: list[Any]) -> str:
     """``child`` with the agent driving ``waypoints`` after its start, on the child's map."""
     robots = json.loads(child)["robots"]
@@ -341,7 +362,7 @@ def mutate(
     focus = _focus(parent, robots, rng)
     margin = _core.shrink_leg_margin(original)
     doorway = float(parent.situation.spec["mission"]["plan_margin_m"]) + DOORWAY_SLACK_M
-    if operator in TARGETED and target is None:
+    if operator in TARGETED and target is None and neighbours(parent.variant, operator):
         target = _other_target(parent, operator, rng)
         accept = list(neighbours(parent.variant, operator))
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
@@ -462,7 +483,8 @@ def neighbours(key: str | None, operator: str) -> dict[str, str]:
     """The targets a targeted ``operator`` can aim at from variant ``key``
     (``CLASS/INTERACTION/CONTEXT``; None: any), each with the variant it would make: every
     other interaction (``approach_peer``), terrain context (``reshape_terrain``), or
-    ``INTERACTION/CONTEXT`` with both other (``reshape_and_approach``)."""
+    ``INTERACTION/CONTEXT`` with both other (``reshape_and_approach``), or the crossing from
+    the other side (``mirror``; none from any other interaction)."""
     cls, interaction, context = (key or "//").split("/")
     interactions = [i for i in APPROACHES if i != interaction]
     contexts = [c for c in CONTEXTS if c != context]
@@ -470,6 +492,8 @@ def neighbours(key: str | None, operator: str) -> dict[str, str]:
         made = [f"{cls}/{i}/{context}" for i in interactions]
     elif operator == "reshape_and_approach":
         made = [f"{cls}/{i}/{c}" for i in interactions for c in contexts]
+    elif operator == "mirror":
+        made = [f"{cls}/{MIRRORED[interaction]}/{context}"] if interaction in MIRRORED else []
     else:
         made = [f"{cls}/{interaction}/{c}" for c in contexts]
     return {target_of(v, operator): v for v in made}
@@ -477,11 +501,11 @@ def neighbours(key: str | None, operator: str) -> dict[str, str]:
 
 def target_of(key: str, operator: str) -> str:
     """The target of a targeted ``operator`` that variant ``key`` stands at: its interaction
-    (``approach_peer``), its terrain context (``reshape_terrain``), or both
+    (``approach_peer``, ``mirror``), its terrain context (``reshape_terrain``), or both
     (``reshape_and_approach``, ``INTERACTION/CONTEXT``) — what a child aimed there should
     show."""
     _, interaction, context = key.split("/")
-    if operator == "approach_peer":
+    if operator in ("approach_peer", "mirror"):
         return interaction
     if operator == "reshape_terrain":
         return context

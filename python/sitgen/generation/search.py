@@ -81,6 +81,7 @@ from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
 from sitgen.generation.mutation import (
     TARGETED,
     Parent,
+    as_made_by,
     cut_past_failure,
     extended,
     mutate,
@@ -604,7 +605,10 @@ class Archive:
                 parent = self.parent_of(parent_id)
                 genome = self.genomes[parent_id]
             child, operator, aim = None, "fresh", None
-            tried: set[str] = set()
+            # A mirrored child is its parent met from the other side: only worth a run where
+            # that side is a variant not seen yet (a crossing from the left or right).
+            unaimed = like is None and not self._unseen(parent, "mirror")
+            tried: set[str] = {"mirror"} if unaimed else set()
             context = self._parent_context(parent.variant)
             # A directed search has no fresh jobs to fall back on: it tries every operator.
             for _ in range(MUTATION_TRIES if like is None else len(SITUATION_OPERATORS)):
@@ -625,7 +629,7 @@ class Archive:
                 children.append(self._fresh(index))
             else:
                 if operator != "like":
-                    child = cut_past_failure(child, parent)
+                    child = cut_past_failure(child, as_made_by(parent, operator))
                 if like is None and rng.random() < STRETCH_SHARE:
                     child = extended(child, rng)
                 parents = (parent_id,) if parent_id >= 0 else ()
@@ -717,14 +721,19 @@ class Archive:
         """For a targeted operator, a neighbour of the parent's variant (its interaction, its
         terrain context, or both changed) not seen yet, if there is one (None lets it draw), and the
         other unseen ones, which a child may make instead."""
-        if parent.variant is None or operator not in TARGETED:
-            return None, []
-        targets = neighbours(parent.variant, operator)
-        unseen = [t for t, key in targets.items() if key not in self.variants_seen]
+        unseen = self._unseen(parent, operator)
         if not unseen:
             return None, []
         aim = int(rng.integers(len(unseen)))
         return unseen[aim], unseen[:aim] + unseen[aim + 1 :]
+
+    def _unseen(self, parent: Parent, operator: str) -> list[str]:
+        """The targets of ``operator`` from the parent's variant (:func:`neighbours`) whose
+        variant no run has shown yet (none for an operator that aims at nothing)."""
+        if parent.variant is None or operator not in TARGETED:
+            return []
+        targets = neighbours(parent.variant, operator)
+        return [t for t, key in targets.items() if key not in self.variants_seen]
 
     def _novel(self, elites: list[int], rng: np.random.Generator) -> int:
         """An elite's position, drawn with weight 1/runs of its cell (novelty: the rarer a
