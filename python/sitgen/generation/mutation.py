@@ -19,7 +19,7 @@ peer whose route passes nearest it):
 - ``remove_obstacle``, ``move_obstacle``: the obstacle (8-connected component of at most
   ``BLOB_MAX_CELLS`` cells) nearest the failure goes, or moves by N(0, ``MOVE_SD_M``);
 - ``mirror``: the whole situation mirrored left to right, so a crossing from the left becomes
-  one from the right;
+  one from the right (a directed search draws it for any parent; otherwise it is aimed, below);
 
 and four that aim at a *target*, a neighbouring variant (``sitgen.triage.variants``) of the
 parent's failure the search has not seen yet (drawn at random when none is given):
@@ -322,7 +322,8 @@ def cut_past_failure(child: str, parent: Parent) -> str:
 
 def as_made_by(parent: Parent, operator: str) -> Parent:
     """``parent`` with its failure where a child made by ``operator`` has it: mirrored left to
-    right for ``mirror``, else where it was."""
+    right for ``mirror`` (without its track, which is the unmirrored run's), else where it
+    was."""
     if operator != "mirror" or parent.failure_pose is None:
         return parent
     x, y, heading = parent.failure_pose
