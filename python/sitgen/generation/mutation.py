@@ -326,10 +326,14 @@ def as_made_by(parent: Parent, operator: str) -> Parent:
     was."""
     if operator != "mirror" or parent.failure_pose is None:
         return parent
-    x, y, heading = parent.failure_pose
-    width = parent.situation.grid.occupied.shape[1] * parent.situation.grid.resolution
-    pose = (width - x, y, math.remainder(math.pi - heading, math.tau))
+    grid = parent.situation.grid
+    pose = _mirrored(grid.occupied.shape[1] * grid.resolution, *parent.failure_pose)
     return dataclasses.replace(parent, failure_pose=pose, track=None)
+
+
+def _mirrored(width: float, x: float, y: float, heading: float) -> tuple[float, float, float]:
+    """A pose on a map ``width`` metres wide, mirrored left to right."""
+    return width - x, y, math.remainder(math.pi - heading, math.tau)
 
 
 def _with_agent_route(child: str, waypoints: list[Any]) -> str:
@@ -363,9 +367,10 @@ def mutate(
     focus = _focus(parent, robots, rng)
     margin = _core.shrink_leg_margin(original)
     doorway = float(parent.situation.spec["mission"]["plan_margin_m"]) + DOORWAY_SLACK_M
-    if operator in TARGETED and target is None and neighbours(parent.variant, operator):
+    aimable = neighbours(parent.variant, operator) if operator in TARGETED else {}
+    if target is None and aimable:
         target = _other_target(parent, operator, rng)
-        accept = list(neighbours(parent.variant, operator))
+        accept = list(aimable)
     ground = _Ground.of(occupied, grid.resolution) if operator == "approach_peer" else None
     # The terrain contexts a child may read as: the one aimed at, or another the caller wants.
     contexts = {target, *accept}
@@ -984,8 +989,9 @@ def _apply(
         occupied = np.ascontiguousarray(occupied[:, ::-1])
         for robot in robots:
             start = robot["start"]
-            start["x_m"] = width - start["x_m"]
-            start["heading_rad"] = math.remainder(math.pi - start["heading_rad"], math.tau)
+            start["x_m"], _, start["heading_rad"] = _mirrored(
+                width, start["x_m"], start["y_m"], start["heading_rad"]
+            )
             robot["waypoints"] = [[width - x, y] for x, y in robot["waypoints"]]
     else:
         raise ValueError(f"unknown situation operator `{operator}`")
