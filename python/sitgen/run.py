@@ -151,6 +151,7 @@ def run(
     params: Mapping[str, float] | None = None,
     step_timeout_s: float = STEP_TIMEOUT_S,
     sensed: bool = False,
+    in_process: bool = False,
 ) -> RunRecord:
     """Run ``situation`` (a Situation or a situation file) to its end.
 
@@ -161,6 +162,8 @@ def run(
     ``time_limit_s``). ``params``: the built-in controller's parameters. A bad spec raises
     SpecError naming the field; a failing user controller gives outcome ``error``.
     ``sensed``: keep what the agent sensed at every step (:class:`Sensed`; the run is the same).
+    ``in_process``: call a ``python:`` class in this process, not in a host process of its own
+    (for disposable pool workers: :mod:`sitgen.controllers.inprocess`; the run is the same).
     """
     if not isinstance(situation, Situation):
         situation = Situation.load(situation)
@@ -169,7 +172,7 @@ def run(
     core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
     if core.agent_is_external:
-        _drive(core, controller, situation, run_spec, step_timeout_s, senses)
+        _drive(core, controller, situation, run_spec, step_timeout_s, senses, in_process)
     elif senses is not None:
         _step(core, None, senses)
     else:
@@ -232,6 +235,7 @@ def _drive(
     run_spec: Mapping[str, Any],
     step_timeout_s: float,
     senses: list[Mapping[str, Any]] | None = None,
+    in_process: bool = False,
 ) -> None:
     """Step a run whose agent is a user controller, turning its failures into the outcome."""
     named = run_spec.get("controller") or situation.agent.controller
@@ -239,7 +243,7 @@ def _drive(
         controller = named["name"]
     assert is_user_controller(controller)
     try:
-        user = load_controller(controller, step_timeout_s, named.get("params"))
+        user = load_controller(controller, step_timeout_s, named.get("params"), in_process)
     except ControllerError as e:
         core.fail(str(e))
         return
@@ -247,7 +251,10 @@ def _drive(
         user.reset(reset_info(situation, run_spec, core.agent))
         # Between the controller's decisions (its control period) its last command stays in
         # force and it is not asked.
-        _step(core, user.act, senses)
+        if senses is None:
+            user.drive(core)
+        else:
+            _step(core, user.act, senses)
     except ControllerError as e:
         core.fail(str(e))
     finally:

@@ -64,6 +64,24 @@ class Hangs(FailsAt):
             pass
 
 
+class HoldsTheGil(FailsAt):
+    """Loops in C without ever returning to the interpreter: no signal can interrupt it."""
+
+    def fail(self) -> None:
+        sum(range(10**15))
+
+
+class Swallows(FailsAt):
+    """Loops forever, swallowing every Exception (a timeout must still end it)."""
+
+    def fail(self) -> None:
+        while True:
+            try:  # noqa: SIM105 - written as a user writes it
+                time.sleep(0.01)
+            except Exception:
+                pass
+
+
 class Exits(FailsAt):
     def fail(self) -> None:
         sys.exit(0)
@@ -93,3 +111,45 @@ class Slow(Forward):
     def act(self, obs: Any) -> tuple[float, float]:
         time.sleep(0.05)
         return 0.3, 0.0
+
+
+class Watchful:
+    """Reads everything an observation has, as a user's controller would: follows the route
+    from ``waypoints_reached``, turns from the nearest tracked robot, backs off when stalled,
+    smooths its speed, and clips its scan in place (its own copy, whichever path calls it)."""
+
+    def __init__(self) -> None:
+        self.waypoints: list[list[float]] = []
+        self.v = 0.0
+        self.scans = 0
+        self.shared_scans = 0
+        self._last: Any = None
+
+    def reset(self, info: dict[str, Any]) -> None:
+        self.waypoints = info["waypoints"]
+        self.limit = info["max_speed_m_s"]
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        import math
+
+        import numpy as np
+
+        self.scans += 1
+        self.shared_scans += obs.ranges is self._last
+        self._last = obs.ranges
+        np.minimum(obs.ranges, 4.0, out=obs.ranges)
+        x, y, heading = obs.pose
+        if obs.waypoints_reached >= len(self.waypoints):
+            return 0.0, 0.0
+        gx, gy = self.waypoints[obs.waypoints_reached]
+        turn = math.remainder(math.atan2(gy - y, gx - x) - heading, math.tau)
+        for track in obs.tracks:
+            tx, ty = track["position"]
+            if math.hypot(tx - x, ty - y) < 2.0:
+                turn -= 0.3 * math.copysign(
+                    1.0, math.remainder(math.atan2(ty - y, tx - x) - heading, math.tau)
+                )
+        ahead = float(np.min(obs.ranges[np.abs(obs.angles) < 0.4]))
+        target = -0.1 if obs.stalled else min(self.limit, 0.2 * ahead) * max(0.0, math.cos(turn))
+        self.v += 0.5 * (target - self.v) + 0.01 * obs.velocity[1]
+        return self.v, 1.2 * turn

@@ -15,6 +15,7 @@ mod sim;
 mod situation;
 mod spec;
 mod terrain;
+mod watchdog;
 
 use pyo3::prelude::*;
 
@@ -51,5 +52,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fault::register(m)?;
     shrink::register(m)?;
     crosscheck::register(m)?;
+    watchdog::register(m)?;
     Ok(())
 }

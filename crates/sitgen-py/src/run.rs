@@ -6,7 +6,7 @@ use std::sync::{Mutex, MutexGuard};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyTuple};
 use sitgen_core::control;
 use sitgen_core::mission::ControllerSpec;
 use sitgen_core::monitor::{self, EventKind};
@@ -15,6 +15,7 @@ use sitgen_core::scoring;
 use sitgen_core::situation::Situation;
 
 use crate::sim::observation_dict;
+use crate::watchdog::Watchdog;
 use crate::SpecError;
 
 fn spec_error(e: impl ToString) -> PyErr {
@@ -105,6 +106,66 @@ impl PyRun {
         let situation = Situation::from_json(situation_json).map_err(spec_error)?;
         let robots = self.live()?.robots_now(&situation);
         Ok(serde_json::to_string(&robots).expect("robots serialize"))
+    }
+
+    /// Step the run to its end with an agent controller called in this process: whenever the
+    /// agent decides, `act(ranges, pose, velocity, stalled, time_s, tracks, waypoints_reached)`
+    /// returns its command (v m/s, ω rad/s). `ranges` is a fresh numpy array each call (one
+    /// copy of the scan, never a Python float per beam); `tracks` a tuple of dicts (`id`,
+    /// `position`, `velocity`). An exception from `act` stops the run where it is and
+    /// propagates (the caller ends the run with its reason). `kill_after_s`: a call still
+    /// running after this long kills this process (see `watchdog`; for pool workers only).
+    #[pyo3(signature = (act, kill_after_s=None))]
+    fn drive(
+        &mut self,
+        py: Python<'_>,
+        act: &Bound<'_, PyAny>,
+        kill_after_s: Option<f64>,
+    ) -> PyResult<()> {
+        let watchdog = kill_after_s.map(Watchdog::new);
+        let run = self.live_mut()?;
+        if !run.agent_is_external() {
+            return Err(PyValueError::new_err(
+                "the agent's controller is built in: run it to its end",
+            ));
+        }
+        loop {
+            let command = if run.agent_acts_now() {
+                let reached = run.agent_waypoints_reached();
+                let o = run.agent_observation();
+                let tracks = PyTuple::new(
+                    py,
+                    o.tracks
+                        .iter()
+                        .map(|t| {
+                            let d = PyDict::new(py);
+                            d.set_item("id", t.id)?;
+                            d.set_item("position", t.position)?;
+                            d.set_item("velocity", t.velocity)?;
+                            Ok::<_, PyErr>(d)
+                        })
+                        .collect::<PyResult<Vec<_>>>()?,
+                )?;
+                let args = (
+                    PyArray1::from_vec(py, o.ranges),
+                    (o.pose.x_m, o.pose.y_m, o.pose.heading_rad),
+                    o.velocity,
+                    o.stalled,
+                    o.time_s,
+                    tracks,
+                    reached,
+                );
+                let watched = watchdog.as_ref().map(Watchdog::watch);
+                let reply = act.call1(args);
+                drop(watched);
+                Some(reply?.extract::<(f64, f64)>()?)
+            } else {
+                None
+            };
+            if run.step(command) {
+                return Ok(());
+            }
+        }
     }
 
     /// End the run with outcome `error` for `reason`.

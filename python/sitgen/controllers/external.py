@@ -24,14 +24,14 @@ import selectors
 import shutil
 import signal
 import subprocess
-import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from sitgen.controllers.host import MAX_LINE_BYTES, BadReply, command, exception_line
+from sitgen import _core
+from sitgen.controllers.host import MAX_LINE_BYTES
 from sitgen.world.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
@@ -80,100 +80,19 @@ class UserController:
         """Make it ready to run (start its process, load its class); ControllerError if it
         cannot be."""
 
+    def drive(self, core: _core.Run) -> None:
+        """Step ``core`` to its end, asking :meth:`act` for a command whenever the agent
+        decides (between its decisions its last command stays in force); raises
+        ControllerError when the controller fails."""
+        while True:
+            command = self.act(core.observe_agent()) if core.agent_acts else None
+            if core.step(command):
+                return
+
     def close(self) -> str | None:
         """End the run; releases any process. Returns None if it shut down cleanly, else why
         not (``check-controller`` reports it; a run's outcome is already set)."""
         return None
-
-
-def _observation(obs: Mapping[str, Any]) -> Observation:
-    return Observation(
-        ranges=obs["ranges"],
-        angles=obs["angles"],
-        pose=obs["pose"],
-        velocity=obs["velocity"],
-        stalled=obs["stalled"],
-        time=obs["time"],
-        max_range=obs["max_range"],
-        tracks=tuple(obs["tracks"]),
-        waypoints_reached=obs.get("waypoints_reached", 0),
-    )
-
-
-class StepTimeout(Exception):
-    """An in-process controller ran past its step timeout."""
-
-
-class PythonController(UserController):
-    """An object with ``reset(info)`` and ``act(obs)``, called in this process (for objects
-    handed to :func:`sitgen.run`; ``python:`` names run in a process of their own). Exceptions,
-    ``sys.exit`` and, in the main thread, a call that runs past the step timeout become
-    ControllerError."""
-
-    def __init__(self, target: Any, name: str, step_timeout_s: float = STEP_TIMEOUT_S) -> None:
-        self.name = name
-        for method in ("reset", "act"):
-            if not callable(getattr(target, method, None)):
-                raise ControllerError(f"controller {name} has no method `{method}`")
-        self._target = target
-        self._step_timeout_s = step_timeout_s
-
-    def reset(self, info: dict[str, Any]) -> None:
-        self._call(lambda: self._target.reset(info), "in reset", START_TIMEOUT_S)
-
-    def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
-        when = f"at {obs['time']:.1f} s"
-        value = self._call(lambda: self._target.act(_observation(obs)), when, self._step_timeout_s)
-        try:
-            return command(value, when)
-        except BadReply as e:
-            raise ControllerError(f"controller {self.name} {e}") from None
-
-    def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
-        try:
-            with _deadline(timeout_s):
-                return call()
-        except StepTimeout:
-            raise ControllerError(
-                f"controller {self.name} did not reply within {timeout_s:g} s {when}"
-            ) from None
-        except SystemExit as e:
-            raise ControllerError(
-                f"controller {self.name} called sys.exit({e.code!r}) {when}"
-            ) from None
-        except Exception as e:  # a user's bug must end this run only
-            reason = exception_line(e)
-            raise ControllerError(f"controller {self.name} raised {when}: {reason}") from e
-
-    def close(self) -> str | None:
-        close = getattr(self._target, "close", None)
-        if callable(close):
-            # Closing is best effort: the run's outcome is already set.
-            try:
-                close()
-            except (Exception, SystemExit) as e:
-                return f"close() raised: {exception_line(e)}"
-        return None
-
-
-@contextlib.contextmanager
-def _deadline(timeout_s: float) -> Iterator[None]:
-    """Interrupt the block with StepTimeout after ``timeout_s`` of wall time (SIGALRM, so only
-    in the main thread; elsewhere the block runs unbounded)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def expire(signum: int, frame: object) -> None:
-        raise StepTimeout
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, timeout_s)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def program_path(argv: list[str], name: str) -> str:

@@ -57,9 +57,17 @@ def _short(value: Any) -> str:
     return shown if len(shown) <= 80 else shown[:77] + "..."
 
 
-def load_class(target: str) -> Any:
-    """An instance of ``module:Class`` or ``path/to/file.py:Class``; raises ValueError with
-    the one-line reason (the text after the controller's name)."""
+_CLASSES: dict[str, Any] = {}
+"""Classes loaded in this process, by ``module:Class`` target: a pool worker imports a user's
+module once, however many runs it makes (each run gets a fresh instance)."""
+
+
+def find_class(target: str) -> Any:
+    """The class (or factory) ``module:Class`` or ``path/to/file.py:Class`` names, imported once
+    per process; raises ValueError with the one-line reason (the text after the controller's
+    name)."""
+    if target in _CLASSES:
+        return _CLASSES[target]
     module_name, sep, attr = target.rpartition(":")
     if not sep or not module_name or not attr:
         raise ValueError("expected python:MODULE:CLASS")
@@ -81,14 +89,27 @@ def load_class(target: str) -> Any:
         raise ValueError(f"failed to load: {exception_line(e)}") from None
     if not hasattr(module, attr):
         raise ValueError(f"module has no `{attr}`")
+    _CLASSES[target] = getattr(module, attr)
+    return _CLASSES[target]
+
+
+def instantiate(factory: Any) -> Any:
+    """A new controller from ``factory`` (a class found by :func:`find_class`), checked for
+    ``reset`` and ``act``; raises ValueError with the one-line reason."""
     try:
-        instance = getattr(module, attr)()
+        instance = factory()
     except BaseException as e:  # so is a constructor that fails
         raise ValueError(f"failed to load: {exception_line(e)}") from None
     for method in ("reset", "act"):
         if not callable(getattr(instance, method, None)):
             raise ValueError(f"has no method `{method}`")
     return instance
+
+
+def load_class(target: str) -> Any:
+    """An instance of ``module:Class`` or ``path/to/file.py:Class``; raises ValueError with
+    the one-line reason (the text after the controller's name)."""
+    return instantiate(find_class(target))
 
 
 class BadReply(Exception):

@@ -14,10 +14,10 @@ from sitgen.controllers.external import (
     STEP_TIMEOUT_S,
     ControllerError,
     ProcessController,
-    PythonController,
     UserController,
     program_path,
 )
+from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name
 
@@ -29,12 +29,18 @@ def load_controller(
     name: str | Any,
     step_timeout_s: float = STEP_TIMEOUT_S,
     params: Mapping[str, float] | None = None,
+    in_process: bool = False,
 ) -> UserController:
     """The user controller ``name`` names (``python:…``, ``cmd:…``, ``ros2:…``; ``params``
-    are a ROS 2 node's parameters), or wrap an object with ``reset`` and ``act``. Raises
-    ControllerError if it cannot be started."""
+    are a ROS 2 node's parameters), or wrap an object with ``reset`` and ``act`` (called in
+    this process). ``in_process``: a ``python:`` class is loaded and called in this process,
+    a disposable pool worker (:mod:`sitgen.controllers.inprocess`), not in a host process of
+    its own. Raises ControllerError if it cannot be started."""
     if not isinstance(name, str):
-        return PythonController(name, f"`{type(name).__name__}`", step_timeout_s)
+        return InProcessController(name, f"`{type(name).__name__}`", step_timeout_s)
+    if name.startswith("python:") and in_process:
+        target = name.removeprefix("python:")
+        return InProcessController(target, f"`{name}`", step_timeout_s, isolated=True)
     if name.startswith("python:"):
         # Not `-m`: the package imports the host module, and runpy would warn that it ran a
         # module already imported.

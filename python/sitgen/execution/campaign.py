@@ -17,6 +17,7 @@ from __future__ import annotations
 import heapq
 import json
 import math
+import os
 import signal
 import time
 import zlib
@@ -154,8 +155,9 @@ def _core_args(job: Job) -> tuple[str, int, str, int]:
     return (json.dumps(job.situation), job.seed, json.dumps(job.run), job.noise_seed)
 
 
-def run_user_job(job: Job) -> dict[str, Any]:
-    """One job with a Python or external controller (in a worker process)."""
+def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
+    """One job with a Python or external controller (in a worker process; ``in_process``: a
+    ``python:`` class is called in it, else in a host process of its own)."""
 
     try:
         situation = (
@@ -165,7 +167,13 @@ def run_user_job(job: Job) -> dict[str, Any]:
         )
     except (_core.GenerationFailed, _core.SpecError) as e:
         return {"ok": False, "error": f"generation failed: {e}"}
-    rec = run(situation, controller=job.controller, seed=job.noise_seed, spec=job.run)
+    rec = run(
+        situation,
+        controller=job.controller,
+        seed=job.noise_seed,
+        spec=job.run,
+        in_process=in_process,
+    )
     record = {
         "outcome": rec.outcome,
         "reason": rec.reason,
@@ -190,17 +198,23 @@ def run_user_job(job: Job) -> dict[str, Any]:
 
 def _worker_start() -> None:
     """A pool worker: Ctrl-C is the campaign's to handle (it finishes the runs in flight), and
-    the worker dies with the campaign even if that is killed outright."""
+    the worker dies with the campaign even if that is killed outright. What a controller called
+    in it prints goes nowhere, as a host process's output does (the campaign's own output stays
+    readable, ``--format json`` included)."""
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent()
+    quiet = os.open(os.devnull, os.O_WRONLY)
+    for fd in (1, 2):
+        os.dup2(quiet, fd)
+    os.close(quiet)
 
 
-def _safe_user_job(job: Job) -> dict[str, Any]:
+def _safe_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
     """:func:`run_user_job`, with any failure of sitgen's own on that run stored as its error
     rather than ending the campaign."""
     try:
-        return run_user_job(job)
+        return run_user_job(job, in_process)
     except Exception as e:  # sitgen's own bug on one run must not end the campaign
         return {"ok": False, "error": f"sitgen failed on this run: {type(e).__name__}: {e}"}
 
@@ -362,10 +376,12 @@ class Executor:
 
 
 def _alone(job: Job) -> dict[str, Any]:
-    """Run one job in a worker of its own: its result, or an error if the worker dies."""
+    """Run one job in a worker of its own, a ``python:`` class in a host process of its own
+    there (so that what killed a worker is reported as the host reports it): its result, or
+    an error if the worker dies."""
     pool = ProcessPoolExecutor(1, initializer=_worker_start)
     try:
-        return pool.submit(_safe_user_job, job).result()
+        return pool.submit(_safe_user_job, job, False).result()
     except BrokenProcessPool:
         return {
             "ok": False,

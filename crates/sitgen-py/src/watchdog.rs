@@ -1,0 +1,108 @@
+//! The last resort against an in-process controller call that never returns: a thread of its
+//! own (it needs no GIL) kills this process once a call has run past its limit.
+//!
+//! A Python controller in a pool worker is interrupted by SIGALRM at its step timeout; code
+//! that holds the GIL in a C loop (`sum(range(10**12))`) never sees the signal. Killing the
+//! worker is then the only way out: the campaign's pool replaces it and reruns the run in a
+//! host process of its own, which reports the timeout as it always has.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Mutex, OnceLock};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use pyo3::prelude::*;
+
+/// Nanoseconds since [`epoch`] at which the call in progress is killed; 0 while none is.
+static DEADLINE_NS: AtomicU64 = AtomicU64::new(0);
+/// The process whose watcher thread runs: a forked child inherits the flag but not the thread.
+static WATCHER_PID: Mutex<u32> = Mutex::new(0);
+/// How often an idle watcher looks for a new call.
+const IDLE_POLL: Duration = Duration::from_millis(100);
+
+fn epoch() -> Instant {
+    static EPOCH: OnceLock<Instant> = OnceLock::new();
+    *EPOCH.get_or_init(Instant::now)
+}
+
+fn now_ns() -> u64 {
+    u64::try_from(epoch().elapsed().as_nanos()).unwrap_or(u64::MAX)
+}
+
+fn watch() {
+    loop {
+        let deadline = DEADLINE_NS.load(Ordering::Acquire);
+        let now = now_ns();
+        if deadline != 0 && now >= deadline {
+            // SAFETY: kill(2) on this process's own id; nothing is borrowed.
+            unsafe {
+                libc::kill(libc::getpid(), libc::SIGKILL);
+            }
+        }
+        let wait = if deadline == 0 {
+            IDLE_POLL
+        } else {
+            Duration::from_nanos(deadline.saturating_sub(now)).min(IDLE_POLL * 10)
+        };
+        thread::sleep(wait.max(Duration::from_millis(1)));
+    }
+}
+
+fn ensure_watcher() {
+    let pid = std::process::id();
+    let mut running = WATCHER_PID.lock().unwrap_or_else(|e| e.into_inner());
+    if *running != pid {
+        thread::Builder::new()
+            .name("sitgen-watchdog".into())
+            .spawn(watch)
+            .expect("a watchdog thread starts");
+        *running = pid;
+    }
+}
+
+/// Kills this process if a call runs longer than `limit`.
+pub(crate) struct Watchdog {
+    limit_ns: u64,
+}
+
+/// One call being watched; dropping it (the call returned, or raised) disarms the watchdog.
+pub(crate) struct Watched;
+
+impl Watchdog {
+    pub(crate) fn new(limit_s: f64) -> Self {
+        ensure_watcher();
+        let limit_ns = (limit_s.clamp(0.001, 1e6) * 1e9) as u64;
+        Self { limit_ns }
+    }
+
+    pub(crate) fn watch(&self) -> Watched {
+        DEADLINE_NS.store(
+            now_ns().saturating_add(self.limit_ns).max(1),
+            Ordering::Release,
+        );
+        Watched
+    }
+}
+
+impl Drop for Watched {
+    fn drop(&mut self) {
+        DEADLINE_NS.store(0, Ordering::Release);
+    }
+}
+
+/// Arm the watchdog for the call that follows (`limit_s`: seconds until this process is
+/// killed), or disarm it (`None`): for the work around an in-process controller's steps — its
+/// class loading and `reset` — that `Run.drive` does not watch itself.
+#[pyfunction]
+#[pyo3(signature = (limit_s=None))]
+fn kill_after(limit_s: Option<f64>) {
+    match limit_s {
+        Some(limit_s) => std::mem::forget(Watchdog::new(limit_s).watch()),
+        None => drop(Watched),
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(kill_after, m)?)?;
+    Ok(())
+}

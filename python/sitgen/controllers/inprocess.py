@@ -1,0 +1,274 @@
+"""A Python controller called in this process, from the core's step loop: the fast path.
+
+What it does: runs a controller object's ``reset(info)`` and ``act(obs) -> (v, omega)``
+without leaving the process — for an object handed to :func:`sitgen.run`, and for a
+``python:MODULE:CLASS`` controller in a campaign's pool worker, where the class is imported
+once per worker and each run gets a fresh instance. The core steps the run and calls ``act``
+whenever the agent decides (``_core.Run.drive``), with the scan as one numpy array (a copy of
+the core's buffer, never a Python float per beam) and the same :class:`Observation` the host
+process builds, so a run gives the same bytes on either path.
+
+Why: a host process (:mod:`sitgen.controllers.host`) costs a JSON round trip through two pipes
+per step, hundreds of times what a cheap controller itself costs. Its isolation is kept another
+way: an exception, ``sys.exit`` or a bad reply ends the run with the host's one-line reason;
+a call past the step timeout is interrupted (SIGALRM, main thread only), and one that cannot be
+interrupted (a C loop holding the GIL) has its worker killed ``KILL_GRACE_S`` later by a
+watchdog thread in the core. A worker that dies — that kill, ``os._exit``, a crash, the
+out-of-memory killer — is replaced, and its runs are made again each in a host process, which
+reports what the controller did exactly as it always has.
+
+Parameters: ``step_timeout_s`` (s, default :data:`STEP_TIMEOUT_S`, 1 s) per ``act``; reset and
+class loading get :data:`START_TIMEOUT_S` (10 s); ``kill_after_s`` (s, default None: never)
+the watchdog's limit, the step or start timeout plus :data:`KILL_GRACE_S` in a pool worker.
+
+Source: sitgen's controller protocol (docs/controller-protocol.md), whose messages this path
+skips but whose meaning and error reasons it keeps.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import signal
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
+import numpy as np
+
+from sitgen import _core
+from sitgen.controllers.external import (
+    START_TIMEOUT_S,
+    STEP_TIMEOUT_S,
+    ControllerError,
+    UserController,
+)
+from sitgen.controllers.host import BadReply, command, exception_line, find_class, instantiate
+from sitgen.world.sim import Observation
+
+KILL_GRACE_S = 1.0
+"""How long past its timeout a call that ignores SIGALRM may run before the watchdog kills its
+worker (a pool worker only; the run is then made again in a host process)."""
+
+
+class StepTimeout(BaseException):
+    """A call ran past its timeout (a BaseException, so that a controller's own
+    ``except Exception`` cannot swallow it)."""
+
+
+class InProcessController(UserController):
+    """An object with ``reset(info)`` and ``act(obs)``, or a ``python:`` target loaded in this
+    process, called without leaving it. ``isolated``: this process is a disposable pool worker
+    (the watchdog may kill it; any exception is the controller's, as in a host process)."""
+
+    def __init__(
+        self,
+        target: Any,
+        name: str,
+        step_timeout_s: float = STEP_TIMEOUT_S,
+        isolated: bool = False,
+    ) -> None:
+        self.name = name
+        self._target: Any = None
+        self._path = target if isinstance(target, str) else None
+        if self._path is None:
+            self._target = _checked(target, name)
+        self._step_timeout_s = step_timeout_s
+        self._isolated = isolated
+        # A host process reports any exception; in the caller's own process Ctrl-C stays its.
+        self._caught: type[BaseException] = BaseException if isolated else Exception
+        self._angles: np.ndarray[Any, np.dtype[np.float64]] = np.zeros(0)
+        self._max_range = 0.0
+
+    def load(self) -> None:
+        if self._target is not None:
+            return
+        assert self._path is not None
+        with self._watched(START_TIMEOUT_S):
+            try:
+                self._target = instantiate(find_class(self._path))
+            except ValueError as e:
+                raise ControllerError(f"controller {self.name} {e}") from None
+
+    def reset(self, info: dict[str, Any]) -> None:
+        self.load()
+        # As the host process gets it: through JSON, lists where the info has tuples.
+        told = json.loads(json.dumps(info))
+        self._angles = np.asarray(told["laser"]["angles"], dtype=np.float64)
+        self._max_range = float(told["laser"]["range_m"])
+        with self._watched(START_TIMEOUT_S):
+            self._call(lambda: self._target.reset(told), "in reset", START_TIMEOUT_S)
+
+    def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
+        when = f"at {obs['time']:.1f} s"
+        observation = self._observation(
+            np.asarray(obs["ranges"], dtype=np.float64),
+            tuple(obs["pose"]),
+            tuple(obs["velocity"]),
+            obs["stalled"],
+            obs["time"],
+            tuple(
+                {"id": t["id"], "position": tuple(t["position"]), "velocity": tuple(t["velocity"])}
+                for t in obs["tracks"]
+            ),
+            obs.get("waypoints_reached", 0),
+        )
+        with self._watched(self._step_timeout_s):
+            value = self._call(lambda: self._target.act(observation), when, self._step_timeout_s)
+        return self._command(value, when)
+
+    def drive(self, core: _core.Run) -> None:
+        """Step ``core`` to its end, the core calling ``act`` whenever the agent decides;
+        raises ControllerError when the controller fails (the run stops at that step)."""
+        target_act, observation = self._target.act, self._observation
+        timeout_s = self._step_timeout_s
+        caught, name = self._caught, self.name
+        timed = _can_time()
+        at = [0.0]
+
+        def act(
+            ranges: Any, pose: Any, velocity: Any, stalled: bool, time_s: float, tracks: Any, k: int
+        ) -> tuple[float, float]:
+            at[0] = time_s
+            obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
+            if timed:
+                signal.setitimer(signal.ITIMER_REAL, timeout_s)
+            try:
+                value = target_act(obs)
+            except StepTimeout:
+                raise
+            except SystemExit as e:
+                raise ControllerError(
+                    f"controller {name} called sys.exit({e.code!r}) at {time_s:.1f} s"
+                ) from None
+            except caught as e:  # a user's bug must end this run only
+                raise ControllerError(
+                    f"controller {name} raised at {time_s:.1f} s: {exception_line(e)}"
+                ) from None
+            finally:
+                if timed:
+                    signal.setitimer(signal.ITIMER_REAL, 0)
+            # The common reply, checked inline: a pair of floats is the command as it is.
+            if type(value) is tuple and len(value) == 2:
+                v, omega = value
+                if type(v) is float and type(omega) is float:
+                    return value
+            return self._command(value, f"at {time_s:.1f} s")
+
+        kill_after_s = timeout_s + KILL_GRACE_S if self._isolated else None
+        with _alarm(timed):
+            try:
+                core.drive(act, kill_after_s)
+            except StepTimeout:
+                raise ControllerError(self._late(timeout_s, f"at {at[0]:.1f} s")) from None
+
+    def _observation(
+        self,
+        ranges: Any,
+        pose: Any,
+        velocity: Any,
+        stalled: bool,
+        time_s: float,
+        tracks: Any,
+        waypoints_reached: int,
+    ) -> Observation:
+        return Observation(
+            ranges=ranges,
+            angles=self._angles,
+            max_range=self._max_range,
+            pose=pose,
+            velocity=velocity,
+            stalled=stalled,
+            time=time_s,
+            tracks=tracks,
+            waypoints_reached=waypoints_reached,
+        )
+
+    def _command(self, value: Any, when: str) -> tuple[float, float]:
+        try:
+            return command(value, when)
+        except BadReply as e:
+            raise ControllerError(f"controller {self.name} {e}") from None
+
+    def _late(self, timeout_s: float, when: str) -> str:
+        return f"controller {self.name} did not reply within {timeout_s:g} s {when}"
+
+    def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
+        try:
+            with _alarm(_can_time()), _deadline(timeout_s):
+                return call()
+        except StepTimeout:
+            raise ControllerError(self._late(timeout_s, when)) from None
+        except SystemExit as e:
+            raise ControllerError(
+                f"controller {self.name} called sys.exit({e.code!r}) {when}"
+            ) from None
+        except self._caught as e:  # a user's bug must end this run only
+            reason = exception_line(e)
+            raise ControllerError(f"controller {self.name} raised {when}: {reason}") from None
+
+    @contextlib.contextmanager
+    def _watched(self, timeout_s: float) -> Iterator[None]:
+        """The watchdog armed around a call made from Python (a pool worker only)."""
+        if not self._isolated:
+            yield
+            return
+        _core.kill_after(timeout_s + KILL_GRACE_S)
+        try:
+            yield
+        finally:
+            _core.kill_after(None)
+
+    def close(self) -> str | None:
+        close = getattr(self._target, "close", None)
+        if callable(close):
+            # Closing is best effort: the run's outcome is already set.
+            try:
+                close()
+            except (Exception, SystemExit) as e:
+                return f"close() raised: {exception_line(e)}"
+        return None
+
+
+def _checked(target: Any, name: str) -> Any:
+    for method in ("reset", "act"):
+        if not callable(getattr(target, method, None)):
+            raise ControllerError(f"controller {name} has no method `{method}`")
+    return target
+
+
+def _can_time() -> bool:
+    """Whether SIGALRM can interrupt a call here (only Python's main thread receives it)."""
+    return threading.current_thread() is threading.main_thread()
+
+
+def _expire(signum: int, frame: object) -> None:
+    raise StepTimeout
+
+
+@contextlib.contextmanager
+def _alarm(timed: bool) -> Iterator[None]:
+    """SIGALRM raises StepTimeout within the block (when ``timed``)."""
+    if not timed:
+        yield
+        return
+    previous = signal.signal(signal.SIGALRM, _expire)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+@contextlib.contextmanager
+def _deadline(timeout_s: float) -> Iterator[None]:
+    """Interrupt the block with StepTimeout after ``timeout_s`` of wall time (SIGALRM, so only
+    in the main thread; elsewhere the block runs unbounded)."""
+    if not _can_time():
+        yield
+        return
+    signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
