@@ -146,43 +146,128 @@ def bench_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any
     return out
 
 
+def own_cost_python(factory: Callable[[], Any], situation: sitgen.Situation) -> float:
+    """Seconds a Python controller itself takes a step: its ``act`` called in a loop on one
+    observation of the scene, nothing else."""
+    from sitgen.world.sim import Observation
+
+    core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:x"}}), 0)
+    o = core.observe_agent()
+    obs = Observation(
+        ranges=o["ranges"], angles=o["angles"], pose=o["pose"], velocity=o["velocity"],
+        stalled=o["stalled"], time=o["time"], tracks=tuple(o["tracks"]),
+    )  # fmt: skip
+    controller = factory()
+    controller.reset({})
+    calls = 2000
+    start = time.perf_counter()
+    for _ in range(calls):
+        controller.act(obs)
+    return (time.perf_counter() - start) / calls
+
+
+def own_cost_program(argv: list[str], situation: sitgen.Situation) -> float:
+    """Seconds a ``cmd:`` program itself takes a step: observation lines fed to it all at once
+    (it never waits for sitgen), less its start-up."""
+    core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:x"}}), 0)
+    o = core.observe_agent()
+    line = json.dumps({
+        "type": "observation", "time": o["time"], "pose": list(o["pose"]),
+        "velocity": list(o["velocity"]), "stalled": o["stalled"], "waypoints_reached": 0,
+        "ranges": o["ranges"].tolist(), "tracks": [],
+    }) + "\n"  # fmt: skip
+    lines = 5000
+
+    def feed(n: int) -> float:
+        start = time.perf_counter()
+        subprocess.run(argv, input=line * n, capture_output=True, text=True, check=True)
+        return time.perf_counter() - start
+
+    feed(0)
+    return max(0.0, (feed(lines) - feed(0)) / lines)
+
+
 def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
-    """The same route follower (examples/ros2/follower.py) driving the reference scene's agent
-    as a ``cmd:`` program (JSON lines over pipes) and as a ROS 2 node (``ros2:``, DDS in
-    lockstep): control steps per second over the run, and the start-up each pays per run
-    (a 0.1 s run). Skipped where sitgen[ros2] is not installed."""
+    """A user's controller on each path, driving the reference scene's agent: control steps per
+    second over a run (less the start-up each run pays, timed on a 0.1 s run), and the ratio of
+    the time a step takes to the controller's own cost, measured in the same process.
+
+    - ``python`` in process: a ``python:`` class as a campaign's pool worker calls it (the
+      fast path), a trivial one and one that spends 200 µs a step;
+    - ``python`` in a host process of its own (the JSON-lines protocol, as ``sitgen run`` and
+      a run redone after its worker died use it);
+    - ``cmd:`` programs: a trivial reply, and the route follower of examples/ros2;
+    - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
+      installed.
+
+    What limits each: the fast path adds a few µs to the built-in run's own step (the scene's
+    simulation, laser and monitor, printed as ``straight``); a program pays a pipe round trip
+    and a JSON line each way."""
+    from user_controllers import Busy, Trivial
+
     from sitgen.controllers.ros2 import ros2_available
 
     situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
-    folder = Path(__file__).resolve().parent.parent / "examples" / "ros2"
-    kinds = {
-        "cmd": f"cmd:{sys.executable} {folder / 'follower_cmd.py'}",
-        "ros2": f"ros2:{sys.executable} {folder / 'follower_node.py'}",
-    }
+    folder = Path(__file__).resolve().parent
+    trivial_cmd = [sys.executable, str(folder / "trivial_cmd.py")]
+    follower_cmd = [sys.executable, str(folder.parent / "examples" / "ros2" / "follower_cmd.py")]
+    kinds: dict[str, tuple[Any, bool, float | None]] = {
+        "built-in straight": ("straight", False, None),
+        "python trivial, in process": (f"python:{folder / 'user_controllers.py'}:Trivial", True,
+                                       own_cost_python(Trivial, situation)),
+        "python 200 µs, in process": (f"python:{folder / 'user_controllers.py'}:Busy", True,
+                                      own_cost_python(Busy, situation)),
+        "python trivial, host process": (f"python:{folder / 'user_controllers.py'}:Trivial", False,
+                                         own_cost_python(Trivial, situation)),
+        "cmd trivial reply": (f"cmd:{' '.join(trivial_cmd)}", False,
+                              own_cost_program(trivial_cmd, situation)),
+        "cmd route follower": (f"cmd:{' '.join(follower_cmd)}", False,
+                               own_cost_program(follower_cmd, situation)),
+        "ros2 route follower": (
+            f"ros2:{sys.executable} {folder.parent / 'examples' / 'ros2' / 'follower_node.py'}",
+            False, None,
+        ),
+    }  # fmt: skip
     reason = ros2_available()
     if reason is not None:
-        print(f"skipped ros2: against cmd: {reason}")
-        kinds.pop("ros2")
+        print(f"skipped ros2: {reason}")
+        kinds.pop("ros2 route follower")
     out: dict[str, Any] = {}
-    for kind, name in kinds.items():
+    for kind, (name, in_process, own_s) in kinds.items():
         steps: list[int] = []
 
-        def whole(_: int, name: str = name, steps: list[int] = steps) -> None:
-            steps.append(sitgen.run(situation, controller=name, time_limit=60.0).steps)
+        def whole(
+            _: int, name: str = name, fast: bool = in_process, steps: list[int] = steps
+        ) -> None:
+            record = sitgen.run(situation, controller=name, time_limit=60.0, in_process=fast)
+            assert record.outcome != "error", record.reason
+            steps.append(record.steps)
 
-        def start(_: int, name: str = name) -> None:
-            sitgen.run(situation, controller=name, time_limit=0.1)
+        def start(_: int, name: str = name, fast: bool = in_process) -> None:
+            sitgen.run(situation, controller=name, time_limit=0.1, in_process=fast)
 
-        m = measure(whole, repeats=3)
-        s = measure(start, repeats=3)
-        per_s = steps[-1] / max(1e-9, m["median_s"] - s["median_s"])
-        out[kind] = {"steps": steps[-1], "steps_per_s": per_s, "start_s": s["median_s"], **m}
-        rows.append((f"route follower as {kind}: {steps[-1]} control steps", m))
+        m = measure(whole, repeats=5)
+        s = measure(start, repeats=5)
+        step_s = max(1e-9, m["median_s"] - s["median_s"]) / steps[-1]
+        out[kind] = {
+            "steps": steps[-1], "steps_per_s": 1 / step_s, "start_s": s["median_s"],
+            "own_us_per_step": None if own_s is None else own_s * 1e6, **m,
+        }  # fmt: skip
+        rows.append((f"{kind}: {steps[-1]} control steps", m))
+        ratio = "" if not own_s else f", {step_s / own_s:7.2f}x its own {own_s * 1e6:6.1f} µs"
         print(
-            f"route follower as {kind:4}: {per_s:8,.0f} control steps/s, "
-            f"{s['median_s'] * 1e3:5.0f} ms to start and end a run ({steps[-1]} steps in "
-            f"{m['median_s']:.2f} s)"
+            f"{kind:30}: {1 / step_s:8,.0f} control steps/s, {step_s * 1e6:6.1f} µs a step"
+            f"{ratio}; {s['median_s'] * 1e3:5.0f} ms to start and end a run"
         )
+    # The floor: a step of the trivial class on the fast path, less its own cost, is the run's
+    # own step (simulation, laser, monitor) with what the fast path adds.
+    trivial = out["python trivial, in process"]
+    floor = 1e6 / trivial["steps_per_s"] - trivial["own_us_per_step"]
+    for kind, r in out.items():
+        if r["own_us_per_step"] is not None:
+            r["beyond_floor_us_per_step"] = 1e6 / r["steps_per_s"] - floor - r["own_us_per_step"]
+            print(f"{kind:30}: {r['beyond_floor_us_per_step']:+7.1f} µs a step beyond its own "
+                  f"cost and the fast path's floor ({floor:.1f} µs: the run and the call)")  # fmt: skip
     return out
 
 

@@ -71,19 +71,9 @@ class Run:
     def step(self, command: tuple[float, float] | None = None) -> bool: ...
     def drive(
         self,
-        act: Callable[
-            [
-                npt.NDArray[np.float64],
-                tuple[float, float, float],
-                tuple[float, float],
-                bool,
-                float,
-                tuple[dict[str, Any], ...],
-                int,
-            ],
-            tuple[float, float],
-        ],
+        act: Callable[..., tuple[float, float]],
         kill_after_s: float | None = None,
+        line: bool = False,
     ) -> None: ...
     def fail(self, reason: str) -> None: ...
     def robots_now(self, situation_json: str) -> str: ...

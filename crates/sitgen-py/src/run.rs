@@ -6,12 +6,13 @@ use std::sync::{Mutex, MutexGuard};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyTuple};
 use sitgen_core::control;
 use sitgen_core::mission::ControllerSpec;
 use sitgen_core::monitor::{self, EventKind};
-use sitgen_core::run::{profile, Run, RunRecord, RunSpec};
+use sitgen_core::run::{profile, protocol, Run, RunRecord, RunSpec};
 use sitgen_core::scoring;
+use sitgen_core::sim::Observation;
 use sitgen_core::situation::Situation;
 
 use crate::sim::observation_dict;
@@ -108,19 +109,22 @@ impl PyRun {
         Ok(serde_json::to_string(&robots).expect("robots serialize"))
     }
 
-    /// Step the run to its end with an agent controller called in this process: whenever the
-    /// agent decides, `act(ranges, pose, velocity, stalled, time_s, tracks, waypoints_reached)`
-    /// returns its command (v m/s, ω rad/s). `ranges` is a fresh numpy array each call (one
-    /// copy of the scan, never a Python float per beam); `tracks` a tuple of dicts (`id`,
-    /// `position`, `velocity`). An exception from `act` stops the run where it is and
-    /// propagates (the caller ends the run with its reason). `kill_after_s`: a call still
-    /// running after this long kills this process (see `watchdog`; for pool workers only).
-    #[pyo3(signature = (act, kill_after_s=None))]
+    /// Step the run to its end with an agent controller called from here: whenever the agent
+    /// decides, `act` returns its command (v m/s, ω rad/s). It is called as
+    /// `act(ranges, pose, velocity, stalled, time_s, tracks, waypoints_reached)`, `ranges` a
+    /// fresh numpy array each call (one copy of the scan, never a Python float per beam) and
+    /// `tracks` a tuple of dicts (`id`, `position`, `velocity`); or, with `line`, as
+    /// `act(message, time_s)`, `message` the controller protocol's observation line (bytes),
+    /// for a program. An exception from `act` stops the run where it is and propagates (the
+    /// caller ends the run with its reason). `kill_after_s`: a call still running after this
+    /// long kills this process (see `watchdog`; for disposable pool workers only).
+    #[pyo3(signature = (act, kill_after_s=None, line=false))]
     fn drive(
         &mut self,
         py: Python<'_>,
         act: &Bound<'_, PyAny>,
         kill_after_s: Option<f64>,
+        line: bool,
     ) -> PyResult<()> {
         let watchdog = kill_after_s.map(Watchdog::new);
         let run = self.live_mut()?;
@@ -133,30 +137,13 @@ impl PyRun {
             let command = if run.agent_acts_now() {
                 let reached = run.agent_waypoints_reached();
                 let o = run.agent_observation();
-                let tracks = PyTuple::new(
-                    py,
-                    o.tracks
-                        .iter()
-                        .map(|t| {
-                            let d = PyDict::new(py);
-                            d.set_item("id", t.id)?;
-                            d.set_item("position", t.position)?;
-                            d.set_item("velocity", t.velocity)?;
-                            Ok::<_, PyErr>(d)
-                        })
-                        .collect::<PyResult<Vec<_>>>()?,
-                )?;
-                let args = (
-                    PyArray1::from_vec(py, o.ranges),
-                    (o.pose.x_m, o.pose.y_m, o.pose.heading_rad),
-                    o.velocity,
-                    o.stalled,
-                    o.time_s,
-                    tracks,
-                    reached,
-                );
                 let watched = watchdog.as_ref().map(Watchdog::watch);
-                let reply = act.call1(args);
+                let reply = if line {
+                    let message = protocol::observation_line(&o, reached);
+                    act.call1((PyBytes::new(py, message.as_bytes()), o.time_s))
+                } else {
+                    act.call1(observation_args(py, o, reached)?)
+                };
                 drop(watched);
                 Some(reply?.extract::<(f64, f64)>()?)
             } else {
@@ -197,6 +184,44 @@ impl PyRun {
         let agent = run.agent();
         record_dict(py, run.finish(), agent)
     }
+}
+
+type ObservationArgs<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    (f64, f64, f64),
+    (f64, f64),
+    bool,
+    f64,
+    Bound<'py, PyTuple>,
+    usize,
+);
+
+/// What `Run.drive` hands an in-process controller: the observation's parts.
+fn observation_args(
+    py: Python<'_>,
+    o: Observation,
+    reached: usize,
+) -> PyResult<ObservationArgs<'_>> {
+    let tracks = o
+        .tracks
+        .iter()
+        .map(|t| {
+            let d = PyDict::new(py);
+            d.set_item("id", t.id)?;
+            d.set_item("position", t.position)?;
+            d.set_item("velocity", t.velocity)?;
+            Ok(d)
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((
+        PyArray1::from_vec(py, o.ranges),
+        (o.pose.x_m, o.pose.y_m, o.pose.heading_rad),
+        o.velocity,
+        o.stalled,
+        o.time_s,
+        PyTuple::new(py, tracks)?,
+        reached,
+    ))
 }
 
 /// A record as a dict: `record` (JSON: outcome, reason, score, events, steps, time_s, robots),

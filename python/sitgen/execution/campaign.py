@@ -17,6 +17,7 @@ from __future__ import annotations
 import heapq
 import json
 import math
+import multiprocessing
 import os
 import signal
 import time
@@ -32,6 +33,7 @@ from typing import Any
 
 from sitgen import _core
 from sitgen import _core as core
+from sitgen.controllers.external import pin_to_one_core
 from sitgen.controllers.host import die_with_parent
 from sitgen.controllers.user import is_user_controller
 from sitgen.execution.jobs import (
@@ -196,14 +198,23 @@ def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
     }
 
 
-def _worker_start() -> None:
+def _worker_start(slots: Any = None) -> None:
     """A pool worker: Ctrl-C is the campaign's to handle (it finishes the runs in flight), and
     the worker dies with the campaign even if that is killed outright. What a controller called
     in it prints goes nowhere, as a host process's output does (the campaign's own output stays
-    readable, ``--format json`` included)."""
+    readable, ``--format json`` included). With ``slots`` (a shared counter), the worker takes
+    the next one and keeps to that CPU of those allowed, it and the programs it starts, so that
+    a program in lockstep with it shares its core and the workers share the cores out
+    (:func:`sitgen.controllers.external.pin_to_one_core`)."""
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent()
+    if slots is not None and hasattr(os, "sched_getaffinity"):
+        with slots.get_lock():
+            slot = slots.value
+            slots.value += 1
+        allowed = sorted(os.sched_getaffinity(0))
+        pin_to_one_core(allowed[slot % len(allowed)])
     quiet = os.open(os.devnull, os.O_WRONLY)
     for fd in (1, 2):
         os.dup2(quiet, fd)
@@ -324,7 +335,8 @@ class Executor:
     ) -> Generator[tuple[Job, dict[str, Any]], None, bool]:
         """Run jobs in one pool until they run out (False) or the pool breaks (True, with the
         runs it had in flight put in ``suspects``)."""
-        pool = ProcessPoolExecutor(self.workers, initializer=_worker_start)
+        slots = multiprocessing.Value("i", 0)
+        pool = ProcessPoolExecutor(self.workers, initializer=_worker_start, initargs=(slots,))
         inflight: dict[Future[dict[str, Any]], Job] = {}
         try:
             while True:

@@ -35,6 +35,7 @@ use crate::situation::Situation;
 pub mod episodes;
 pub mod perturb;
 pub mod profile;
+pub mod protocol;
 pub mod serve;
 
 pub use perturb::Perturbation;
