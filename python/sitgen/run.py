@@ -101,7 +101,8 @@ def _controller_name(controller: Any) -> str:
 
 
 def reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
-    """What a user controller is told at the start: its route, body, laser and limits."""
+    """What a user controller is told at the start: its route, body, laser and limits, and the
+    params its controller table gives it."""
     robot = situation.robots[agent]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
     resolved = json.loads(_core.check_run_spec(spec_json(dict(run), "run")))
@@ -121,6 +122,7 @@ def reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict
         "max_turn_rate_deg_s": float(sim["max_turn_rate_deg_s"]),
         "time_limit_s": float(resolved["time_limit_s"]),
         "control_period_s": float(controller.get("control_period_s") or sim["dt_s"]),
+        "params": dict(controller.get("params") or {}),
     }
 
 
@@ -129,16 +131,29 @@ def run_spec_with(
     time_limit: float | None = None,
     controller: str | None = None,
     params: Mapping[str, float] | None = None,
+    base: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
-    with ``params``) given on top, as ``sitgen run``'s options give them; the rest of the spec's
-    controller section (its ``control_period_s``, ``fault``) stays."""
+    with ``params`` over its own) given on top, as the commands' options give them. The
+    controller table given on top of is the spec's, else ``base`` (the situation's agent's):
+    for the same controller its params, fault and ``control_period_s`` stay; another
+    controller keeps only the ``control_period_s``."""
     run_spec: dict[str, Any] = dict(spec or {})
     if time_limit is not None:
         run_spec["time_limit_s"] = time_limit
-    if controller:
-        given = dict(run_spec.get("controller") or {})
-        run_spec["controller"] = {**given, "name": controller, "params": dict(params or {})}
+    if not controller and not params:
+        return run_spec
+    given = dict(run_spec.get("controller") or base or {})
+    if controller and given.get("name") not in (None, controller):
+        given = {k: v for k, v in given.items() if k == "control_period_s"}
+    name = controller or given.get("name")
+    if not name:
+        raise _core.SpecError("--param: no controller to give it to; name one with --controller")
+    run_spec["controller"] = {
+        **given,
+        "name": name,
+        "params": {**dict(given.get("params") or {}), **dict(params or {})},
+    }
     return run_spec
 
 
@@ -168,7 +183,7 @@ def run(
     if not isinstance(situation, Situation):
         situation = Situation.load(situation)
     name = _controller_name(controller)
-    run_spec = run_spec_with(spec, time_limit, name, params)
+    run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
     core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
     if core.agent_is_external:
@@ -302,6 +317,7 @@ def check_controller(
     situation: Situation,
     steps: int = 50,
     step_timeout_s: float = STEP_TIMEOUT_S,
+    params: Mapping[str, float] | None = None,
 ) -> list[Check]:
     """Drive ``controller`` for ``steps`` steps of ``situation`` and say what is wrong with it,
     check by check (in the spirit of Gymnasium's ``check_env``): it loads, it accepts the reset
@@ -312,7 +328,7 @@ def check_controller(
 
     checks: list[Check] = []
     try:
-        user = load_controller(controller, step_timeout_s)
+        user = load_controller(controller, step_timeout_s, params)
     except ControllerError as e:
         return [Check("loads", False, str(e))]
     try:
@@ -322,6 +338,7 @@ def check_controller(
         return [Check("loads", False, str(e))]
     checks.append(Check("loads", True, user.name))
     info = reset_info(situation, {}, 0)
+    info["params"] = dict(params or {})
     core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)
     try:
         try:

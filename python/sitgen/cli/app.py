@@ -84,10 +84,42 @@ ControllerOption = Annotated[
     typer.Option(
         "--controller",
         "-c",
-        help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS or "
-        "'cmd:PROGRAM ARGS'. Default: the situation's.",
+        help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS (or "
+        "python:FILE.py:CLASS), 'cmd:PROGRAM ARGS' or 'ros2:PROGRAM ARGS'. Default: the "
+        "spec's, else the situation's.",
     ),
 ]
+
+
+ParamOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--param",
+        "-p",
+        help="NAME=VALUE: a parameter of the controller, a number, over the spec's "
+        "(repeatable). A python: class gets them as keyword arguments, a cmd: program in its "
+        "reset message, a ros2: node as ROS parameters.",
+    ),
+]
+
+
+def parse_params(items: list[str] | None, option: str = "--param") -> dict[str, float]:
+    """``NAME=VALUE`` items as a controller's params; SpecError names the option and item."""
+    import math
+
+    params: dict[str, float] = {}
+    for item in items or []:
+        name, sep, text = item.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name.strip() or not math.isfinite(value):
+            raise _core.SpecError(
+                f"{option}: `{item}` is not NAME=VALUE with VALUE a finite number"
+            )
+        params[name.strip()] = value
+    return params
 
 
 TimeLimitOption = Annotated[

@@ -15,6 +15,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from sitgen import _core
 from sitgen.store import StoreError, require_store
 from sitgen.world.config import preset_names, preset_spec
 from sitgen.world.situation import generate_situation
@@ -26,7 +27,9 @@ from sitgen.cli.app import (
     AddressOption,
     BackendOption,
     CampaignSeedOption,
+    ControllerOption,
     OnProgress,
+    ParamOption,
     RerunsOption,
     SeedOption,
     T,
@@ -38,17 +41,46 @@ from sitgen.cli.app import (
     _weights,
     _writing,
     app,
+    parse_params,
 )
 from sitgen.cli.triage import failures
 from sitgen.cli.world import _coverage_target
 
 
-def _campaign_spec(spec: Path | None) -> CampaignSpec:
-    """The campaign spec in file ``spec``, or the paper's."""
+def _campaign_spec(
+    spec: Path | None, controller: str | None = None, params: list[str] | None = None
+) -> CampaignSpec:
+    """The campaign spec in file ``spec``, or the paper's, with the agent's controller and its
+    params as ``--controller`` and ``--param`` give them (:func:`_with_controller`)."""
     from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
-    return parse_campaign(text, str(spec) if spec else "paper campaign")
+    parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
+    return _with_controller(parsed, controller, params)
+
+
+def _with_controller(
+    parsed: CampaignSpec, controller: str | None, params: list[str] | None
+) -> CampaignSpec:
+    """``parsed`` whose runs give the agent ``controller`` (over the spec's run controller, or
+    its mission's) with ``params`` over its own; unchanged without either."""
+    from sitgen.execution.jobs import campaign_from_data
+    from sitgen.run import run_spec_with
+
+    given = parse_params(params)
+    if not controller and not given:
+        return parsed
+    if controller:
+        _core.check_controller(controller, "--controller")
+    varied = [p for p in parsed.vary if p.endswith(("controller.name", "agent_controller.name"))]
+    if controller and varied:
+        raise UsageError(f"--controller: the spec varies {varied[0]}; name one or the other")
+    source = copy.deepcopy(parsed.source)
+    mission = source.get("situation", {}).get("mission", {}).get("agent_controller")
+    source["run"] = run_spec_with(
+        source.get("run"), None, controller, given, mission or {"name": "snd_follow"}
+    )
+    return campaign_from_data(source)
 
 
 def _stored(
@@ -74,6 +106,8 @@ def campaign(
         Path | None,
         typer.Argument(help="Campaign spec (TOML). Omit for the paper's experiment."),
     ] = None,
+    controller: ControllerOption = None,
+    param: ParamOption = None,
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
@@ -127,7 +161,7 @@ def campaign(
     from sitgen.execution.campaign import DEFAULT_KEEP, run_campaign
 
     _check_reruns(reruns)
-    parsed = _campaign_spec(spec)
+    parsed = _campaign_spec(spec, controller, param)
     total_n = parsed.n if n is None else n
     result = _stored(
         "campaign",
@@ -380,6 +414,8 @@ def search(
             help="Campaign spec (TOML) whose varied fields to search. Omit for the paper's."
         ),
     ] = None,
+    controller: ControllerOption = None,
+    param: ParamOption = None,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -463,6 +499,8 @@ def search(
         source = copy.deepcopy(parsed.source)
         source.setdefault("run", {})["scoring"] = learned.table()
         parsed = campaign_from_data(source)
+    # Last: a directed search varies the run it starts from, driven by this controller.
+    parsed = _with_controller(parsed, controller, param)
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
         plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)
@@ -553,6 +591,15 @@ def diff_command(
         ),
     ] = "snd_follow",
     b: Annotated[str, typer.Option("--b", help="Controller B (the new version), as --a.")] = "",
+    param: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--param",
+            "-p",
+            help="NAME=VALUE: a parameter given to both A and B, over their own (repeatable; a "
+            "JSON table in --a or --b gives one side its own).",
+        ),
+    ] = None,
     n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
     seed: CampaignSeedOption = 0,
     situations: Annotated[
@@ -580,6 +627,7 @@ def diff_command(
         parse_controller,
         run_diff,
         summary_lines,
+        with_params,
     )
     from sitgen.generation.diff import write_junit as write_diff_junit
     from sitgen.store import Store
@@ -588,9 +636,10 @@ def diff_command(
         raise UsageError(f"--format: `{format}` is not one of table, json")
     if not b:
         raise UsageError("--b: the controller to compare with A is required")
+    given = parse_params(param)
     plan = DiffPlan(
-        parse_controller(a, "--a"),
-        parse_controller(b, "--b"),
+        with_params(parse_controller(a, "--a"), given, "--a"),
+        with_params(parse_controller(b, "--b"), given, "--b"),
         "stored" if situations else "random",
         str(situations) if situations else None,
     )

@@ -21,6 +21,7 @@ from sitgen.cli.app import (
     EXIT_FAILED,
     AllowEditedOption,
     ControllerOption,
+    ParamOption,
     RunSpecOption,
     SensorSeedOption,
     TimeLimitOption,
@@ -28,6 +29,7 @@ from sitgen.cli.app import (
     _read_run_spec,
     _writing,
     app,
+    parse_params,
 )
 
 
@@ -102,6 +104,7 @@ def crosscheck(
 def run_command(
     situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
     controller: ControllerOption = None,
+    param: ParamOption = None,
     time_limit: TimeLimitOption = None,
     seed: SensorSeedOption = 0,
     spec: RunSpecOption = None,
@@ -125,10 +128,11 @@ def run_command(
     if rosbag2 is not None and rosbag2.exists():
         raise UsageError(f"--rosbag2: {rosbag2} already exists; a rosbag2 is written anew")
     loaded = Situation.load(situation, allow_edited)
-    run_spec = _read_run_spec(spec)
+    run_spec = run_spec_with(
+        _read_run_spec(spec), None, controller, parse_params(param), loaded.agent.controller
+    )
     record = run(
         loaded,
-        controller=controller,
         time_limit=time_limit,
         seed=seed,
         spec=run_spec,
@@ -140,9 +144,7 @@ def run_command(
     if rosbag2 is not None:
         try:
             with _writing(rosbag2, "the rosbag2"):
-                write_rosbag2(
-                    rosbag2, loaded, record, run_spec_with(run_spec, time_limit, controller)
-                )
+                write_rosbag2(rosbag2, loaded, record, run_spec_with(run_spec, time_limit))
         except RosbagUnavailable as e:
             raise UsageError(f"--rosbag2: {e}") from None
     if as_json:
@@ -178,6 +180,7 @@ def check_controller_command(
         typer.Option("--situation", help="Situation to drive (default: open_field, seed 0)."),
     ] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, max=100_000, help="Steps to drive.")] = 50,
+    param: ParamOption = None,
     allow_edited: AllowEditedOption = False,
 ) -> None:
     """Check that a user controller speaks the interface: loads, resets, replies with finite
@@ -193,7 +196,7 @@ def check_controller_command(
         if situation is not None
         else generate_situation(preset_spec("open_field"), seed=0)
     )
-    checks = check_controller(controller, loaded, steps=steps)
+    checks = check_controller(controller, loaded, steps=steps, params=parse_params(param))
     for c in checks:
         typer.echo(f"{'ok  ' if c.ok else 'FAIL'} {c.name:8} {c.detail}")
     if not all(c.ok for c in checks):

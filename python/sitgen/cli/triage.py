@@ -20,6 +20,7 @@ from sitgen.cli.app import (
     EXIT_FAILED,
     AllowEditedOption,
     ControllerOption,
+    ParamOption,
     RunSpecOption,
     SensorSeedOption,
     TimeLimitOption,
@@ -32,6 +33,7 @@ from sitgen.cli.app import (
     _weights,
     _writing,
     app,
+    parse_params,
 )
 
 
@@ -88,6 +90,7 @@ def shrink(
         ),
     ] = None,
     controller: ControllerOption = None,
+    param: ParamOption = None,
     failure_class: Annotated[
         str | None,
         typer.Option(
@@ -129,19 +132,26 @@ def shrink(
             if is_store:
                 if run_id is None:
                     raise UsageError(f"{source}: give the run to shrink: sitgen shrink DB RUN")
-                if controller or time_limit is not None or spec is not None:
+                if controller or param or time_limit is not None or spec is not None:
                     raise UsageError(
-                        "--controller, --time-limit and --spec are for a situation file; a "
-                        "stored run is shrunk with its own controller and run spec"
+                        "--controller, --param, --time-limit and --spec are for a situation "
+                        "file; a stored run is shrunk with its own controller and run spec"
                     )
                 require_store(source)
                 result = shrink_run(source, run_id, workers, max_probes, failure_class, on_progress)
             else:
                 if run_id is not None:
                     raise UsageError(f"{source}: a run id is for a campaign store (.db)")
+                loaded = Situation.load(source, allow_edited)
                 result = shrink_situation(
-                    Situation.load(source, allow_edited),
-                    run_spec_with(_read_run_spec(spec), time_limit, controller),
+                    loaded,
+                    run_spec_with(
+                        _read_run_spec(spec),
+                        time_limit,
+                        controller,
+                        parse_params(param),
+                        loaded.agent.controller,
+                    ),
                     seed,
                     failure_class,
                     workers,

@@ -4,7 +4,8 @@ A Python controller runs in a child process of its own, spoken to over the JSON-
 controller protocol (docs/controller-protocol.md) exactly like a ``cmd:`` program, so that
 whatever it does — loop forever, call ``sys.exit``, ``os._exit``, crash the interpreter,
 exhaust memory — ends only its own run, with the same per-step timeout as a program and
-nothing left behind. ``python -c "from sitgen.controllers.host import main; main()" MODULE:CLASS``.
+nothing left behind. ``python -c "from sitgen.controllers.host import main; main()" MODULE:CLASS
+[PARAMS]``, PARAMS the class's keyword arguments as a JSON object.
 
 Failures the host can see (the class does not load, ``reset`` or ``act`` raises, ``act``
 returns something that is not a pair of numbers, ``sys.exit`` is called) are answered with
@@ -19,6 +20,7 @@ import importlib.util
 import json
 import os
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import IO, Any
 
@@ -93,11 +95,12 @@ def find_class(target: str) -> Any:
     return _CLASSES[target]
 
 
-def instantiate(factory: Any) -> Any:
-    """A new controller from ``factory`` (a class found by :func:`find_class`), checked for
-    ``reset`` and ``act``; raises ValueError with the one-line reason."""
+def instantiate(factory: Any, params: Mapping[str, float] | None = None) -> Any:
+    """A new controller from ``factory`` (a class found by :func:`find_class`), given the
+    controller's ``params`` as keyword arguments, checked for ``reset`` and ``act``; raises
+    ValueError with the one-line reason."""
     try:
-        instance = factory()
+        instance = factory(**dict(params or {}))
     except BaseException as e:  # so is a constructor that fails
         raise ValueError(f"failed to load: {exception_line(e)}") from None
     for method in ("reset", "act"):
@@ -106,10 +109,10 @@ def instantiate(factory: Any) -> Any:
     return instance
 
 
-def load_class(target: str) -> Any:
-    """An instance of ``module:Class`` or ``path/to/file.py:Class``; raises ValueError with
-    the one-line reason (the text after the controller's name)."""
-    return instantiate(find_class(target))
+def load_class(target: str, params: Mapping[str, float] | None = None) -> Any:
+    """An instance of ``module:Class`` or ``path/to/file.py:Class`` made with ``params``;
+    raises ValueError with the one-line reason (the text after the controller's name)."""
+    return instantiate(find_class(target), params)
 
 
 class BadReply(Exception):
@@ -143,15 +146,18 @@ def _observation(message: dict[str, Any], laser: dict[str, Any]) -> Any:
     )
 
 
-def serve(target: str, inbox: IO[str], outbox: IO[str]) -> int:
-    """Answer the protocol's messages from ``inbox`` on ``outbox`` until ``end``."""
+def serve(
+    target: str, inbox: IO[str], outbox: IO[str], params: Mapping[str, float] | None = None
+) -> int:
+    """Answer the protocol's messages from ``inbox`` on ``outbox`` until ``end``, for an
+    instance of ``target`` made with ``params``."""
 
     def reply(message: dict[str, Any]) -> None:
         outbox.write(json.dumps(message) + "\n")
         outbox.flush()
 
     try:
-        controller, failure = load_class(target), None
+        controller, failure = load_class(target, params), None
     except ValueError as e:
         controller, failure = None, str(e)
     laser: dict[str, Any] = {}
@@ -196,7 +202,8 @@ def main() -> None:
     outbox = os.fdopen(os.dup(sys.stdout.fileno()), "w")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
     sys.stdout = sys.stderr
-    sys.exit(serve(sys.argv[1], sys.stdin, outbox))
+    params = json.loads(sys.argv[2]) if len(sys.argv) > 2 else None
+    sys.exit(serve(sys.argv[1], sys.stdin, outbox, params))
 
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ class InProcessController(UserController):
         name: str,
         step_timeout_s: float = STEP_TIMEOUT_S,
         isolated: bool = False,
+        params: Mapping[str, float] | None = None,
     ) -> None:
         self.name = name
         self._target: Any = None
@@ -75,6 +76,7 @@ class InProcessController(UserController):
             self._target = _checked(target, name)
         self._step_timeout_s = step_timeout_s
         self._isolated = isolated
+        self._params = dict(params or {})
         # A host process reports any exception; in the caller's own process Ctrl-C stays its.
         self._caught: type[BaseException] = BaseException if isolated else Exception
         self._angles: np.ndarray[Any, np.dtype[np.float64]] = np.zeros(0)
@@ -86,7 +88,7 @@ class InProcessController(UserController):
         assert self._path is not None
         with self._watched(START_TIMEOUT_S):
             try:
-                self._target = instantiate(find_class(self._path))
+                self._target = instantiate(find_class(self._path), self._params)
             except ValueError as e:
                 raise ControllerError(f"controller {self.name} {e}") from None
 

@@ -5,6 +5,7 @@ docs/ros2.md)."""
 
 from __future__ import annotations
 
+import json
 import shlex
 import sys
 from collections.abc import Mapping
@@ -32,7 +33,8 @@ def load_controller(
     in_process: bool = False,
 ) -> UserController:
     """The user controller ``name`` names (``python:…``, ``cmd:…``, ``ros2:…``; ``params``
-    are a ROS 2 node's parameters), or wrap an object with ``reset`` and ``act`` (called in
+    are a class's keyword arguments, a ROS 2 node's parameters; a program reads them in its
+    reset message), or wrap an object with ``reset`` and ``act`` (called in
     this process). ``in_process``: a ``python:`` class is loaded and called in this process,
     a disposable pool worker (:mod:`sitgen.controllers.inprocess`), not in a host process of
     its own. Raises ControllerError if it cannot be started."""
@@ -40,12 +42,14 @@ def load_controller(
         return InProcessController(name, f"`{type(name).__name__}`", step_timeout_s)
     if name.startswith("python:") and in_process:
         target = name.removeprefix("python:")
-        return InProcessController(target, f"`{name}`", step_timeout_s, isolated=True)
+        return InProcessController(target, f"`{name}`", step_timeout_s, True, params)
     if name.startswith("python:"):
         # Not `-m`: the package imports the host module, and runpy would warn that it ran a
         # module already imported.
         start = "from sitgen.controllers.host import main; main()"
         host = [sys.executable, "-c", start, name.removeprefix("python:")]
+        if params:
+            host.append(json.dumps(dict(params)))
         return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
     if name.startswith("cmd:"):
         command_line = name.removeprefix("cmd:")
@@ -55,9 +59,10 @@ def load_controller(
     raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…")
 
 
-def check_controller_name(name: str) -> None:
+def check_controller_name(name: str, params: Mapping[str, float] | None = None) -> None:
     """Check, before any run, that a user controller can be used: a ``cmd:`` program that
-    exists, a ``python:`` class that loads (in a host process, within the start timeout), a
+    exists, a ``python:`` class that loads with ``params`` (in a host process, within the
+    start timeout), a
     ``ros2:`` program that exists with the ROS 2 wheels installed. Raises ControllerError with
     the reason; built-in names are the core's to check."""
     if name.startswith("cmd:"):
@@ -68,7 +73,7 @@ def check_controller_name(name: str) -> None:
     elif name.startswith(ROS2_PREFIX):
         check_ros2_name(name)
     elif name.startswith("python:"):
-        controller = load_controller(name)
+        controller = load_controller(name, params=params)
         try:
             controller.load()
         finally:

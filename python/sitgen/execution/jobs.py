@@ -302,13 +302,14 @@ def check_campaign(
             return
         build_job(spec, seed, i)
     checked: set[str] = set()
+    params = spec.run.get("controller", {}).get("params")
     for path, name in controller_names(spec):
         if name in checked:
             continue
         checked.add(name)
         _core.check_controller(name, path)
         try:
-            check_controller_name(name)
+            check_controller_name(name, params if path.startswith(("run.", "vary.'run.")) else None)
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
 

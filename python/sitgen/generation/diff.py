@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -78,6 +78,21 @@ def parse_controller(text: str, option: str) -> dict[str, Any]:
     except _core.SpecError as e:
         raise _core.SpecError(f"{option}: {e}") from None
     return controller
+
+
+def with_params(
+    controller: dict[str, Any], params: Mapping[str, float], option: str
+) -> dict[str, Any]:
+    """``controller`` (as :func:`parse_controller` gives it) with ``params`` over its own;
+    SpecError names the option if the controller does not take them."""
+    if not params:
+        return controller
+    given = {**controller, "params": {**dict(controller.get("params") or {}), **params}}
+    try:
+        _core.check_run_spec(json.dumps({"controller": given}))
+    except _core.SpecError as e:
+        raise _core.SpecError(f"{option}: {e}") from None
+    return given
 
 
 @dataclass(frozen=True)
