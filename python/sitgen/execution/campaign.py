@@ -14,12 +14,15 @@ its runs are retried one at a time, and a run that kills its worker again is sto
 
 from __future__ import annotations
 
+import atexit
 import heapq
 import json
 import math
 import multiprocessing
+import multiprocessing.connection
 import os
 import signal
+import threading
 import time
 import zlib
 from collections import deque
@@ -198,6 +201,24 @@ def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
     }
 
 
+def _die_with_campaign() -> None:
+    """End this worker when the process that asked for it ends, however it ends. The worker's
+    parent is the fork server, which outlives a campaign killed outright (its workers keep it
+    alive, and it them), so the worker watches the campaign's own sentinel, a pipe that closes
+    when the campaign does, and kills itself then; the programs it started die with it."""
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.sentinel is None:
+        die_with_parent()
+        return
+    sentinel = parent.sentinel
+
+    def watch() -> None:
+        multiprocessing.connection.wait([sentinel])
+        os.kill(os.getpid(), signal.SIGKILL)
+
+    threading.Thread(target=watch, name="sitgen-campaign-watch", daemon=True).start()
+
+
 def _worker_start(slots: Any = None) -> None:
     """A pool worker: Ctrl-C is the campaign's to handle (it finishes the runs in flight), and
     the worker dies with the campaign even if that is killed outright. What a controller called
@@ -208,7 +229,7 @@ def _worker_start(slots: Any = None) -> None:
     (:func:`sitgen.controllers.external.pin_to_one_core`)."""
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    die_with_parent()
+    _die_with_campaign()
     if slots is not None and hasattr(os, "sched_getaffinity"):
         with slots.get_lock():
             slot = slots.value
@@ -228,6 +249,16 @@ def _safe_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
         return run_user_job(job, in_process)
     except Exception as e:  # sitgen's own bug on one run must not end the campaign
         return {"ok": False, "error": f"sitgen failed on this run: {type(e).__name__}: {e}"}
+
+
+def pool_context() -> multiprocessing.context.BaseContext:
+    """How pool workers start: forked from a clean server process, never from this one. A
+    process that has used the core's thread pool (a search has) cannot be forked safely: the
+    child inherits the pool without its threads, and its first parallel call waits forever.
+    The server imports the campaign's code once, so a worker starts in milliseconds."""
+    context = multiprocessing.get_context("forkserver")
+    context.set_forkserver_preload([__name__])
+    return context
 
 
 def _failed(job: Job) -> dict[str, Any] | None:
@@ -335,14 +366,15 @@ class Executor:
     ) -> Generator[tuple[Job, dict[str, Any]], None, bool]:
         """Run jobs in one pool until they run out (False) or the pool breaks (True, with the
         runs it had in flight put in ``suspects``)."""
-        slots = multiprocessing.Value("i", 0)
-        pool = ProcessPoolExecutor(self.workers, initializer=_worker_start, initargs=(slots,))
+        pool = _idle_pool(self.workers)
         inflight: dict[Future[dict[str, Any]], Job] = {}
+        finished = False
         try:
             while True:
                 for job in (yield from self._take(jobs, self.window - len(inflight))):
                     inflight[pool.submit(_safe_user_job, job)] = job
                 if not inflight:
+                    finished = True
                     return False
                 done, _ = wait(inflight, return_when=FIRST_COMPLETED)
                 broken = False
@@ -359,7 +391,12 @@ class Executor:
                     suspects.extend(inflight.values())
                     return True
         finally:
-            _shut(pool)
+            # A pool left idle serves the next batch (a search's screen asks for a few copies
+            # at a time); one stopped part way, or broken, is shut with what runs in it.
+            if finished:
+                _IDLE_POOLS[self.workers] = pool
+            else:
+                _shut(pool)
 
     def _ray_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         ray = self._ray
@@ -387,11 +424,32 @@ class Executor:
             self._stream.stop()
 
 
+_IDLE_POOLS: dict[int, ProcessPoolExecutor] = {}
+"""Pools whose last batch finished, by worker count, kept for the next batch of this process
+(workers start once, not once per batch); shut when the process exits."""
+
+
+def _idle_pool(workers: int) -> ProcessPoolExecutor:
+    """An idle pool of ``workers`` workers, kept from an earlier batch or new."""
+    pool = _IDLE_POOLS.pop(workers, None)
+    if pool is not None:
+        return pool
+    context = pool_context()
+    slots = context.Value("i", 0)
+    return ProcessPoolExecutor(workers, context, initializer=_worker_start, initargs=(slots,))
+
+
+@atexit.register
+def _shut_idle_pools() -> None:
+    while _IDLE_POOLS:
+        _shut(_IDLE_POOLS.popitem()[1])
+
+
 def _alone(job: Job) -> dict[str, Any]:
     """Run one job in a worker of its own, a ``python:`` class in a host process of its own
     there (so that what killed a worker is reported as the host reports it): its result, or
     an error if the worker dies."""
-    pool = ProcessPoolExecutor(1, initializer=_worker_start)
+    pool = ProcessPoolExecutor(1, pool_context(), initializer=_worker_start)
     try:
         return pool.submit(_safe_user_job, job, False).result()
     except BrokenProcessPool:
