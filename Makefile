@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -45,7 +45,24 @@ py-test:
 	$(BIN)/pytest -n auto --maxprocesses 4 --dist loadfile --ignore=tests/test_ros2.py
 	$(BIN)/pytest tests/test_ros2.py
 
-test: install-test lint rust-test py-test
+test: install-test lint rust-test py-test wheel-test
+
+# A wheel for Python 3.11 and later (abi3), which installs where there is no Rust toolchain.
+wheel: $(BIN)/python
+	$(BIN)/pip install -q 'maturin>=1.7,<2'
+	rm -f dist/sitgen-*.whl
+	$(BIN)/maturin build --release --out dist
+
+# The wheel as a user without Rust gets it: a fresh virtual environment, no cargo or rustc on
+# PATH, `pip install` of the wheel, then `sitgen demo` in an empty folder.
+WHEEL_VENV := target/wheel-test
+wheel-test: wheel
+	rm -rf $(WHEEL_VENV) && $(PYTHON) -m venv $(WHEEL_VENV)
+	PATH="$$(echo "$$PATH" | tr ':' '\n' | grep -v -e cargo -e rustup | paste -sd:)" sh -c '\
+		! command -v cargo && ! command -v rustc && \
+		$(WHEEL_VENV)/bin/pip install -q dist/sitgen-*-abi3-*.whl && \
+		rm -rf $(WHEEL_VENV)/demo && mkdir $(WHEEL_VENV)/demo && cd $(WHEEL_VENV)/demo && \
+		../bin/sitgen demo -o demo'
 
 bench: install-test
 	$(BIN)/python benches/run.py

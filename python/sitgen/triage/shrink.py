@@ -36,13 +36,10 @@ import hashlib
 import itertools
 import json
 import math
-import multiprocessing
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 from functools import cached_property
-from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -52,7 +49,8 @@ from scipy import ndimage
 
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
-from sitgen.execution.jobs import check_workers
+from sitgen.execution.campaign import Executor
+from sitgen.execution.jobs import Job, check_workers
 from sitgen.run import robots_at, run
 from sitgen.store import Store
 from sitgen.triage.failures import distinct_failures
@@ -231,28 +229,6 @@ def _first(subsets: list[list[Any]], fails: Callable[[list[list[Any]]], list[boo
     return next((s for s, f in zip(subsets, fails(subsets), strict=True) if f), None)
 
 
-def user_probe(
-    candidate: str, run_spec: dict[str, Any], seed: int, leg_margin_m: float | None
-) -> dict[str, Any]:
-    """A probe of ``candidate`` (situation JSON) as the core makes one (``ok``, then
-    ``problem`` or ``class``, ``first_s``, ``time_s``, ``outcome``), run through
-    :func:`sitgen.run.run` for a user controller; a run the controller could not finish is
-    skipped, like a candidate that is not valid."""
-    problem = _core.shrink_check(candidate, leg_margin_m)
-    if problem is not None:
-        return {"ok": False, "problem": problem}
-    record = run(Situation(candidate), seed=seed, spec=run_spec)
-    if record.outcome == "error":
-        return {"ok": False, "problem": f"the controller failed: {record.reason}"}
-    return {
-        "ok": True,
-        "class": None if record.failure is None else record.failure["class"],
-        "first_s": _core.first_seen(record.events_jsonl, 0),
-        "time_s": record.time_s,
-        "outcome": record.outcome,
-    }
-
-
 def user_probes(
     candidates: list[str],
     run_spec: dict[str, Any],
@@ -260,21 +236,37 @@ def user_probes(
     leg_margin_m: float | None,
     workers: int,
 ) -> list[dict[str, Any]]:
-    """:func:`user_probe` of each candidate, in order, on ``workers`` processes (started by a
-    fork server, so that none inherits a ROS 2 or DDS state of this process)."""
-    if workers <= 1 or len(candidates) <= 1:
-        return [user_probe(c, run_spec, seed, leg_margin_m) for c in candidates]
-    context = multiprocessing.get_context("forkserver")
-    with ProcessPoolExecutor(min(workers, len(candidates)), mp_context=context) as pool:
-        return list(
-            pool.map(
-                user_probe,
-                candidates,
-                repeat(run_spec),
-                repeat(seed),
-                repeat(leg_margin_m),
-            )
-        )
+    """A probe of each candidate (situation JSON), in order, as the core makes one (``ok``,
+    then ``problem`` or ``class``, ``first_s``, ``time_s``, ``outcome``), run for a user
+    controller in the campaigns' worker pool (a ``python:`` class called in its worker, a
+    worker that dies replaced); a run the controller could not finish is skipped, like a
+    candidate that is not valid."""
+    probes: list[dict[str, Any]] = [{} for _ in candidates]
+    jobs = []
+    for i, candidate in enumerate(candidates):
+        problem = _core.shrink_check(candidate, leg_margin_m)
+        if problem is not None:
+            probes[i] = {"ok": False, "problem": problem}
+        else:
+            jobs.append(Job(i, seed, json.loads(candidate), run_spec, run_seed=seed))
+    for job, result in Executor(workers, user=True).results(jobs):
+        probes[job.index] = _probe(result)
+    return probes
+
+
+def _probe(result: dict[str, Any]) -> dict[str, Any]:
+    if not result["ok"]:
+        return {"ok": False, "problem": result["error"]}
+    record = json.loads(result["record"])
+    if record["outcome"] == "error":
+        return {"ok": False, "problem": f"the controller failed: {record['reason']}"}
+    return {
+        "ok": True,
+        "class": None if record["failure"] is None else record["failure"]["class"],
+        "first_s": _core.first_seen(result["events_jsonl"], 0),
+        "time_s": record["time_s"],
+        "outcome": record["outcome"],
+    }
 
 
 class Shrinker:
