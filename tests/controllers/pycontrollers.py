@@ -153,3 +153,19 @@ class Watchful:
         target = -0.1 if obs.stalled else min(self.limit, 0.2 * ahead) * max(0.0, math.cos(turn))
         self.v += 0.5 * (target - self.v) + 0.01 * obs.velocity[1]
         return self.v, 1.2 * turn
+
+
+class TellsParams:
+    """Fails at once, saying what it was made with and told: its keyword arguments and the
+    reset info's ``params``."""
+
+    def __init__(self, **params: float) -> None:
+        self.params = params
+
+    def reset(self, info: dict[str, Any]) -> None:
+        told = ", ".join(f"{k}={v}" for k, v in sorted(info["params"].items()))
+        made = ", ".join(f"{k}={v}" for k, v in sorted(self.params.items()))
+        raise RuntimeError(f"made with {made}; told {told}")
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        return 0.0, 0.0
