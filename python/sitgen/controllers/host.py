@@ -59,17 +59,18 @@ def _short(value: Any) -> str:
     return shown if len(shown) <= 80 else shown[:77] + "..."
 
 
-_CLASSES: dict[str, Any] = {}
-"""Classes loaded in this process, by ``module:Class`` target: a pool worker imports a user's
-module once, however many runs it makes (each run gets a fresh instance)."""
+_CLASSES: dict[tuple[str, str], Any] = {}
+"""Classes loaded in this process, by folder and ``module:Class`` target: a pool worker imports
+a user's module once, however many runs it makes (each run gets a fresh instance)."""
 
 
 def find_class(target: str) -> Any:
     """The class (or factory) ``module:Class`` or ``path/to/file.py:Class`` names, imported once
     per process; raises ValueError with the one-line reason (the text after the controller's
     name)."""
-    if target in _CLASSES:
-        return _CLASSES[target]
+    key = (os.getcwd(), target)
+    if key in _CLASSES:
+        return _CLASSES[key]
     module_name, sep, attr = target.rpartition(":")
     if not sep or not module_name or not attr:
         raise ValueError("expected python:MODULE:CLASS")
@@ -91,8 +92,8 @@ def find_class(target: str) -> Any:
         raise ValueError(f"failed to load: {exception_line(e)}") from None
     if not hasattr(module, attr):
         raise ValueError(f"module has no `{attr}`")
-    _CLASSES[target] = getattr(module, attr)
-    return _CLASSES[target]
+    _CLASSES[key] = getattr(module, attr)
+    return _CLASSES[key]
 
 
 def instantiate(factory: Any, params: Mapping[str, float] | None = None) -> Any:

@@ -242,9 +242,13 @@ def _worker_start(slots: Any = None) -> None:
     os.close(quiet)
 
 
-def _safe_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
-    """:func:`run_user_job`, with any failure of sitgen's own on that run stored as its error
-    rather than ending the campaign."""
+def _safe_user_job(job: Job, in_process: bool = True, cwd: str | None = None) -> dict[str, Any]:
+    """:func:`run_user_job` from the folder ``cwd`` (the campaign's: a worker forked from the
+    fork server starts in the folder the server did, and a controller's relative path or module
+    is the campaign's), with any failure of sitgen's own on that run stored as its error rather
+    than ending the campaign."""
+    if cwd is not None and os.getcwd() != cwd:
+        os.chdir(cwd)
     try:
         return run_user_job(job, in_process)
     except Exception as e:  # sitgen's own bug on one run must not end the campaign
@@ -372,7 +376,7 @@ class Executor:
         try:
             while True:
                 for job in (yield from self._take(jobs, self.window - len(inflight))):
-                    inflight[pool.submit(_safe_user_job, job)] = job
+                    inflight[pool.submit(_safe_user_job, job, True, os.getcwd())] = job
                 if not inflight:
                     finished = True
                     return False
@@ -451,7 +455,7 @@ def _alone(job: Job) -> dict[str, Any]:
     an error if the worker dies."""
     pool = ProcessPoolExecutor(1, pool_context(), initializer=_worker_start)
     try:
-        return pool.submit(_safe_user_job, job, False).result()
+        return pool.submit(_safe_user_job, job, False, os.getcwd()).result()
     except BrokenProcessPool:
         return {
             "ok": False,
