@@ -50,11 +50,11 @@ def test_every_search_strategy_takes_a_controller(tmp_path: Path, strategy: str)
     db = tmp_path / "s.db"
     done = run_cli(
         "search", "--controller", BRAKING, "--param", "brake_m=1.0", "--strategy", strategy,
-        "--budget", "6", "--seed", "1", "--reruns", "0", "--db", str(db),
+        "--budget", "4", "--seed", "1", "--reruns", "0", "--db", str(db),
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     specs = [json.loads(s) for (s,) in stored(db, "SELECT run_spec FROM runs")]
-    assert len(specs) == 6
+    assert len(specs) == 4
     assert all(s["controller"] == {"name": BRAKING, "params": {"brake_m": 1.0}} for s in specs)
     if strategy != "mutation":
         return
@@ -65,7 +65,7 @@ def test_every_search_strategy_takes_a_controller(tmp_path: Path, strategy: str)
     for how in (["--like", f"{db}:{run_id}"], ["--class", str(cls)]):
         more = tmp_path / f"more{how[0]}.db"
         done = run_cli(
-            "search", "--strategy", "mutation", *how, "--controller", BRAKING, "--budget", "3",
+            "search", "--strategy", "mutation", *how, "--controller", BRAKING, "--budget", "2",
             "--seed", "2", "--reruns", "0", "--db", str(more),
         )  # fmt: skip
         assert done.returncode == 0, done.stdout + done.stderr
