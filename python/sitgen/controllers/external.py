@@ -308,6 +308,16 @@ class ProcessController(UserController):
     def _read_line(self, deadline: float, timeout_s: float, when: str) -> bytes:
         proc = self._proc
         assert proc is not None and proc.stdout is not None
+        if b"\n" not in self._buffer:
+            # On one core in lockstep the program has usually answered while sitgen wrote to it:
+            # take the reply without waiting (a program that has not is waited for below).
+            try:
+                chunk = os.read(proc.stdout.fileno(), 1 << 16)
+            except BlockingIOError:
+                chunk = None
+            if chunk == b"":
+                raise ControllerError(self._died(when))
+            self._buffer += chunk or b""
         while b"\n" not in self._buffer:
             if len(self._buffer) > MAX_REPLY_BYTES:
                 raise ControllerError(
