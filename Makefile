@@ -60,7 +60,7 @@ wheel: $(BIN)/python
 	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/maturin build --release --out dist
 
 # The wheel as a user without Rust gets it: a fresh virtual environment, no cargo or rustc on
-# PATH, `pip install` of the wheel, then `sitgen demo` in an empty folder.
+# PATH, `pip install` of the wheel, then `sitgen demo` (100 situations) in an empty folder.
 WHEEL_VENV := target/wheel-test
 wheel-test: wheel
 	rm -rf $(WHEEL_VENV) && $(PYTHON) -m venv $(WHEEL_VENV)
@@ -68,7 +68,7 @@ wheel-test: wheel
 		! command -v cargo && ! command -v rustc && \
 		$(WHEEL_VENV)/bin/pip install -q dist/sitgen-*-abi3-*.whl && \
 		rm -rf $(WHEEL_VENV)/demo && mkdir $(WHEEL_VENV)/demo && cd $(WHEEL_VENV)/demo && \
-		../bin/sitgen demo -o demo'
+		../bin/sitgen demo -o demo --n 100'
 
 bench: install-test
 	$(BIN)/python benches/run.py
