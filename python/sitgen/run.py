@@ -327,6 +327,9 @@ def check_controller(
     import time
 
     checks: list[Check] = []
+    # The run first: the core's thread pool starts with it, on every core, before a program's
+    # start keeps this thread to one (ProcessController), which threads started then inherit.
+    core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)
     try:
         user = load_controller(controller, step_timeout_s, params)
     except ControllerError as e:
@@ -339,7 +342,6 @@ def check_controller(
     checks.append(Check("loads", True, user.name))
     info = reset_info(situation, {}, 0)
     info["params"] = dict(params or {})
-    core = _core.Run(situation.to_json(), json.dumps({"controller": {"name": "cmd:check"}}), 0)
     try:
         try:
             user.reset(info)
