@@ -1,7 +1,7 @@
 """The ``sitgen`` command: one module per command group, registered on the app in
 :mod:`sitgen.cli.app` when imported here; ``sitgen`` runs :func:`main`."""
 
-from sitgen.cli import campaigns, judging, runs, triage, world
+from sitgen.cli import campaigns, judging, runs, triage, verdicts, world
 from sitgen.cli.app import app, main
 
-__all__ = ["app", "campaigns", "judging", "main", "runs", "triage", "world"]
+__all__ = ["app", "campaigns", "judging", "main", "runs", "triage", "verdicts", "world"]

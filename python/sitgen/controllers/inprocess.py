@@ -124,7 +124,7 @@ class InProcessController(UserController):
         raises ControllerError when the controller fails (the run stops at that step)."""
         target_act, observation = self._target.act, self._observation
         timeout_s = self._step_timeout_s
-        caught, name = self._caught, self.name
+        caught, reason_of = self._caught, self._reason_of
         timed = _can_time()
         at = [0.0]
 
@@ -139,14 +139,8 @@ class InProcessController(UserController):
                 value = target_act(obs)
             except StepTimeout:
                 raise
-            except SystemExit as e:
-                raise ControllerError(
-                    f"controller {name} called sys.exit({e.code!r}) at {time_s:.1f} s"
-                ) from None
             except caught as e:  # a user's bug must end this run only
-                raise ControllerError(
-                    f"controller {name} raised at {time_s:.1f} s: {exception_line(e)}"
-                ) from None
+                raise reason_of(e, f"at {time_s:.1f} s") from None
             finally:
                 if timed:
                     signal.setitimer(signal.ITIMER_REAL, 0)
@@ -201,13 +195,14 @@ class InProcessController(UserController):
                 return call()
         except StepTimeout:
             raise ControllerError(self._late(timeout_s, when)) from None
-        except SystemExit as e:
-            raise ControllerError(
-                f"controller {self.name} called sys.exit({e.code!r}) {when}"
-            ) from None
         except self._caught as e:  # a user's bug must end this run only
-            reason = exception_line(e)
-            raise ControllerError(f"controller {self.name} raised {when}: {reason}") from None
+            raise self._reason_of(e, when) from None
+
+    def _reason_of(self, e: BaseException, when: str) -> ControllerError:
+        """What the controller did, as the host process says it: ``sys.exit`` or a raise."""
+        if isinstance(e, SystemExit):
+            return ControllerError(f"controller {self.name} called sys.exit({e.code!r}) {when}")
+        return ControllerError(f"controller {self.name} raised {when}: {exception_line(e)}")
 
     @contextlib.contextmanager
     def _watched(self, timeout_s: float) -> Iterator[None]:

@@ -1,0 +1,293 @@
+"""Commands that judge failures on perturbed copies: faults (the seeded faults' kill rate), diff
+(what a controller change fixed and broke), robustness (of chosen runs)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from sitgen.cli.app import (
+    EXIT_FAILED,
+    AddressOption,
+    BackendOption,
+    CampaignSeedOption,
+    UsageError,
+    WorkersOption,
+    app,
+    parse_params,
+)
+from sitgen.cli.campaigns import _campaign_spec, _stored
+from sitgen.store import require_store
+
+
+@app.command()
+def faults(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    budget: Annotated[
+        int, typer.Option("--budget", "-n", min=1, help="Situations to generate and run.")
+    ] = 100,
+    seed: CampaignSeedOption = 0,
+    db: Annotated[Path, typer.Option("--db", help="Evaluation store (SQLite).")] = Path(
+        "faults.db"
+    ),
+    strategy: Annotated[
+        str,
+        typer.Option(
+            "--strategy",
+            help="How situations are drawn: random (the campaign's generation), barn (the 300 "
+            "BARN worlds, shuffled by the seed) or stored (a campaign's or search's situations, "
+            "in the order it ran them: --situations).",
+        ),
+    ] = "random",
+    barn_dir: Annotated[
+        Path | None,
+        typer.Option("--barn-dir", help="The BARN data folder (with --strategy barn)."),
+    ] = None,
+    situations: Annotated[
+        Path | None,
+        typer.Option("--situations", help="A campaign or search store (with --strategy stored)."),
+    ] = None,
+    fault_ids: Annotated[
+        str | None,
+        typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: WorkersOption = None,
+    backend: BackendOption = "local",
+    address: AddressOption = None,
+) -> None:
+    """Measure fault-finding power: run the agent's controller and each of its seeded faults
+    (docs/faults.md) on the same situations, and report which faults were killed, after how
+    many situations, and the kill rate by budget. Ctrl-C stops; the same command resumes."""
+    from sitgen.generation.fault_report import (
+        fault_status,
+        report_from,
+        summary_lines,
+        write_fault_report,
+    )
+    from sitgen.generation.faults import run_faults
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    chosen = None if fault_ids is None else [f.strip() for f in fault_ids.split(",") if f.strip()]
+    result = _stored(
+        "faults",
+        budget,
+        "situations",
+        lambda on_progress, stop: run_faults(
+            _campaign_spec(spec),
+            db,
+            seed=seed,
+            budget=budget,
+            faults=chosen,
+            strategy=strategy,
+            workers=workers,
+            backend=backend,
+            address=address,
+            on_progress=on_progress,
+            stop=stop,
+            barn_dir=barn_dir,
+            situations_db=situations,
+        ),
+    )
+    if result.interrupted:
+        typer.echo(
+            f"stopped early after {result.situations} of {budget} situations: run the same "
+            "command again to finish",
+            err=True,
+        )
+        if not db.exists():
+            raise typer.Exit(130)
+    report = report_from(db)
+    if format == "json":
+        write_fault_report(report, sys.stdout)
+    else:
+        table = Table(title=f"{db}: seeded faults of {report.controller}")
+        for column in ("fault", "result", "killing run", "stands for"):
+            table.add_column(column)
+        for row in report.faults:
+            table.add_row(
+                row.id,
+                fault_status(row, report.situations),
+                "" if row.run is None else f"{row.run} (correct: {row.correct_run})",
+                row.stands_for,
+            )
+        Console(width=200).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
+    if result.interrupted:
+        raise typer.Exit(130)
+
+
+@app.command("diff")
+def diff_command(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    a: Annotated[
+        str,
+        typer.Option(
+            "--a",
+            help="Controller A (the old version): a name, NAME+FAULT, python:MODULE:CLASS, "
+            "'cmd:PROGRAM ARGS', or a JSON controller table with params.",
+        ),
+    ] = "snd_follow",
+    b: Annotated[str, typer.Option("--b", help="Controller B (the new version), as --a.")] = "",
+    param: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--param",
+            "-p",
+            help="NAME=VALUE: a parameter given to both A and B, over their own (repeatable; a "
+            "JSON table in --a or --b gives one side its own).",
+        ),
+    ] = None,
+    n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
+    seed: CampaignSeedOption = 0,
+    situations: Annotated[
+        Path | None,
+        typer.Option(
+            "--situations",
+            help="Use a stored campaign's or search's situations (its first N runs) instead of "
+            "generating them.",
+        ),
+    ] = None,
+    db: Annotated[Path, typer.Option("--db", help="Diff store (SQLite).")] = Path("diff.db"),
+    junit: Annotated[
+        Path | None, typer.Option("--junit", help="Write the verdict as JUnit XML here.")
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    workers: WorkersOption = None,
+) -> None:
+    """What a controller change fixed and what it broke: run the same situations with A and B
+    and judge each difference in failure on perturbed copies of both (docs/failures.md):
+    each distinct failure robustly new in B, robustly fixed, unchanged, or not robust either
+    way. Exits 1 when B has robust new failures. Ctrl-C stops; the same command resumes."""
+    from sitgen.generation.diff import (
+        DiffPlan,
+        diff_report,
+        parse_controller,
+        run_diff,
+        summary_lines,
+        with_params,
+    )
+    from sitgen.generation.diff import write_junit as write_diff_junit
+    from sitgen.store import Store
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    if not b:
+        raise UsageError("--b: the controller to compare with A is required")
+    given = parse_params(param)
+    plan = DiffPlan(
+        with_params(parse_controller(a, "--a"), given, "--a"),
+        with_params(parse_controller(b, "--b"), given, "--b"),
+        "stored" if situations else "random",
+        str(situations) if situations else None,
+    )
+    parsed = _campaign_spec(spec)
+    result = _stored(
+        "diff",
+        n,
+        "situations",
+        lambda on_progress, stop: run_diff(
+            parsed,
+            db,
+            plan,
+            seed=seed,
+            n=n,
+            workers=workers or os.cpu_count() or 1,
+            on_progress=on_progress,
+            stop=stop,
+            situations_db=situations,
+        ),
+    )
+    with Store(db) as store:
+        report = diff_report(store)
+    if junit is not None:
+        junit.parent.mkdir(parents=True, exist_ok=True)
+        with junit.open("w") as out:
+            write_diff_junit(report, out)
+    if format == "json":
+        json.dump(report.as_dict(), sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        table = Table(title=f"{db}: distinct failures, A against B")
+        for column in ("class", "verdict", "new in B", "fixed", "unchanged", "not robust"):
+            table.add_column(column, justify="left" if column in ("class", "verdict") else "right")
+        for c in report.classes:
+            table.add_row(
+                c.failure_class, c.verdict, str(len(c.new)), str(len(c.fixed)),
+                str(len(c.unchanged)), str(len(c.not_robust)),
+            )  # fmt: skip
+        Console(width=160).print(table)
+        for line in summary_lines(report):
+            typer.echo(line)
+    if result.interrupted:
+        typer.echo("stopped early: run the same command again to finish")
+        raise typer.Exit(130)
+    if report.robust_new:
+        raise typer.Exit(EXIT_FAILED)
+
+
+@app.command()
+def robustness(
+    db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],
+    run_ids: Annotated[
+        list[int] | None,
+        typer.Argument(help="Failing runs to measure (default: every distinct failure's)."),
+    ] = None,
+    reruns: Annotated[int, typer.Option("--reruns", help="Perturbed copies of each run.")] = 8,
+    workers: WorkersOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Rerun failing runs under perturbations a real robot would not notice (laser noise at
+    the LMS200's level, starts jittered by a centimetre and half a degree) and say in how
+    many copies each one's failure class recurs: robust or knife-edge (docs/failures.md).
+    Stored; `failures`, `rank` and `report` show it."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import distinct_failures, measure_robustness
+    from sitgen.triage.robustness import check_reruns, measure_runs, tally, verdict
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    check_reruns(reruns)
+    require_store(db)
+    with Store(db) as store:
+        if run_ids:
+            for run_id in run_ids:
+                if store.run_row(run_id)["failure"] is None:
+                    raise UsageError(f"run {run_id}: it did not fail; robustness is a failure's")
+            measure_runs(store, run_ids, reruns, workers or os.cpu_count() or 1)
+            wanted = list(run_ids)
+        else:
+            measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+            wanted = [f.representative for f in distinct_failures(store)]
+        measured = store.robustness(wanted)
+    rows = [measured[r] for r in wanted if r in measured]
+    if format == "json":
+        for r in rows:
+            r["robust"] = verdict(r["recurs"], r["reruns"]) == "robust"
+        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
+    table = Table(title=f"{db}: robustness of {len(rows)} failing runs")
+    for column in ("run", "class", "recurs", "verdict", "copies' classes"):
+        table.add_column(column, justify="right" if column == "run" else "left")
+    for r in rows:
+        table.add_row(
+            str(r["run_id"]), r["failure_class"], f"{r['recurs']}/{r['reruns']}",
+            verdict(r["recurs"], r["reruns"]), tally(r["classes"]),
+        )  # fmt: skip
+    Console(width=200).print(table)
