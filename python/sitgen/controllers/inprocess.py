@@ -77,8 +77,11 @@ class InProcessController(UserController):
         self._step_timeout_s = step_timeout_s
         self._isolated = isolated
         self._params = dict(params or {})
-        # A host process reports any exception; in the caller's own process Ctrl-C stays its.
-        self._caught: type[BaseException] = BaseException if isolated else Exception
+        # A host process reports any exception; in the caller's own process Ctrl-C stays its,
+        # but a controller's sys.exit still ends only its run.
+        self._caught: tuple[type[BaseException], ...] = (
+            (BaseException,) if isolated else (Exception, SystemExit)
+        )
         self._angles: np.ndarray[Any, np.dtype[np.float64]] = np.zeros(0)
         self._max_range = 0.0
 
