@@ -327,6 +327,63 @@ def bench_campaign(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
     return out
 
 
+def bench_robustness(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
+    """What measuring robustness adds to the default campaign, on one worker (so wall time is
+    CPU time): the 500 runs, then the copies the campaign makes at its end (each watched to
+    its horizon), then the same runs' copies watched to their time limit (as before the
+    horizon). Prints each as a share of the runs' cost, and whether the verdicts agree."""
+    from sitgen.store import Store
+    from sitgen.triage.failures import measure_robustness
+    from sitgen.triage.recall import stored_run
+    from sitgen.triage.robustness import is_robust, measure
+
+    n = int(os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500"))
+    with tempfile.TemporaryDirectory() as tmp:
+        db = Path(tmp) / "bench.db"
+        command = [
+            sys.executable, "-m", "sitgen.cli", "campaign", "--n", str(n), "--seed", "0",
+            "--db", str(db), "--workers", "1", "--reruns", "0",
+        ]  # fmt: skip
+        start = time.perf_counter()
+        subprocess.run(command, check=True, capture_output=True)
+        runs_s = time.perf_counter() - start
+        with Store(db) as store:
+            start = time.perf_counter()
+            copies = measure_robustness(store, workers=1)
+            horizon_s = time.perf_counter() - start
+            measured = store.robustness()
+            rows_ = [stored_run(store, i) for i in sorted(measured)]
+        start = time.perf_counter()
+        whole = measure(rows_, workers=1, horizon=False)
+        whole_s = time.perf_counter() - start
+    cut = {r: is_robust(m["recurs"], m["reruns"]) for r, m in measured.items()}
+    same = sum(cut[w.run_id] == w.robust for w in whole)
+    out = {
+        "n": n,
+        "runs_s": runs_s,
+        "copies": copies,
+        "copies_to_horizon_s": horizon_s,
+        "copies_to_limit_s": whole_s,
+        "share_to_horizon": horizon_s / runs_s,
+        "share_to_limit": whole_s / runs_s,
+        "measured_runs": len(whole),
+        "same_verdicts": same,
+    }
+    for name, t in (("to their horizon", horizon_s), ("to their time limit", whole_s)):
+        rows.append(
+            (f"robustness copies ({copies}) {name}, 1 worker", {
+                "median_s": t, "min_s": t, "max_s": t, "repeats": 1,
+            })
+        )  # fmt: skip
+    print(
+        f"robustness of the default campaign ({n} runs, 1 worker): runs {runs_s:.1f} s; "
+        f"{copies} copies to their horizon {horizon_s:.1f} s ({horizon_s / runs_s:.0%} of the "
+        f"runs), to their time limit {whole_s:.1f} s ({whole_s / runs_s:.0%}); verdicts the "
+        f"same on {same} of {len(whole)} measured runs"
+    )
+    return out
+
+
 def machine() -> dict[str, Any]:
     return {
         "cpu": platform.processor() or platform.machine(),
@@ -372,6 +429,7 @@ def main() -> None:
     results["user_controllers"] = bench_user_controllers(rows)
     if os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500") != "0":
         results["campaign"] = bench_campaign(rows)
+        results["robustness"] = bench_robustness(rows)
 
     scen = SHARED / "movingai" / "scenarios" / (ASTAR_MAP + ".scen")
     if scen.is_file():

@@ -17,10 +17,14 @@ import pytest
 from sitgen import _core
 from sitgen.run import run
 from sitgen.store import Store
+from sitgen.triage.failures import measure_robustness
+from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import (
+    HORIZON_AFTER_S,
     ROBUST_SHARE,
     is_robust,
     label,
+    measure,
     perturbation_sizes,
     perturbed,
     tally,
@@ -66,7 +70,13 @@ def test_a_copy_is_the_same_run_spec_with_a_perturbation_the_core_resolves() -> 
         "laser_noise_sd_m": 0.005,
         "start_position_m": 0.01,
         "start_heading_deg": 0.5,
+        "horizon_after_s": HORIZON_AFTER_S,
     }
+    cut = perturbed(spec, 3, {"horizon_s": 12.5, "watch_for": "drove_into_wall"})
+    resolved = json.loads(_core.check_run_spec(json.dumps(cut)))["perturbation"]
+    assert (resolved["horizon_s"], resolved["watch_for"]) == (12.5, "drove_into_wall")
+    with pytest.raises(_core.SpecError, match=r"run\.perturbation\.watch_for"):
+        _core.check_run_spec(json.dumps(perturbed(spec, 3, {"watch_for": "drove_into_wall"})))
     with pytest.raises(_core.SpecError, match=r"run\.perturbation\.rerun"):
         _core.check_run_spec(json.dumps(perturbed(spec, 0)))
 
@@ -218,3 +228,23 @@ def test_a_measurement_killed_part_way_loses_nothing_and_repeats_to_the_same_fig
     clean.write_bytes(campaign.read_bytes())
     again = robustness_json(killed, *failing, "--reruns", "8")
     assert again == robustness_json(clean, *failing, "--reruns", "8")
+
+
+def test_copies_watched_to_their_horizon_give_the_verdicts_of_whole_copies_on_the_default_campaign(
+    tmp_path: Path,
+) -> None:
+    """The default campaign's distinct failures measured as a campaign measures them (copies
+    stopped a minute after the failure first showed) and again with every copy run to its time
+    limit: the same verdict for every measured run, for a fraction of the simulated time."""
+    db = tmp_path / "default.db"
+    done = run_cli("campaign", "--db", str(db), "--reruns", "0", "--workers", "2")
+    assert done.returncode == 0, done.stderr
+    with Store(db) as store:
+        copies = measure_robustness(store, workers=2)
+        measured = store.robustness()
+        rows = [stored_run(store, i) for i in sorted(measured)]
+    assert copies == 8 * len(measured) and len(measured) >= 10
+    whole = measure(rows, workers=2, horizon=False)
+    verdicts = {r: verdict(m["recurs"], m["reruns"]) for r, m in measured.items()}
+    assert {w.run_id: verdict(w.recurs, w.reruns) for w in whole} == verdicts
+    assert "knife-edge" in verdicts.values() and "robust" in verdicts.values()

@@ -448,13 +448,13 @@ def _echo_variants(db: Path, target_class: str | None, reruns: int, workers: int
     """The variants a mutation search found (of its target class, if it has one), each best
     run measured for robustness."""
     from sitgen.store import Store
-    from sitgen.triage.robustness import label, measure_runs, verdict
+    from sitgen.triage.robustness import label, measure_runs, measured_as_now, verdict
     from sitgen.triage.variants import variants_of
 
     with Store(db) as store:
         found = variants_of(store, target_class)
         measured = store.robustness([v.best_run for v in found])
-        todo = [v.best_run for v in found if v.best_run not in measured]
+        todo = [v.best_run for v in found if not measured_as_now(measured.get(v.best_run), reruns)]
         if todo and reruns:
             for r in measure_runs(store, todo, reruns, workers or 1):
                 measured[r.run_id] = r.as_row()

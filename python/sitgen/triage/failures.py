@@ -22,7 +22,14 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.store import Store, main_events
-from sitgen.triage.robustness import CANDIDATES, RERUNS, check_reruns, is_robust, measure_runs
+from sitgen.triage.robustness import (
+    CANDIDATES,
+    RERUNS,
+    check_reruns,
+    is_robust,
+    measure_runs,
+    measured_as_now,
+)
 from sitgen.triage.rows import write_rows
 
 BROAD_RUNS = 20
@@ -190,7 +197,7 @@ def measure_robustness(store: Store, reruns: int = RERUNS, workers: int = 1) -> 
             if any(d is None or is_robust(d["recurs"], d["reruns"]) for d in earlier):
                 continue
             run_id = runs[depth]
-            if run_id not in stored or stored[run_id]["reruns"] != reruns:
+            if not measured_as_now(stored.get(run_id), reruns):
                 wanted.append(run_id)
         if wanted:
             measure_runs(store, wanted, reruns, workers)

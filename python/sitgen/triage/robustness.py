@@ -10,11 +10,21 @@ half a degree (``perturbation`` in the run spec; the sizes and why are in the co
 ``perturbation = {rerun = k}``, drawn from the run's seed, so the figure is reproducible and
 independent of the worker count. A failure that recurs in at least :data:`ROBUST_SHARE` of
 its copies is *robust*; one that recurs less is *knife-edge*.
+
+A copy is watched until :data:`HORIZON_AFTER_S` after the run's failure first showed, and past
+that only until it has shown the failure's class or a worse one (the ``horizon_s`` and
+``watch_for`` of its perturbation; the controllers are not told); its class is the most severe
+it showed by then. The question a copy answers is whether *this* failure shows again where it
+showed, not what the robot does minutes later: a robot stuck at 120 s in every copy,
+struck by a peer at 530 s in every copy, has a stuck failure that recurs 8 of 8 (its whole
+runs' classes would say 0 of 8). And most failing runs then sit stuck until their time limit,
+so a copy watched to the limit costs several times one watched to the horizon.
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import json
 import math
 from collections.abc import Iterable, Sequence
@@ -36,25 +46,54 @@ MAX_RERUNS = 1000
 """Most copies of one run (the core's ``perturbation.rerun`` bound)."""
 ROBUST_SHARE = 0.75
 """A failure recurring in at least this share of its copies (6 of 8) is robust."""
+HORIZON_AFTER_S = 60.0
+"""Simulated seconds a copy is watched past the time its run's failure first showed: past
+every detection window (oscillation 10 s, loitering 20 s) and a copy's drift in timing. On the
+default campaign every copy's class is the same as its whole run's (docs/failures.md)."""
 CANDIDATES = 3
 """A distinct failure's highest-scoring runs measured, best first, until one is robust."""
 ERROR = "error"
 """A copy's class where its run failed to run (its controller failed)."""
 
 
-def perturbed(run_spec: dict[str, Any], k: int) -> dict[str, Any]:
+def perturbed(
+    run_spec: dict[str, Any], k: int, horizon: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Run spec of copy ``k`` (1-based) of a run with ``run_spec``: the same spec, perturbed
-    at the default sizes."""
+    at the default sizes, watched as ``horizon`` says (:func:`horizon_of`; None: to its time
+    limit)."""
     spec = copy.deepcopy(run_spec)
-    spec["perturbation"] = {"rerun": k}
+    spec["perturbation"] = {"rerun": k} | (horizon or {})
     return spec
 
 
+def horizon_of(failure: dict[str, Any]) -> dict[str, Any] | None:
+    """How the copies of a run with ``failure`` (its stored failure) are watched: until
+    :data:`HORIZON_AFTER_S` after the failure first showed, and past that until they have shown
+    its class or a worse one (the perturbation's ``horizon_s`` and ``watch_for``). None for a
+    failure stored without its start: to the time limit."""
+    start = failure.get("features", {}).get("start_s")
+    if start is None:
+        return None
+    return {"horizon_s": float(start) + HORIZON_AFTER_S, "watch_for": str(failure["class"])}
+
+
+@functools.cache
 def perturbation_sizes() -> dict[str, float]:
     """The default sizes of a copy's perturbations, as the core resolves them."""
     spec = json.loads(_core.check_run_spec(json.dumps(perturbed({}, 1))))
     sizes: dict[str, float] = spec["perturbation"]
-    return {k: v for k, v in sizes.items() if k != "rerun"}
+    return {k: v for k, v in sizes.items() if k != "rerun"} | {"horizon_after_s": HORIZON_AFTER_S}
+
+
+def measured_as_now(stored: dict[str, Any] | None, reruns: int) -> bool:
+    """Whether a stored robustness row counts as measured now: as many copies, perturbed and
+    watched as copies are today (a row from before the horizon is measured again)."""
+    return (
+        stored is not None
+        and stored["reruns"] == reruns
+        and stored.get("perturbation") == perturbation_sizes()
+    )
 
 
 def check_reruns(reruns: int) -> int:
@@ -132,15 +171,19 @@ def copy_class(result: dict[str, Any]) -> str | None:
     return ERROR if outcome.error else outcome.failure_class
 
 
-def copy_jobs(row: dict[str, Any], reruns: int, first_index: int) -> list[Job]:
-    """The ``reruns`` perturbed copies of stored run ``row`` (:meth:`Store.run_row`), as jobs
-    numbered from ``first_index``."""
+def copy_jobs(
+    row: dict[str, Any], reruns: int, first_index: int, horizon: bool = True
+) -> list[Job]:
+    """The ``reruns`` perturbed copies of stored failing run ``row`` (:meth:`Store.run_row`),
+    each stopped at its horizon (``horizon=False``: run to its time limit, as copies were
+    before the horizon), as jobs numbered from ``first_index``."""
+    watched = horizon_of(row["failure"]) if horizon else None
     return [
         Job(
             index=first_index + k - 1,
             seed=row["situation_seed"],
             situation=row["situation_spec"],
-            run=perturbed(row["run_spec"], k),
+            run=perturbed(row["run_spec"], k, watched),
             run_seed=row["run_seed"],
         )
         for k in range(1, reruns + 1)
@@ -158,15 +201,16 @@ def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
 
 
 def measure(
-    rows: Sequence[dict[str, Any]], reruns: int = RERUNS, workers: int = 1
+    rows: Sequence[dict[str, Any]], reruns: int = RERUNS, workers: int = 1, horizon: bool = True
 ) -> list[Robustness]:
     """The robustness of failing stored runs ``rows`` (:meth:`Store.run_row`), all copies run
-    as one batch. Raises StoreError for a run that has no failure."""
+    as one batch (``horizon``: see :func:`copy_jobs`). Raises StoreError for a run that has
+    no failure."""
     jobs: list[Job] = []
     for i, row in enumerate(rows):
         if row["failure"] is None:
             raise StoreError(f"run {row['id']}: it did not fail; robustness is a failure's")
-        jobs += copy_jobs(row, reruns, i * reruns)
+        jobs += copy_jobs(row, reruns, i * reruns, horizon)
     results = copies(jobs, workers)
     return [
         Robustness(

@@ -169,7 +169,26 @@ pub struct Failure {
 /// for whether the agent was oscillating at the time); `None` for events that are not
 /// failures (progress, peers among themselves, unscored events).
 pub fn class_of(e: &Event, events: &[Event], agent: u32) -> Option<FailureClass> {
-    if !e.scored || !e.concerns(agent) {
+    if !e.scored {
+        return None;
+    }
+    agent_class_of(e, events, agent)
+}
+
+/// The most severe class among the events of a run still going, whose events are not yet
+/// marked scored (every event that concerns the agent will be): what a perturbed copy
+/// watching for a class reads each step. An event still lasting may grow more severe when it
+/// closes (an oscillation learns what it was beside), never less.
+pub fn worst_so_far(events: &[Event], agent: u32) -> Option<FailureClass> {
+    events
+        .iter()
+        .filter_map(|e| agent_class_of(e, events, agent))
+        .min()
+}
+
+/// [`class_of`] for an event whether or not it is marked scored yet.
+fn agent_class_of(e: &Event, events: &[Event], agent: u32) -> Option<FailureClass> {
+    if !e.concerns(agent) {
         return None;
     }
     match e.kind {

@@ -377,6 +377,9 @@ impl Frame<'_> {
 struct Log {
     events: Vec<Event>,
     dt_s: f64,
+    /// Events opened or closed so far: a reader of a log still growing re-reads it only when
+    /// this moved.
+    changes: u64,
 }
 
 impl Log {
@@ -398,12 +401,14 @@ impl Log {
             scored: false,
             details,
         });
+        self.changes += 1;
         self.events.len() - 1
     }
 
     /// End the lasting event at `index` at `step`.
     fn close(&mut self, index: usize, step: u64) {
         self.events[index].end_s = Some(seconds(step, self.dt_s));
+        self.changes += 1;
     }
 
     fn set(&mut self, index: usize, name: &str, value: serde_json::Value) {
@@ -497,6 +502,7 @@ impl Monitor {
             log: Log {
                 events: Vec::new(),
                 dt_s,
+                changes: 0,
             },
             collision: collision::Detector::new(
                 agent,
@@ -571,6 +577,13 @@ impl Monitor {
     /// The events so far, those still lasting without an end.
     pub fn events_so_far(&self) -> &[Event] {
         &self.log.events
+    }
+
+    /// How many times an event has been opened or closed so far: the events' classes can
+    /// only have changed when this has (details that decide a class are written when an
+    /// event opens, or just before it closes).
+    pub fn log_changes(&self) -> u64 {
+        self.log.changes
     }
 
     /// Whether robot `id` has driven its whole route.

@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::control::{self, Command, Controller};
 use crate::coverage::{CoverageRecord, Observer};
 use crate::error::{join, SpecError};
-use crate::failure::{self, Failure};
+use crate::failure::{self, Failure, FailureClass};
 use crate::mission::ControllerSpec;
 use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
 use crate::scoring::{self, Score, ScoringSpec};
@@ -169,6 +169,8 @@ pub enum Outcome {
     Completed,
     /// The time limit came first.
     Timeout,
+    /// A perturbed copy's horizon came first: stopped unfinished, without a timeout.
+    Stopped,
     /// The agent's controller failed (crashed, hung, or returned garbage).
     Error,
 }
@@ -220,6 +222,11 @@ pub struct Run {
     agent: u32,
     scoring: ScoringSpec,
     limit_steps: u64,
+    /// Where a perturbed copy stops unfinished, if before the time limit, and the class it
+    /// watches for past it ([`Perturbation`]).
+    horizon: Option<(u64, Option<FailureClass>)>,
+    /// The agent's worst class so far, as read from the monitor's log at that many changes.
+    worst_read: (u64, Option<FailureClass>),
     trajectory: Vec<f64>,
     ended: Option<(Outcome, String)>,
 }
@@ -293,6 +300,10 @@ impl Run {
             controllers.push(Some(c));
         }
         let limit_steps = (spec.time_limit_s / spec.sim.dt_s - 1e-9).ceil() as u64;
+        let horizon = spec.perturbation.as_ref().and_then(|p| {
+            let steps = (p.horizon_s? / spec.sim.dt_s - 1e-9).ceil() as u64;
+            (steps < limit_steps).then_some((steps, p.watch_for))
+        });
         let mut run = Self {
             world,
             monitor: Some(monitor),
@@ -303,6 +314,8 @@ impl Run {
             agent,
             scoring: spec.scoring.clone(),
             limit_steps,
+            horizon,
+            worst_read: (u64::MAX, None),
             trajectory: Vec::new(),
             ended: None,
         };
@@ -490,7 +503,8 @@ impl Run {
     }
 
     /// After the world has stepped: record the poses, let the monitor and the coverage
-    /// observer watch, and end the run on completion or at the time limit.
+    /// observer watch, and end the run on completion, at the time limit or at a copy's
+    /// horizon.
     fn watch_step(&mut self, seen: &[u32]) -> bool {
         self.agent_scan = None;
         self.record_poses();
@@ -515,8 +529,37 @@ impl Run {
                 Outcome::Timeout,
                 format!("route not completed within {:.1} s", self.world.time_s()),
             ));
+        } else if self.past_horizon() {
+            self.ended = Some((
+                Outcome::Stopped,
+                format!(
+                    "stopped at the copy's horizon, {:.1} s",
+                    self.world.time_s()
+                ),
+            ));
         }
         self.ended.is_some()
+    }
+
+    /// Whether a perturbed copy is done: at its horizon, or past it once it has shown the
+    /// class it watches for or a more severe one.
+    fn past_horizon(&mut self) -> bool {
+        let Some((steps, watch_for)) = self.horizon else {
+            return false;
+        };
+        if self.world.steps() < steps {
+            return false;
+        }
+        let Some(class) = watch_for else {
+            return true;
+        };
+        let monitor = self.live_monitor();
+        let changes = monitor.log_changes();
+        if self.worst_read.0 != changes {
+            let worst = failure::worst_so_far(monitor.events_so_far(), self.agent);
+            self.worst_read = (changes, worst);
+        }
+        self.worst_read.1.is_some_and(|so_far| so_far <= class)
     }
 
     /// End the run with outcome `error` for `reason` (a controller that crashed, hung or sent

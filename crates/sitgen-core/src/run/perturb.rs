@@ -23,6 +23,16 @@
 //! - `start_heading_deg`: largest start turn, degrees, in [0, 5]. Default 0.5: what a
 //!   centimetre's offset does to a heading taken from two marks half a metre apart, and about
 //!   a Pioneer's odometry after a metre of travel.
+//! - `horizon_s`: simulated seconds after which the copy stops, unfinished (outcome
+//!   `stopped`, no timeout event), in (0, 86400]. Default none: the run's own time limit. A
+//!   robustness copy asks whether a failure shows again near where it showed in the run, so
+//!   it is watched only that far (`python/sitgen/triage/robustness.py` says how far); the
+//!   controllers are not told, and everything before the horizon is the copy run to its
+//!   limit.
+//! - `watch_for`: a failure class. With it, a copy past its horizon stops only once it has
+//!   shown that class or a more severe one, else runs to its time limit: the absence of a
+//!   failure by the horizon is no evidence (it may show late); its presence, or a worse one,
+//!   decides the copy. Default none.
 //!
 //! A robot whose jittered start would overlap an obstacle or another robot starts where the
 //! situation puts it (the copy must be a situation the generator could have made).
@@ -37,6 +47,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{join, SpecError};
+use crate::failure::FailureClass;
 use crate::rng::ChoiceSource;
 use crate::sim::{wrap_angle, SimSpec, World};
 use crate::situation::{Pose, Situation};
@@ -68,6 +79,14 @@ pub struct Perturbation {
     /// Largest start turn, degrees, in [0, 5]. Default 0.5.
     #[serde(default = "default_start_heading_deg")]
     pub start_heading_deg: f64,
+    /// Simulated seconds after which the copy stops unfinished, in (0, 86400]. Default none:
+    /// the run's time limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub horizon_s: Option<f64>,
+    /// With `horizon_s`: past it, stop once the run has shown this class or a more severe
+    /// one. Default none: stop at the horizon.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub watch_for: Option<FailureClass>,
 }
 
 fn default_laser_noise_sd_m() -> f64 {
@@ -88,6 +107,8 @@ impl Perturbation {
             laser_noise_sd_m: LASER_NOISE_SD_M,
             start_position_m: START_POSITION_M,
             start_heading_deg: START_HEADING_DEG,
+            horizon_s: None,
+            watch_for: None,
         }
     }
 
@@ -116,7 +137,15 @@ impl Perturbation {
             self.start_heading_deg,
             0.0,
             5.0,
-        )
+        )?;
+        match (self.horizon_s, self.watch_for) {
+            (Some(h), _) => SpecError::check_positive(&join(path, "horizon_s"), h, 86_400.0),
+            (None, Some(_)) => Err(SpecError::new(
+                join(path, "watch_for"),
+                "needs a horizon_s to watch past",
+            )),
+            (None, None) => Ok(()),
+        }
     }
 
     /// The copy's seed: the run's seed and the copy's number mixed (SplitMix64's finaliser),

@@ -776,3 +776,98 @@ fn a_perturbation_out_of_range_is_refused_with_its_field() {
     let e = RunSpec::from_json(r#"{"perturbation": {}}"#, "run").unwrap_err();
     assert!(e.to_string().contains("rerun"), "{e}");
 }
+
+#[test]
+fn a_copy_stopped_at_its_horizon_is_its_whole_copy_cut_there_without_a_timeout() {
+    let s = rear_approach();
+    let copy_until = |horizon_s: Option<f64>| {
+        let spec = RunSpec {
+            perturbation: Some(Perturbation {
+                horizon_s,
+                ..Perturbation::copy(3)
+            }),
+            ..spec(Some("snd_follow"), 20.0)
+        };
+        run(&s, &spec, 5).unwrap()
+    };
+    let whole = copy_until(None);
+    let cut = copy_until(Some(8.0));
+    assert_eq!(cut.outcome, Outcome::Stopped, "{}", cut.reason);
+    assert!((cut.time_s - 8.0).abs() < 1e-9, "{}", cut.time_s);
+    assert_eq!(cut.trajectory[..], whole.trajectory[..cut.trajectory.len()]);
+    assert!(cut.events.iter().all(|e| e.kind != EventKind::Timeout));
+    let started: Vec<_> = whole
+        .events
+        .iter()
+        .filter(|e| e.kind != EventKind::Timeout && e.start_s <= 8.0)
+        .map(|e| (e.kind, e.robot, e.start_s))
+        .collect();
+    let seen: Vec<_> = cut
+        .events
+        .iter()
+        .map(|e| (e.kind, e.robot, e.start_s))
+        .collect();
+    assert!(
+        seen.iter().all(|e| started.contains(e)),
+        "every event of the cut copy is one of the whole copy's: {seen:?} {started:?}"
+    );
+    assert_eq!(
+        copy_until(Some(20.0)),
+        whole,
+        "a horizon at the limit changes nothing"
+    );
+    let e =
+        RunSpec::from_json(r#"{"perturbation": {"rerun": 1, "horizon_s": 0}}"#, "run").unwrap_err();
+    assert!(
+        e.to_string().starts_with("run.perturbation.horizon_s"),
+        "{e}"
+    );
+}
+
+#[test]
+fn a_copy_watching_for_a_class_stops_past_its_horizon_only_once_it_has_shown_it() {
+    let s = rear_approach();
+    let copy_watching = |horizon_s: Option<f64>, watch_for: Option<FailureClass>| {
+        let spec = RunSpec {
+            perturbation: Some(Perturbation {
+                horizon_s,
+                watch_for,
+                ..Perturbation::copy(3)
+            }),
+            ..spec(Some("cmd:still"), 20.0)
+        };
+        let mut r = Run::new(&s, &spec, 5).unwrap();
+        while !r.step(Some((0.0, 0.0))) {}
+        r.finish()
+    };
+    let whole = copy_watching(None, None);
+    let failure = whole
+        .failure
+        .as_ref()
+        .expect("the peer drives into the still agent");
+    let shown_s = failure.features["start_s"].as_f64().unwrap();
+    assert!(
+        shown_s > 1.0 && whole.time_s > shown_s + 1.0,
+        "{shown_s} {}",
+        whole.time_s
+    );
+    let found = copy_watching(Some(1.0), Some(failure.class));
+    assert_eq!(found.outcome, Outcome::Stopped);
+    assert_eq!(found.failure.as_ref().map(|f| f.class), Some(failure.class));
+    assert!(found.time_s >= shown_s && found.time_s < whole.time_s);
+    // A class more severe than any it shows is never seen: the copy runs to its time limit.
+    assert_ne!(failure.class, FailureClass::DroveIntoUnseenPeer);
+    assert_eq!(
+        copy_watching(Some(1.0), Some(FailureClass::DroveIntoUnseenPeer)),
+        whole
+    );
+    let e = RunSpec::from_json(
+        r#"{"perturbation": {"rerun": 1, "watch_for": "drove_into_wall"}}"#,
+        "run",
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().starts_with("run.perturbation.watch_for"),
+        "{e}"
+    );
+}
