@@ -52,7 +52,8 @@ from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.fault_report import report_from
 from sitgen.generation.faults import is_harder, run_faults
 from sitgen.generation.mutation import target_of
-from sitgen.generation.search import SearchPlan, run_search
+from sitgen.generation.search import run_search
+from sitgen.generation.search.plan import SearchPlan
 from sitgen.store import Store, unpack_json
 from sitgen.triage.variants import Tally, robust_variants, variant
 

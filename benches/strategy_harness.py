@@ -16,7 +16,8 @@ from typing import Any
 from sitgen.execution.jobs import CampaignSpec
 from sitgen.generation.fault_report import FaultReport, report_from
 from sitgen.generation.faults import run_faults
-from sitgen.generation.search import SearchPlan, run_search
+from sitgen.generation.search import run_search
+from sitgen.generation.search.plan import SearchPlan
 
 Measure = Callable[[Path, int, FaultReport], dict[str, float]]
 """A strategy's figures for the first ``budget`` runs of its store, given its fault kills."""

@@ -22,7 +22,8 @@ from sitgen import _core
 from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.genome import Genome
 from sitgen.generation.guidance import GUIDE_EPSILON, guide_weights, guided_genes
-from sitgen.generation.search import BATCH, INITIAL, SearchPlan, run_search
+from sitgen.generation.search import run_search
+from sitgen.generation.search.plan import BATCH, INITIAL, SearchPlan
 from sitgen.store import Store
 from sitgen.triage.coverage import all_cells, dimensions, split, stored, summarise, total_cells
 from tests.conftest import ROOT, open_page, run_cli

@@ -46,15 +46,9 @@ from sitgen.generation.mutation import (
     neighbours,
     target_of,
 )
-from sitgen.generation.search import (
-    BATCH,
-    FRONTIER_FLOOR,
-    INITIAL,
-    LOCAL,
-    Archive,
-    SearchPlan,
-    run_search,
-)
+from sitgen.generation.search import run_search
+from sitgen.generation.search.archive import Archive
+from sitgen.generation.search.plan import BATCH, FRONTIER_FLOOR, INITIAL, LOCAL, SearchPlan
 from sitgen.store import Store, unpack_json
 from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import copies, copy_class, copy_jobs
@@ -544,8 +538,14 @@ def test_a_directed_search_varies_the_run_it_is_given(tmp_path: Path) -> None:
     assert "fresh" not in operators
     with Store(db) as store:
         assert any(v.key.startswith(cls + "/") for v in variants_of(store, cls))
-    wrong = run_cli("search", "--like", f"{campaign}:{run_id}", "--db", str(tmp_path / "x.db"))
-    assert wrong.returncode == 2 and "--like: directs the mutation strategy" in wrong.stderr
+    wrong = run_cli(
+        "search", "--strategy", "random", "--like", f"{campaign}:{run_id}",
+        "--db", str(tmp_path / "x.db"),
+    )  # fmt: skip
+    assert wrong.returncode == 2, wrong.stderr
+    assert "--like: directs the mutation strategy (the default), not --strategy random" in (
+        wrong.stderr
+    )
     bad = run_cli(
         "search", "--strategy", "mutation", "--class", "nope", "--db", str(tmp_path / "y.db")
     )

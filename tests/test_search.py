@@ -17,7 +17,9 @@ import pytest
 from sitgen import _core
 from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.genome import OPERATORS, fresh, vary
-from sitgen.generation.search import BATCH, INITIAL, Archive, SearchPlan, generation_of, run_search
+from sitgen.generation.search import run_search
+from sitgen.generation.search.archive import Archive
+from sitgen.generation.search.plan import BATCH, INITIAL, SearchPlan, generation_of
 from tests.conftest import open_page, run_cli
 from tests.test_campaign import SMALL, start_command, wait_for_runs, write_spec
 
@@ -28,6 +30,8 @@ SEARCHED = SMALL.replace(
 )
 """A small campaign spec with a choice, reals, a scale and a mission gene."""
 BUDGET = INITIAL + 2 * BATCH
+ELITES = SearchPlan("map-elites")
+"""These tests are MAP-Elites' (the default strategy, mutation, is tested in test_mutation)."""
 """Generation 0 and two generations of variation."""
 
 
@@ -68,7 +72,7 @@ def test_the_archive_keeps_the_best_run_per_cell_and_picks_parents_evenly_over_c
     """On a synthetic objective: each cell's elite is its highest-scoring run, the QD score is
     the elites' sum, and parents are drawn evenly over cells however many runs fell in each."""
     spec = spec_of()
-    archive = Archive(spec, 0, SearchPlan())
+    archive = Archive(spec, 0, ELITES)
     runs = [view(i, "drove_into_wall", "caves", float(i), spec) for i in range(100)]
     runs += [view(100, "oscillated_in_open", "open_field", 5.0, spec)]
     runs += [view(101, None, "caves", 50.0, spec), view(102, None, "caves", 7.0, spec)]
@@ -129,11 +133,11 @@ def test_a_search_is_the_same_on_one_and_two_workers_and_a_budget_only_truncates
 ) -> None:
     spec = spec_of()
     one, two, short = tmp_path / "one.db", tmp_path / "two.db", tmp_path / "short.db"
-    a = run_search(spec, one, seed=4, budget=BUDGET, workers=1)
+    a = run_search(spec, one, seed=4, budget=BUDGET, workers=1, plan=ELITES)
     assert (a.ran, a.total, a.interrupted) == (BUDGET, BUDGET, False)
-    run_search(spec, two, seed=4, budget=BUDGET, workers=2)
+    run_search(spec, two, seed=4, budget=BUDGET, workers=2, plan=ELITES)
     assert stored(one) == stored(two)
-    run_search(spec, short, seed=4, budget=INITIAL + BATCH + 3, workers=2)
+    run_search(spec, short, seed=4, budget=INITIAL + BATCH + 3, workers=2, plan=ELITES)
     assert stored(short) == stored(one)[: INITIAL + BATCH + 3]
     rows = stored(one)
     assert {r[1] for r in rows} == {0, 1, 2}
@@ -142,7 +146,7 @@ def test_a_search_is_the_same_on_one_and_two_workers_and_a_budget_only_truncates
     for r in varied:
         assert all(p < INITIAL + BATCH * (r[1] - 1) for p in json.loads(r[2]))
     # Growing the budget extends the same search.
-    more = run_search(spec, short, seed=4, budget=BUDGET, workers=1)
+    more = run_search(spec, short, seed=4, budget=BUDGET, workers=1, plan=ELITES)
     assert more.ran == BUDGET - (INITIAL + BATCH + 3)
     assert stored(short) == rows
 
@@ -170,16 +174,16 @@ def test_random_search_is_the_campaign(tmp_path: Path) -> None:
 def test_a_stopped_search_resumes_to_the_same_runs(tmp_path: Path) -> None:
     spec = spec_of()
     reference, db = tmp_path / "reference.db", tmp_path / "stopped.db"
-    run_search(spec, reference, seed=6, budget=BUDGET)
+    run_search(spec, reference, seed=6, budget=BUDGET, plan=ELITES)
     calls = []
 
     def stop() -> bool:
         calls.append(1)
         return len(calls) > INITIAL + 5
 
-    first = run_search(spec, db, seed=6, budget=BUDGET, workers=1, stop=stop)
+    first = run_search(spec, db, seed=6, budget=BUDGET, workers=1, stop=stop, plan=ELITES)
     assert first.interrupted and first.total < BUDGET
-    rest = run_search(spec, db, seed=6, budget=BUDGET, workers=2)
+    rest = run_search(spec, db, seed=6, budget=BUDGET, workers=2, plan=ELITES)
     assert rest.ran == BUDGET - first.total and not rest.interrupted
     assert stored(db) == stored(reference)
 
@@ -189,16 +193,21 @@ def test_a_killed_search_command_resumes_to_the_same_runs(tmp_path: Path, how: i
     spec = write_spec(tmp_path, SEARCHED)
     budget = str(INITIAL + BATCH)
     reference = tmp_path / "reference.db"
-    done = run_cli("search", str(spec), "--db", str(reference), "--seed", "8", "--budget", budget)
+    elites = ("--strategy", "map-elites")
+    done = run_cli(
+        "search", str(spec), "--db", str(reference), "--seed", "8", "--budget", budget, *elites
+    )
     assert done.returncode == 0, done.stderr
     db = tmp_path / "killed.db"
     proc = start_command(
-        spec, db, "--seed", "8", "--budget", budget, "--workers", "1", command="search"
+        spec, db, "--seed", "8", "--budget", budget, "--workers", "1", *elites, command="search"
     )
     wait_for_runs(db, INITIAL + 2, proc)
     proc.send_signal(how)
     proc.communicate(timeout=120)
-    again = run_cli("search", str(spec), "--db", str(db), "--seed", "8", "--budget", budget)
+    again = run_cli(
+        "search", str(spec), "--db", str(db), "--seed", "8", "--budget", budget, *elites
+    )
     assert again.returncode == 0, again.stderr
     assert stored(db) == stored(reference)
 
@@ -211,7 +220,10 @@ def test_a_search_store_works_with_failures_report_rerun_and_faults(
 ) -> None:
     spec = write_spec(tmp_path, SEARCHED)
     db = tmp_path / "search.db"
-    done = run_cli("search", str(spec), "--db", str(db), "--seed", "3", "--budget", str(BUDGET))
+    done = run_cli(
+        "search", str(spec), "--db", str(db), "--seed", "3", "--budget", str(BUDGET),
+        "--strategy", "map-elites",
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "archive" in done.stdout and "distinct failures" in done.stdout
     failures = run_cli("failures", str(db), "--format", "json")
@@ -282,4 +294,4 @@ def test_bad_input_fails_before_any_run_naming_the_field(tmp_path: Path) -> None
     done = run_cli("search", str(spec), "--db", str(campaign), "--budget", "2")
     assert done.returncode == 2 and "holds a campaign, not a search" in done.stderr
     with pytest.raises(_core.SpecError, match="--budget"):
-        run_search(spec_of(), tmp_path / "x.db", budget=0)
+        run_search(spec_of(), tmp_path / "x.db", budget=0, plan=ELITES)

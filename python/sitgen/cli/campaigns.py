@@ -322,25 +322,26 @@ def search(
         str,
         typer.Option(
             "--strategy",
-            help="map-elites (quality diversity), random (the campaign's generation), "
-            "coverage (fields drawn toward uncovered cells of the interaction space) or "
-            "mutation (situation operators on the archive's elites; docs/search.md).",
+            help="mutation (the default: situation operators on failing runs, the strategy "
+            "that finds the most robust failure variants), map-elites (quality diversity over "
+            "the spec's fields and seeds), random (the campaign's generation) or coverage "
+            "(fields drawn toward uncovered cells of the interaction space); docs/search.md.",
         ),
-    ] = "map-elites",
+    ] = "mutation",
     like: Annotated[
         str | None,
         typer.Option(
             "--like",
-            help="DB:RUN: with --strategy mutation, start from this failing run and find "
-            "more, different variants of its failure.",
+            help="DB:RUN: start from this failing run and find more, different variants of "
+            "its failure (the mutation strategy).",
         ),
     ] = None,
     target_class: Annotated[
         str | None,
         typer.Option(
             "--class",
-            help="With --strategy mutation: vary runs of this failure class, toward more "
-            "variants of it.",
+            help="Vary runs of this failure class, toward more variants of it (the mutation "
+            "strategy).",
         ),
     ] = None,
     measures: Annotated[
@@ -370,19 +371,15 @@ def search(
     weights: WeightsOption = None,
     reruns: RerunsOption = 8,
 ) -> None:
-    """Search toward distinct failures: MAP-Elites over the spec's varied fields and the
-    situation seed, each cell of the archive (failure class × terrain by default) holding its
-    highest-scoring run; or (--strategy coverage) generation steered toward situation coverage.
+    """Search toward distinct failures: by default mutation, which edits failing situations
+    (moves a peer, reshapes terrain, mirrors a crossing…) toward failure variants not yet
+    found; or MAP-Elites over the spec's varied fields and seeds, random generation, or
+    generation steered toward situation coverage (--strategy).
     Writes a store like a campaign's (rank, failures, report, rerun, shrink, coverage work on
     it). Ctrl-C stops after the runs in flight; the same command resumes."""
     from sitgen.execution.jobs import campaign_from_data
-    from sitgen.generation.search import (
-        SearchProgress,
-        SearchResult,
-        like_run,
-        plan_search,
-        run_search,
-    )
+    from sitgen.generation.search import SearchProgress, SearchResult, like_run, run_search
+    from sitgen.generation.search.plan import plan_search
     from sitgen.triage.failures import FailureFilterError
 
     _check_reruns(reruns)

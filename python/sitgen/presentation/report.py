@@ -34,7 +34,8 @@ from sitgen.generation.fault_report import (
     fault_status,
     summary_lines,
 )
-from sitgen.generation.search import SearchReplay, elite_grid, replay
+from sitgen.generation.search import SearchReplay, replay
+from sitgen.generation.search.archive import elite_grid
 from sitgen.presentation.page import _page
 from sitgen.presentation.rosbag import write_stored_run
 from sitgen.presentation.run_page import run_page
