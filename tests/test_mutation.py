@@ -21,31 +21,28 @@ import sitgen
 from sitgen import _core
 from sitgen.execution.jobs import build_job
 from sitgen.generation.genome import fresh
-from sitgen.generation.mutation import (
+from sitgen.generation.mutation import OPERATORS, TARGETED, mutate, neighbours, target_of
+from sitgen.generation.mutation.approach import (
     AGENT_M_S,
     APPROACHES,
-    CONTEXTS,
-    IN_RANGE_M,
-    KEPT_PAST,
     MEET_BACK_M,
-    OPERATORS,
     PEER_CLEAR_M,
-    POINT_CLEAR_M,
-    SPEED_RANGE,
     STAGED_MIN_M_S,
     START_S_MAX,
-    TARGETED,
+    Ground,
+)
+from sitgen.generation.mutation.local import SPEED_RANGE
+from sitgen.generation.mutation.mirror import as_made_by
+from sitgen.generation.mutation.parent import (
+    IN_RANGE_M,
+    KEPT_PAST,
     Parent,
     Track,
-    _Ground,
-    as_made_by,
     cut_past_failure,
     extended,
-    focus_peer,
-    mutate,
-    neighbours,
-    target_of,
 )
+from sitgen.generation.mutation.places import focus_peer
+from sitgen.generation.mutation.terrain import CONTEXTS, POINT_CLEAR_M
 from sitgen.generation.search import run_search
 from sitgen.generation.search.archive import Archive
 from sitgen.generation.search.plan import BATCH, FRONTIER_FLOOR, INITIAL, LOCAL, SearchPlan
@@ -294,7 +291,7 @@ def test_a_staged_meeting_moves_back_along_the_agents_way_until_the_peer_has_roo
     # 10 x 10 m at 0.1 m, a wall from x = 6 m: the agent failed at (5.8, 5) facing it.
     occupied = np.zeros((100, 100), dtype=bool)
     occupied[:, 60:] = True
-    ground = _Ground.of(occupied, 0.1)
+    ground = Ground.of(occupied, 0.1)
     start, back = (5.8, 5.0), math.pi
     # From the left (the peer comes from +y and goes on to -y): the first point back from the
     # wall with ground clear for the peer.

@@ -41,9 +41,7 @@ from sitgen.execution.jobs import (
 from sitgen.generation.genome import (
     Genome,
 )
-from sitgen.generation.mutation import (
-    Parent,
-)
+from sitgen.generation.mutation.parent import Parent
 from sitgen.generation.search.archive import (
     Archive,
     Child,

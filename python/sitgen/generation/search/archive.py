@@ -46,15 +46,9 @@ from sitgen.generation.guidance import (
     guided_genes,
 )
 from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
-from sitgen.generation.mutation import (
-    TARGETED,
-    Parent,
-    as_made_by,
-    cut_past_failure,
-    extended,
-    mutate,
-    neighbours,
-)
+from sitgen.generation.mutation import TARGETED, mutate, neighbours
+from sitgen.generation.mutation.mirror import as_made_by
+from sitgen.generation.mutation.parent import Parent, cut_past_failure, extended
 from sitgen.generation.search.plan import (
     ARM_PRIOR_RUNS,
     CROWD_SHARE,

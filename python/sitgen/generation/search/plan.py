@@ -34,9 +34,7 @@ from sitgen.generation.guidance import (
     GUIDE_STRATA,
 )
 from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
-from sitgen.generation.mutation import (
-    TARGETED,
-)
+from sitgen.generation.mutation import TARGETED
 from sitgen.triage.failures import check_class
 from sitgen.triage.failures import classes as failure_classes
 from sitgen.triage.variants import NO_PEER, interaction_context
