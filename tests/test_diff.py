@@ -167,3 +167,22 @@ def test_the_report_shows_each_robust_difference_as_a_and_b_side_by_side(
         assert pair.index(f"run-{a}.png") < pair.index(f"run-{b}.png")
         assert (out / f"run-{a}.html").is_file() and (out / f"run-{b}.html").is_file()
         assert f"A {first['a_recurs']}/{first['copies']}, B {first['b_recurs']}/" in pair
+
+
+@pytest.mark.parametrize("b", ["cmd:/bin/false", "cmd:/no/such/program"])
+def test_a_b_that_cannot_run_fails_the_gate_and_says_why(tmp_path: Path, b: str) -> None:
+    """A regression gate must not pass a B that never ran: its table is empty and it has no
+    new failure class, yet the command fails and JUnit holds a failed case with B's reason."""
+    junit = tmp_path / "junit.xml"
+    done = run_cli(
+        "diff", "--a", "snd_follow", "--b", b, "--n", "3", "--db", str(tmp_path / "d.db"),
+        "--junit", str(junit), "--format", "json",
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr
+    report = json.loads(done.stdout)
+    assert report["failed"] and report["both_ran"] == 0 and report["robust_new"] == 0
+    assert [e["situation"] for e in report["b_errors"]] == [0, 1, 2]
+    suite = ElementTree.parse(junit).getroot().find("testsuite")
+    assert suite is not None and suite.get("failures") == "1"
+    case = suite.find("testcase[@name='controller_error']/failure")
+    assert case is not None and "B could not run on 3 situation(s) where A ran" in (case.text or "")

@@ -173,7 +173,8 @@ def diff_command(
     """What a controller change fixed and what it broke: run the same situations with A and B
     and judge each difference in failure on perturbed copies of both (docs/failures.md):
     each distinct failure robustly new in B, robustly fixed, unchanged, or not robust either
-    way. Exits 1 when B has robust new failures. Ctrl-C stops; the same command resumes."""
+    way. Exits 1 when B has robust new failures, or fails to run where A ran, or nothing could be
+    compared. Ctrl-C stops; the same command resumes."""
     from sitgen.generation.diff import (
         DiffPlan,
         diff_report,
@@ -237,7 +238,7 @@ def diff_command(
     if result.interrupted:
         typer.echo("stopped early: run the same command again to finish")
         raise typer.Exit(130)
-    if report.robust_new:
+    if report.failed:
         raise typer.Exit(EXIT_FAILED)
 
 

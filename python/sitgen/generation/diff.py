@@ -368,10 +368,21 @@ class DiffReport:
     runs: int
     """Runs in all, every perturbed copy counted."""
     classes: list[ClassDiff]
+    b_errors: dict[int, str] = field(default_factory=dict)
+    """Situations where B could not run (its controller failed) and A could, each with B's
+    reason: a regression as much as a new failure."""
+    both_ran: int = 0
+    """Situations both sides ran: with none, there is no verdict to give."""
 
     @property
     def robust_new(self) -> list[ClassDiff]:
         return [c for c in self.classes if c.new]
+
+    @property
+    def failed(self) -> bool:
+        """Whether the gate fails: B has robust new failures, fails to run where A ran, or
+        nothing could be compared."""
+        return bool(self.robust_new or self.b_errors or (self.situations and not self.both_ran))
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -380,6 +391,9 @@ class DiffReport:
             "situations": self.situations,
             "runs": self.runs,
             "robust_new": len(self.robust_new),
+            "b_errors": [{"situation": i, "reason": r} for i, r in self.b_errors.items()],
+            "both_ran": self.both_ran,
+            "failed": self.failed,
             "classes": [c.as_dict() for c in self.classes],
         }
 
@@ -423,8 +437,24 @@ def diff_report(store: Store) -> DiffReport:
     )
     copies = store.db.execute("SELECT coalesce(sum(copies), 0) FROM diff_chunks").fetchone()[0]
     evaluated = store.db.execute("SELECT count(*) FROM runs WHERE id % 2 = 0").fetchone()[0]
+    erred: dict[int, dict[int, str]] = {0: {}, 1: {}}
+    for run_id, reason in store.db.execute(
+        "SELECT id, reason FROM runs WHERE outcome = 'error' ORDER BY id"
+    ):
+        erred[run_id % 2][run_id // 2] = str(reason)
+    both = store.db.execute(
+        "SELECT count(*) FROM runs a JOIN runs b ON b.id = a.id + 1 WHERE a.id % 2 = 0 "
+        "AND a.outcome != 'error' AND b.outcome != 'error'"
+    ).fetchone()[0]
+    b_errors = {i: r for i, r in erred[1].items() if i not in erred[0]}
     return DiffReport(
-        plan["a"], plan["b"], int(evaluated), store.run_count() + int(copies), classes
+        plan["a"],
+        plan["b"],
+        int(evaluated),
+        store.run_count() + int(copies),
+        classes,
+        b_errors,
+        int(both),
     )
 
 
@@ -454,6 +484,18 @@ def write_junit(report: DiffReport, out: TextIO) -> None:
             cases.append(Case(c.failure_class, "sitgen.generation.diff", failure=failure))
         else:
             cases.append(Case(c.failure_class, "sitgen.generation.diff", output=c.verdict))
+    if report.b_errors:
+        first, reason = next(iter(report.b_errors.items()))
+        text = (
+            f"B could not run on {len(report.b_errors)} situation(s) where A ran: "
+            f"{', '.join(map(str, report.b_errors))}; situation {first} (run {2 * first + 1}): "
+            f"{reason}"
+        )
+        failure = ("controller_error", "B could not run where A ran", text)
+        cases.append(Case("controller_error", "sitgen.generation.diff", failure=failure))
+    elif report.situations and not report.both_ran:
+        failure = ("no_comparison", "no situation ran on both sides", "nothing was compared")
+        cases.append(Case("no_comparison", "sitgen.generation.diff", failure=failure))
     name = f"sitgen diff: {controller_label(report.a)} -> {controller_label(report.b)}"
     write_junit_cases(name, cases, out)
 
@@ -468,3 +510,11 @@ def summary_lines(report: DiffReport) -> Iterable[str]:
         f"B has {len(new)} robustly new distinct failure{'s' if len(new) != 1 else ''}"
         + (": " + ", ".join(c.failure_class for c in new) if new else "")
     )
+    if report.b_errors:
+        first, reason = next(iter(report.b_errors.items()))
+        yield (
+            f"B could not run on {len(report.b_errors)} situation(s) where A ran "
+            f"(situation {first}, run {2 * first + 1}: {reason})"
+        )
+    elif report.situations and not report.both_ran:
+        yield "no situation ran on both sides: nothing was compared"
