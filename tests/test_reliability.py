@@ -16,6 +16,7 @@ import sqlite3
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import zlib
@@ -947,3 +948,28 @@ def test_a_hung_stage_and_everything_it_started_end_with_the_crosscheck(
     while _alive(child) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not _alive(child), "the hung Stage's child still runs"
+
+
+def test_a_dds_domain_lock_never_follows_a_planted_link_nor_waits_on_a_fifo(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The lock files live in the shared temp folder: a symlink planted there must not have
+    its target truncated, a FIFO must not block; their domains are passed over."""
+    from sitgen.controllers import ros2
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    canary = tmp_path / "canary"
+    canary.write_text("keep me")
+    free = ros2.DOMAIN_IDS[-1]
+    for domain in ros2.DOMAIN_IDS[:-1]:
+        path = tmp_path / f"sitgen-ros2-domain-{domain}.lock"
+        if domain % 2:
+            path.symlink_to(canary)
+        else:
+            os.mkfifo(path)
+    domain, lock = ros2._claim_domain()
+    try:
+        assert domain == free
+        assert canary.read_text() == "keep me"
+    finally:
+        lock.close()

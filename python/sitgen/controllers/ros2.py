@@ -47,6 +47,7 @@ import math
 import os
 import shlex
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -139,6 +140,22 @@ def _messages() -> Any:
     }
 
 
+def _open_lock(path: str) -> IO[bytes] | None:
+    """The lock file at ``path``, opened for locking without following a link or waiting on a
+    special file (the folder is shared: anyone may have put something there); None where what
+    is there is not a regular file, so the domain it stands for is passed over."""
+    try:
+        fd = os.open(
+            path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o600
+        )
+    except OSError:
+        return None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        return None
+    return os.fdopen(fd, "r+b")
+
+
 def _claim_domain() -> tuple[int, IO[bytes]]:
     """A DDS domain id no other sitgen process on this machine holds, and the open lock file
     that holds it for this process's life."""
@@ -146,7 +163,9 @@ def _claim_domain() -> tuple[int, IO[bytes]]:
     start = os.getpid() % len(DOMAIN_IDS)
     for k in range(len(DOMAIN_IDS)):
         domain = DOMAIN_IDS[(start + k) % len(DOMAIN_IDS)]
-        lock = open(os.path.join(folder, f"sitgen-ros2-domain-{domain}.lock"), "wb")  # noqa: SIM115
+        lock = _open_lock(os.path.join(folder, f"sitgen-ros2-domain-{domain}.lock"))
+        if lock is None:
+            continue
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -155,7 +174,7 @@ def _claim_domain() -> tuple[int, IO[bytes]]:
         return domain, lock
     raise ControllerError(
         f"ros2: every DDS domain {DOMAIN_IDS.start}-{DOMAIN_IDS.stop - 1} is held by another "
-        "sitgen process"
+        f"sitgen process (or its lock file in {folder} is not a regular file)"
     )
 
 
