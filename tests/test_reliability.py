@@ -33,7 +33,7 @@ from hypothesis import strategies as st
 import sitgen
 from sitgen.execution.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
-from tests.conftest import ROOT, Result, sitgen_command
+from tests.conftest import ROOT, Result, run_cli, sitgen_command
 
 MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehaving.py'}"
 PY = "python:tests.controllers.pycontrollers"
@@ -973,3 +973,25 @@ def test_a_dds_domain_lock_never_follows_a_planted_link_nor_waits_on_a_fifo(
         assert canary.read_text() == "keep me"
     finally:
         lock.close()
+
+
+def test_an_output_file_that_is_the_store_or_links_to_it_is_refused_and_the_store_kept(
+    tmp_path: Path,
+) -> None:
+    db = tmp_path / "c.db"
+    assert run_cli("campaign", "--n", "2", "--db", str(db), "--reruns", "0").returncode == 0
+    link = tmp_path / "link.xml"
+    link.symlink_to(db)
+    other = tmp_path / "other.db"
+    other.write_bytes(db.read_bytes())
+    for option, path in [("--junit", db), ("--summary", link), ("--junit", other)]:
+        done = run_cli("campaign", "--n", "3", "--db", str(db), option, str(path))
+        assert done.returncode == 2, done.stdout + done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith(f"error: {option}: "), done.stderr
+    with sqlite3.connect(db) as c:
+        assert c.execute("SELECT count(*) FROM runs").fetchone()[0] == 2, "nothing ran, all kept"
+    diff_db = tmp_path / "d.db"
+    done = run_cli("diff", "--b", "vo", "--n", "1", "--db", str(diff_db), "--junit", str(db))
+    assert done.returncode == 2 and "--junit: " in done.stderr, done.stderr
+    assert other.read_bytes()[:16] == b"SQLite format 3\x00"

@@ -195,6 +195,28 @@ def _writing(output: Path, what: str) -> Iterator[None]:
         raise OSError(f"{output}: cannot write {what}: {e.strerror or e}") from None
 
 
+def check_output(output: Path | None, option: str, *inputs: Path | None) -> None:
+    """Refuse an output file that would overwrite what the command reads or stores: one that
+    is (or links to) an input or the store, or any SQLite store. Checked before any work, so
+    nothing stored is ever turned into a report."""
+    if output is None:
+        return
+    target = os.path.realpath(output)
+    for given in inputs:
+        if given is not None and target == os.path.realpath(given):
+            raise UsageError(
+                f"{option}: {output} is {given}, which this command reads or stores; "
+                "give another file"
+            )
+    try:
+        with open(target, "rb") as f:
+            header = f.read(16)
+    except OSError:
+        return
+    if header == b"SQLite format 3\x00":
+        raise UsageError(f"{option}: {output} is a sitgen store (SQLite); give another file")
+
+
 def _is_store(path: Path) -> bool:
     """Whether ``path`` is an SQLite file (a campaign store) rather than a situation."""
     if path.suffix == ".db":

@@ -42,6 +42,7 @@ from sitgen.cli.app import (
     _weights,
     _writing,
     app,
+    check_output,
     parse_params,
 )
 from sitgen.cli.triage import failures
@@ -162,6 +163,8 @@ def campaign(
     from sitgen.execution.campaign import DEFAULT_KEEP, run_campaign
 
     _check_reruns(reruns)
+    check_output(junit, "--junit", db, spec)
+    check_output(summary_json, "--summary", db, spec, junit)
     parsed = _campaign_spec(spec, controller, param)
     total_n = parsed.n if n is None else n
     result = _stored(

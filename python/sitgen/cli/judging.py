@@ -15,7 +15,7 @@ from sitgen.store import require_store
 
 if TYPE_CHECKING:
     pass
-from sitgen.cli.app import UsageError, app
+from sitgen.cli.app import UsageError, app, check_output
 
 
 @app.command()
@@ -112,6 +112,7 @@ def judgements_export(
     from sitgen.triage.weights import write_judgements
 
     require_store(db)
+    check_output(output, "--output", db)
     with Store(db) as store:
         written = write_judgements(store.judgements(), output)
     typer.echo(f"wrote {written} judgements to {output}")
@@ -145,6 +146,7 @@ def weights_fit(
     from sitgen.triage.weights import JudgementError, fit, read_judgements, weights_toml
 
     require_store(db)
+    check_output(output, "--output", db, judgements)
     with Store(db) as store:
         try:
             judged = (

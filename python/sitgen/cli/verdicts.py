@@ -21,6 +21,7 @@ from sitgen.cli.app import (
     UsageError,
     WorkersOption,
     app,
+    check_output,
     parse_params,
 )
 from sitgen.cli.campaigns import _campaign_spec, _stored
@@ -190,6 +191,7 @@ def diff_command(
         raise UsageError(f"--format: `{format}` is not one of table, json")
     if not b:
         raise UsageError("--b: the controller to compare with A is required")
+    check_output(junit, "--junit", db, spec, situations)
     given = parse_params(param)
     plan = DiffPlan(
         with_params(parse_controller(a, "--a"), given, "--a"),
