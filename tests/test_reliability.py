@@ -995,3 +995,24 @@ def test_an_output_file_that_is_the_store_or_links_to_it_is_refused_and_the_stor
     done = run_cli("diff", "--b", "vo", "--n", "1", "--db", str(diff_db), "--junit", str(db))
     assert done.returncode == 2 and "--junit: " in done.stderr, done.stderr
     assert other.read_bytes()[:16] == b"SQLite format 3\x00"
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        {"answer_timeout_s": 1e300},
+        {"answer_timeout_s": 0},
+        {"answer_timeout_s": -1.0},
+        {"answer_timeout_s": float("nan")},
+        {"max_missed_answers": 2.5},
+        {"max_missed_answers": -1},
+    ],
+)
+def test_a_ros2_controller_s_own_timeouts_are_bounded(params: dict[str, float]) -> None:
+    """Every wait of a run has a documented maximum: a node's answer timeout and the answers it
+    may miss are refused, naming the parameter, out of their ranges."""
+    from sitgen.controllers.external import ControllerError
+    from sitgen.controllers.ros2 import Ros2Controller
+
+    with pytest.raises(ControllerError, match=rf"params\.{next(iter(params))}: .* is not"):
+        Ros2Controller("true", "`ros2:true`", params)

@@ -97,6 +97,11 @@ TOPICS = Topics()
 FRAMES = Frames()
 MAX_MISSED_ANSWERS = 10
 """Control periods in a row a node may leave unanswered before its run ends as an error."""
+MOST_ANSWER_TIMEOUT_S = 60.0
+"""Largest ``answer_timeout_s`` (wall seconds): a node that does not answer within a minute
+is not answering; every wait of a run is bounded."""
+MOST_MISSED_ANSWERS = 100_000
+"""Largest ``max_missed_answers``."""
 DOMAIN_IDS = range(1, 102)
 """DDS domains sitgen may claim: 0 is left to the user's own ROS system; above 101 the
 ports of a domain start to collide with Linux's ephemeral range."""
@@ -299,7 +304,20 @@ class Ros2Controller(UserController):
         params = dict(params or {})
         own = {k: params.pop(k) for k in SITGEN_PARAMS if k in params}
         self._answer_timeout_s = float(own.get("answer_timeout_s", step_timeout_s))
-        self._max_missed = int(own.get("max_missed_answers", MAX_MISSED_ANSWERS))
+        if not 0 < self._answer_timeout_s <= MOST_ANSWER_TIMEOUT_S:
+            raise ControllerError(
+                f"controller {name}: params.answer_timeout_s: {self._answer_timeout_s!r} is not "
+                f"in (0, {MOST_ANSWER_TIMEOUT_S:g}] wall seconds"
+            )
+        missed = own.get("max_missed_answers", MAX_MISSED_ANSWERS)
+        if not (
+            math.isfinite(missed) and missed == int(missed) and 0 <= missed <= MOST_MISSED_ANSWERS
+        ):
+            raise ControllerError(
+                f"controller {name}: params.max_missed_answers: {missed!r} is not a whole "
+                f"number in [0, {MOST_MISSED_ANSWERS}]"
+            )
+        self._max_missed = int(missed)
         ros_params = [a for k, v in sorted(params.items()) for a in ("-p", f"{k}:={v!r}")]
         self._argv = [
             program_path(argv, name),
