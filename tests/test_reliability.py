@@ -1016,3 +1016,25 @@ def test_a_ros2_controller_s_own_timeouts_are_bounded(params: dict[str, float]) 
 
     with pytest.raises(ControllerError, match=rf"params\.{next(iter(params))}: .* is not"):
         Ros2Controller("true", "`ros2:true`", params)
+
+
+@pytest.mark.parametrize("prefix", ["cmd:", "ros2:"])
+def test_a_command_line_that_does_not_parse_is_one_line_everywhere(
+    situation_file: Path, tmp_path: Path, prefix: str
+) -> None:
+    controller = f"{prefix}python3 'oops"
+    for args in (
+        ("campaign", "--n", "2", "--db", str(tmp_path / "c.db"), "--controller", controller),
+        ("run", str(situation_file), "--controller", controller),
+        ("check-controller", controller),
+    ):
+        done = run_cli(*args)
+        assert done.returncode in (1, 2), done.stdout + done.stderr
+        assert "Traceback" not in done.stdout + done.stderr, done.stderr
+        said = done.stdout + done.stderr
+        assert "its command line does not parse: No closing quotation" in said, said
+    spec = tmp_path / "nul.toml"
+    paper = (ROOT / "examples" / "campaigns" / "paper.toml").read_text()
+    spec.write_text(paper.replace('name = "snd_follow"', 'name = "cmd:a\\u0000b"'))
+    done = run_cli("campaign", str(spec), "--n", "2", "--db", str(tmp_path / "n.db"))
+    assert done.returncode == 2 and "holds a NUL character" in done.stderr, done.stderr

@@ -21,6 +21,7 @@ import contextlib
 import json
 import os
 import selectors
+import shlex
 import shutil
 import signal
 import subprocess
@@ -93,6 +94,21 @@ class UserController:
         """End the run; releases any process. Returns None if it shut down cleanly, else why
         not (``check-controller`` reports it; a run's outcome is already set)."""
         return None
+
+
+def command_argv(command_line: str, name: str) -> list[str]:
+    """A program controller's command line split as a shell would (no shell runs it);
+    ControllerError, naming the controller, where it does not split (an unterminated quote),
+    holds a NUL (no program can be given one), or names no program."""
+    if "\0" in command_line:
+        raise ControllerError(f"controller {name}: its command line holds a NUL character")
+    try:
+        argv = shlex.split(command_line)
+    except ValueError as e:
+        raise ControllerError(f"controller {name}: its command line does not parse: {e}") from None
+    if not argv:
+        raise ControllerError(f"controller {name}: no program given")
+    return argv
 
 
 def program_path(argv: list[str], name: str) -> str:

@@ -45,7 +45,6 @@ import contextlib
 import fcntl
 import math
 import os
-import shlex
 import signal
 import stat
 import subprocess
@@ -63,6 +62,7 @@ from sitgen.controllers.external import (
     STEP_TIMEOUT_S,
     ControllerError,
     UserController,
+    command_argv,
     die_with_parent_prefix,
     program_path,
     short,
@@ -298,9 +298,7 @@ class Ros2Controller(UserController):
         start_timeout_s: float = START_TIMEOUT_S,
     ) -> None:
         self.name = name
-        argv = shlex.split(command_line)
-        if not argv:
-            raise ControllerError(f"controller {name}: no program given")
+        argv = command_argv(command_line, name)
         params = dict(params or {})
         own = {k: params.pop(k) for k in SITGEN_PARAMS if k in params}
         self._answer_timeout_s = float(own.get("answer_timeout_s", step_timeout_s))
@@ -624,10 +622,7 @@ def _seconds(time_msg: Any) -> float:
 def check_ros2_name(name: str) -> None:
     """Check before any run that a ``ros2:`` controller can be used: the wheels import and the
     program exists. Raises ControllerError with the reason."""
-    argv = shlex.split(name.removeprefix(PREFIX))
-    if not argv:
-        raise ControllerError(f"controller `{name}`: no program given")
-    program_path(argv, f"`{name}`")
+    program_path(command_argv(name.removeprefix(PREFIX), f"`{name}`"), f"`{name}`")
     reason = ros2_available()
     if reason is not None:
         raise ControllerError(f"controller `{name}`: {reason}")

@@ -6,7 +6,6 @@ docs/ros2.md)."""
 from __future__ import annotations
 
 import json
-import shlex
 import sys
 from collections.abc import Mapping
 from typing import Any
@@ -16,6 +15,7 @@ from sitgen.controllers.external import (
     ControllerError,
     ProcessController,
     UserController,
+    command_argv,
     program_path,
 )
 from sitgen.controllers.inprocess import InProcessController
@@ -53,7 +53,8 @@ def load_controller(
         return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
     if name.startswith("cmd:"):
         command_line = name.removeprefix("cmd:")
-        return ProcessController(shlex.split(command_line), f"`{name}`", step_timeout_s)
+        argv = command_argv(command_line, f"`{name}`")
+        return ProcessController(argv, f"`{name}`", step_timeout_s)
     if name.startswith(ROS2_PREFIX):
         return Ros2Controller(name.removeprefix(ROS2_PREFIX), f"`{name}`", params, step_timeout_s)
     raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…")
@@ -66,10 +67,7 @@ def check_controller_name(name: str, params: Mapping[str, float] | None = None) 
     ``ros2:`` program that exists with the ROS 2 wheels installed. Raises ControllerError with
     the reason; built-in names are the core's to check."""
     if name.startswith("cmd:"):
-        argv = shlex.split(name.removeprefix("cmd:"))
-        if not argv:
-            raise ControllerError(f"controller `{name}`: no program given")
-        program_path(argv, f"`{name}`")
+        program_path(command_argv(name.removeprefix("cmd:"), f"`{name}`"), f"`{name}`")
     elif name.startswith(ROS2_PREFIX):
         check_ros2_name(name)
     elif name.startswith("python:"):
