@@ -84,3 +84,23 @@ def test_diffs_junit_validates_against_the_same_schema(tmp_path: Path) -> None:
     )  # fmt: skip
     assert done.returncode in (0, 1), done.stderr
     validate(tmp_path / "d.xml")
+
+
+def test_names_and_messages_with_control_and_markup_characters_still_parse(tmp_path: Path) -> None:
+    """A controller's name or a program's last line may hold an ESC, a NUL's neighbours or
+    markup: the document must parse, and what was there must still be readable."""
+    from sitgen.triage.junit import Case, write_junit
+
+    odd = 'ctl \x01 esc \x1b[31m <&"> é'
+    path = tmp_path / "odd.xml"
+    with path.open("w") as out:
+        write_junit(
+            odd, [Case(odd, odd, failure=(odd, odd, odd)), Case(odd, odd, error=(odd, odd))], out
+        )
+    suite = ElementTree.parse(path).getroot().find("testsuite")
+    assert suite is not None
+    readable = 'ctl \\x01 esc \\x1b[31m <&"> é'
+    assert suite.get("name") == readable
+    failure = suite.find("testcase/failure")
+    assert failure is not None and failure.text == readable and failure.get("message") == readable
+    validate(path)

@@ -10,6 +10,7 @@ with at most one ``failure`` or ``error`` (``type``, ``message``, text) and ``sy
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO
@@ -32,8 +33,22 @@ class Case:
     output: str = ""
 
 
+NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+"""Characters XML 1.0 cannot hold at all, escaped or not (a controller's name or a program's
+last line may hold them: an ANSI colour's ESC, a stray NUL)."""
+
+
+def xml_text(text: str) -> str:
+    """``text`` with each character XML 1.0 cannot hold written as ``\\xNN`` (or
+    ``\\uNNNN``), so that the document parses and a reader still sees what was there."""
+    return NOT_XML.sub(lambda m: ascii(m.group(0))[1:-1], text)
+
+
 def write_junit(suite_name: str, cases: Sequence[Case], out: TextIO) -> None:
-    """``cases`` as one JUnit test suite named ``suite_name``."""
+    """``cases`` as one JUnit test suite named ``suite_name`` (every name and text made
+    writable as XML by :func:`xml_text`; ElementTree escapes ``<``, ``&`` and quotes)."""
+    cases = [_writable(c) for c in cases]
+    suite_name = xml_text(suite_name)
     suite = ElementTree.Element(
         "testsuite",
         name=suite_name,
@@ -57,6 +72,12 @@ def write_junit(suite_name: str, cases: Sequence[Case], out: TextIO) -> None:
     ElementTree.indent(root)
     out.write(ElementTree.tostring(root, encoding="unicode", xml_declaration=True))
     out.write("\n")
+
+
+def _writable(c: Case) -> Case:
+    failure = c.failure and (xml_text(c.failure[0]), xml_text(c.failure[1]), xml_text(c.failure[2]))
+    error = c.error and (xml_text(c.error[0]), xml_text(c.error[1]))
+    return Case(xml_text(c.name), xml_text(c.classname), failure, error, xml_text(c.output))
 
 
 def campaign_cases(store: Store) -> list[Case]:
