@@ -1038,3 +1038,12 @@ def test_a_command_line_that_does_not_parse_is_one_line_everywhere(
     spec.write_text(paper.replace('name = "snd_follow"', 'name = "cmd:a\\u0000b"'))
     done = run_cli("campaign", str(spec), "--n", "2", "--db", str(tmp_path / "n.db"))
     assert done.returncode == 2 and "holds a NUL character" in done.stderr, done.stderr
+
+
+def test_a_program_killed_by_a_real_time_signal_is_named_by_it(situation_file: Path) -> None:
+    """Real-time signals have no name of their own in Python's Signals: the reason must still
+    be a line, not a traceback."""
+    controller = "cmd:sh -c 'read line; kill -s RTMIN+6 $$'"
+    done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "was killed by SIGRTMIN+6 on reset" in done.stdout, done.stdout + done.stderr

@@ -96,6 +96,16 @@ class UserController:
         return None
 
 
+def signal_name(number: int) -> str:
+    """``SIGSEGV`` for 11; a real-time signal, which has no name of its own, as ``SIGRTMIN+6``
+    (or ``signal 40`` where even that does not fit)."""
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        low, high = int(signal.SIGRTMIN), int(signal.SIGRTMAX)
+        return f"SIGRTMIN+{number - low}" if low <= number <= high else f"signal {number}"
+
+
 def command_argv(command_line: str, name: str) -> list[str]:
     """A program controller's command line split as a shell would (no shell runs it);
     ControllerError, naming the controller, where it does not split (an unterminated quote),
@@ -410,7 +420,7 @@ class ProcessController(UserController):
         if code is None:
             how = "closed its output"
         elif code < 0:
-            how = f"was killed by {signal.Signals(-code).name}"
+            how = f"was killed by {signal_name(-code)}"
         else:
             how = f"exited with code {code}"
         return f"controller {self.name} {how} {when}{said}"

@@ -66,6 +66,7 @@ from sitgen.controllers.external import (
     die_with_parent_prefix,
     program_path,
     short,
+    signal_name,
 )
 
 PREFIX = "ros2:"
@@ -441,7 +442,7 @@ class Ros2Controller(UserController):
             return
         code = proc.returncode
         how = (
-            f"was killed by {signal.Signals(-code).name}"
+            f"was killed by {signal_name(-code)}"
             if code < 0
             else f"exited with code {code}"
         )
