@@ -186,3 +186,10 @@ def test_a_b_that_cannot_run_fails_the_gate_and_says_why(tmp_path: Path, b: str)
     assert suite is not None and suite.get("failures") == "1"
     case = suite.find("testcase[@name='controller_error']/failure")
     assert case is not None and "B could not run on 3 situation(s) where A ran" in (case.text or "")
+
+
+def test_diff_s_workers_are_capped_as_everywhere(tmp_path: Path) -> None:
+    db = tmp_path / "d.db"
+    done = run_cli("diff", "--b", "vo", "--n", "2", "--workers", "1000", "--db", str(db))
+    assert done.returncode == 2 and done.stderr.startswith("error: --workers: 1000 is not in")
+    assert not db.exists()

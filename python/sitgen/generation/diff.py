@@ -33,7 +33,7 @@ from typing import Any, TextIO
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor, run_chunk, started_at
-from sitgen.execution.jobs import CampaignSpec, Job, check_campaign
+from sitgen.execution.jobs import CampaignSpec, Job, check_campaign, check_workers
 from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
 from sitgen.triage.junit import Case
@@ -258,6 +258,7 @@ def run_diff(
     """Compare (or resume comparing) ``plan``'s controllers on ``n`` situations into ``db``."""
     if not 1 <= n <= MAX_SITUATIONS:
         raise _core.SpecError(f"--n: {n} is not in [1, {MAX_SITUATIONS}]")
+    workers = check_workers(workers, "local")
     started = time.perf_counter()
     situations = Situations(spec, seed, plan.strategy, None, situations_db)
     try:
