@@ -104,3 +104,16 @@ def test_names_and_messages_with_control_and_markup_characters_still_parse(tmp_p
     failure = suite.find("testcase/failure")
     assert failure is not None and failure.text == readable and failure.get("message") == readable
     validate(path)
+
+
+def test_a_campaign_whose_every_run_errs_still_writes_its_junit_and_summary(tmp_path: Path) -> None:
+    junit, summary = tmp_path / "junit.xml", tmp_path / "summary.json"
+    done = run_cli(
+        "campaign", "--n", "2", "--db", str(tmp_path / "c.db"), "--controller", "cmd:/bin/false",
+        "--junit", str(junit), "--summary", str(summary),
+    )  # fmt: skip
+    assert done.returncode == 1 and "every run is an error" in done.stderr, done.stderr
+    suite = ElementTree.parse(junit).getroot().find("testsuite")
+    assert suite is not None and suite.get("errors") == "2"
+    assert json.loads(summary.read_text())["outcomes"] == {"error": 2}
+    validate(junit)

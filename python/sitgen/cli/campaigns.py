@@ -186,7 +186,13 @@ def campaign(
     )
     if not result.interrupted:
         _measure_robustness(db, reruns, workers)
-    _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
+    try:
+        _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
+    except typer.Exit as e:
+        if e.exit_code == EXIT_FAILED:
+            # Every run erred: CI still gets the report that says why.
+            _write_results(db, junit, summary_json)
+        raise
     if shrink_top:
         _shrink_top(db, shrink_top, workers)
     _write_results(db, junit, summary_json)
