@@ -1047,3 +1047,20 @@ def test_a_program_killed_by_a_real_time_signal_is_named_by_it(situation_file: P
     done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
     assert done.returncode == 1, done.stdout + done.stderr
     assert "was killed by SIGRTMIN+6 on reset" in done.stdout, done.stdout + done.stderr
+
+
+def test_an_empty_file_given_as_a_store_to_read_is_refused_and_left_empty(tmp_path: Path) -> None:
+    empty = tmp_path / "empty.db"
+    empty.touch()
+    for args in (
+        ("diff", "--b", "vo", "--n", "1", "--situations", str(empty),
+         "--db", str(tmp_path / "d.db")),
+        ("faults", "--strategy", "stored", "--situations", str(empty), "--budget", "1",
+         "--db", str(tmp_path / "f.db")),
+        ("rank", str(empty)),
+        ("report", str(empty), "-o", str(tmp_path / "site")),
+    ):  # fmt: skip
+        done = run_cli(*args)
+        assert done.returncode in (1, 2), done.stdout + done.stderr
+        assert "an empty file or database, not a sitgen campaign store" in done.stderr, done.stderr
+        assert empty.stat().st_size == 0, args

@@ -117,7 +117,7 @@ class Store:
                 raise StoreError(f"{self.path}: cannot create the store: {folder} is read-only")
         creating = create and not self.path.exists()
         try:
-            self._open()
+            self._open(create)
         except sqlite3.Error as e:
             if not creating:
                 raise
@@ -129,14 +129,21 @@ class Store:
             why = str(e).removeprefix(f"{self.path}: ")
             raise StoreError(f"{self.path}: cannot create the store: {why}") from None
 
-    def _open(self) -> None:
+    def _open(self, create: bool) -> None:
         try:
             self.db = sqlite3.connect(self.path, timeout=30.0, factory=_Connection)
             self.db.path = str(self.path)
+            version = self._schema_version()
+            if version is None and not create:
+                # A store is only ever made by a command that writes one: a file read as a
+                # store (an empty file, say) is an input, and is left as it was.
+                self.db.close()
+                raise StoreError(
+                    f"{self.path}: an empty file or database, not a sitgen campaign store"
+                )
             self.db.execute("PRAGMA journal_mode=WAL")
             self.db.execute("PRAGMA synchronous=NORMAL")
             self.db.execute("PRAGMA foreign_keys=ON")
-            version = self._schema_version()
         except sqlite3.DatabaseError as e:
             why = str(e).removeprefix(f"{self.path}: ")
             raise StoreError(f"{self.path}: not a sitgen campaign store ({why})") from None
