@@ -268,3 +268,32 @@ def test_reports_of_empty_failing_and_long_campaigns(tmp_path: Path, browser: An
             assert errors == [], (run_page, errors)
     assert "error" in (failing / "index.html").read_text()
     assert len(list(long_runs.glob("run-*.html"))) == 2
+
+
+def test_a_report_never_removes_what_it_did_not_write_where_its_bags_go(tmp_path: Path) -> None:
+    """`report --rosbag2` rewrites its own bags, and refuses to touch anything else at
+    OUT/rosbag2/run-N (a user's file, a folder of theirs, a link)."""
+    db = tmp_path / "c.db"
+    spec = write_spec(tmp_path, SMALL)
+    assert (
+        run_cli("campaign", str(spec), "--n", "3", "--db", str(db), "--reruns", "0").returncode == 0
+    )
+    out = tmp_path / "site"
+    bags = out / "rosbag2"
+    bags.mkdir(parents=True)
+    mine = tmp_path / "mine.txt"
+    mine.write_text("keep")
+    for run_id in range(3):
+        (bags / f"run-{run_id}").symlink_to(mine)
+    done = run_cli("report", str(db), "-o", str(out), "--rosbag2", "1", "--top", "0")
+    assert done.returncode == 1 and "is not a rosbag2 a report wrote" in done.stderr, done.stderr
+    assert mine.read_text() == "keep"
+    for run_id in range(3):
+        (bags / f"run-{run_id}").unlink()
+    assert (
+        run_cli("report", str(db), "-o", str(out), "--rosbag2", "1", "--top", "0").returncode == 0
+    )
+    written = [p for p in bags.iterdir() if (p / "metadata.yaml").is_file()]
+    assert len(written) == 1
+    again = run_cli("report", str(db), "-o", str(out), "--rosbag2", "1", "--top", "0")
+    assert again.returncode == 0, again.stderr  # its own bag is rewritten

@@ -595,6 +595,17 @@ def _robustness_line(f: DistinctFailure) -> str:
     )
 
 
+def _own_bag(path: Path) -> bool:
+    """Whether ``path`` is a bag folder as a report writes one (a folder, not a link, holding
+    only its ``metadata.yaml`` and MCAP files): the one thing a report may remove."""
+    if path.is_symlink() or not path.is_dir():
+        return False
+    return all(
+        f.is_file() and not f.is_symlink() and (f.name == "metadata.yaml" or f.suffix == ".mcap")
+        for f in path.iterdir()
+    )
+
+
 def write_report(
     db: str | Path,
     out: str | Path,
@@ -633,7 +644,12 @@ def write_report(
             wanted += diff_runs(diff)
         for r in ranked[: max(0, rosbags)]:
             bag = out / "rosbag2" / f"run-{r['run']}"
-            if bag.exists():
+            if bag.is_symlink() or bag.exists():
+                if not _own_bag(bag):
+                    raise OSError(
+                        f"{bag}: is there and is not a rosbag2 a report wrote; move it, or give "
+                        "another --output"
+                    )
                 shutil.rmtree(bag)  # the report's own, from an earlier writing
             bag.parent.mkdir(exist_ok=True)
             write_stored_run(store, r["run"], bag)
