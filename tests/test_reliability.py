@@ -1064,3 +1064,18 @@ def test_an_empty_file_given_as_a_store_to_read_is_refused_and_left_empty(tmp_pa
         assert done.returncode in (1, 2), done.stdout + done.stderr
         assert "an empty file or database, not a sitgen campaign store" in done.stderr, done.stderr
         assert empty.stat().st_size == 0, args
+
+
+def test_rerunning_a_run_whose_program_is_gone_says_it_could_not_run(tmp_path: Path) -> None:
+    program = tmp_path / "trivial.py"
+    program.write_text((ROOT / "benches" / "trivial_cmd.py").read_text())
+    db = tmp_path / "c.db"
+    controller = f"cmd:{sys.executable} {program}"
+    done = run_cli("campaign", "--n", "1", "--db", str(db), "--reruns", "0", "-c", controller)
+    assert done.returncode == 0, done.stderr
+    assert run_cli("rerun", str(db), "0").returncode == 0
+    program.unlink()
+    again = run_cli("rerun", str(db), "0")
+    assert again.returncode == 1, again.stdout + again.stderr
+    assert "could not be run again: controller" in again.stdout, again.stdout
+    assert "DIFFERS" not in again.stdout

@@ -147,6 +147,10 @@ def rerun(db: str | Path, run_id: int) -> Rerun:
     # The stored run spec names the controller if the campaign gave one (with its parameters
     # and any seeded fault); otherwise the situation's own drives, as it did.
     record = run(situation, seed=stored["run_seed"], spec=stored["run_spec"])
+    if record.outcome == "error" and stored["outcome"] != "error":
+        # Not a different run: this one could not be made now (its program is gone, say).
+        lines.append(f"could not be run again: {record.reason}")
+        return Rerun(False, lines)
     # A run kept as a summary has only its log's digest: the same bytes give the same digest.
     same_log = events_digest(record.events_jsonl) == stored["events_sha256"]
     events = len(record.events_jsonl.splitlines())

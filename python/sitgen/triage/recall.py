@@ -95,6 +95,10 @@ def resimulate_checked(
         )
         if not same
     ]
+    if differs and record.outcome == "error" and row["outcome"] != "error":
+        # Not a different run: this one could not be made (a program that is gone, a class
+        # that no longer loads).
+        raise StoreError(f"{store.path}: run {run_id} could not be run again: {record.reason}")
     if differs:
         version = (store.campaign() or {}).get("sitgen_version", "another version")
         raise StoreError(
