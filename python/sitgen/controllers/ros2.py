@@ -441,11 +441,7 @@ class Ros2Controller(UserController):
         if proc is None or proc.poll() is None:
             return
         code = proc.returncode
-        how = (
-            f"was killed by {signal_name(-code)}"
-            if code < 0
-            else f"exited with code {code}"
-        )
+        how = f"was killed by {signal_name(-code)}" if code < 0 else f"exited with code {code}"
         time.sleep(0.05)  # the drain thread's last read
         with self._tail_lock:
             tail = self._tail.decode(errors="replace").strip().splitlines()
