@@ -1079,3 +1079,42 @@ def test_rerunning_a_run_whose_program_is_gone_says_it_could_not_run(tmp_path: P
     assert again.returncode == 1, again.stdout + again.stderr
     assert "could not be run again: controller" in again.stdout, again.stdout
     assert "DIFFERS" not in again.stdout
+
+
+@pytest.mark.parametrize("how", ["end", signal.SIGTERM, signal.SIGHUP, signal.SIGKILL])
+def test_what_a_controller_started_is_gone_when_its_run_ends_however_sitgen_ends(
+    situation_file: Path, tmp_path: Path, how: str | int
+) -> None:
+    """A helper a controller starts in a session of its own (setsid) leaves the controller's
+    process group; it must still be gone after the run, and after sitgen is ended by a signal
+    (even SIGKILL, which sitgen never sees: its reaper does the work)."""
+    tag = f"{abs(hash((str(tmp_path), str(how)))) % 10**9 + 10**9}"
+    program, started = tmp_path / "daemonizing.sh", tmp_path / "started"
+    trivial = ROOT / "benches" / "trivial_cmd.py"
+    program.write_text(
+        f"#!/bin/sh\nsetsid sleep {tag} &\ntouch {started}\nexec {sys.executable} {trivial}\n"
+    )
+    program.chmod(0o755)
+
+    def left() -> list[psutil.Process]:
+        return [p for p in psutil.process_iter(["cmdline"]) if p.info["cmdline"] == ["sleep", tag]]
+
+    limit = "5" if how == "end" else "3000"
+    args = ["run", str(situation_file), "--controller", f"cmd:{program}", "--time-limit", limit]
+    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 30
+        while not started.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert started.exists(), "the helper never started"
+        if how != "end":
+            proc.send_signal(int(how))
+        proc.wait(timeout=60)
+        deadline = time.monotonic() + 5
+        while left() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not left(), f"the helper outlived sitgen ({how})"
+    finally:
+        proc.kill()
+        for p in left():
+            p.kill()

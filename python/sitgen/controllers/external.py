@@ -18,6 +18,7 @@ outcome, and the next run starts a fresh controller.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import os
 import selectors
@@ -25,7 +26,9 @@ import shlex
 import shutil
 import signal
 import subprocess
+import sys
 import time
+import uuid
 from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
@@ -159,6 +162,74 @@ def pin_to_one_core(cpu: int | None = None) -> set[int] | None:
     return allowed
 
 
+MARK = "SITGEN_CONTROLLER_MARK"
+"""The environment variable each controller process sitgen starts carries, as
+``PROCESS.CONTROLLER``: every process it starts inherits it, even one that leaves its process
+group (``setsid``) or whose parent exits, so :func:`kill_marked` finds them all when the run
+ends, and this process's reaper (:func:`_reaper`) finds them when this process dies, however
+it dies (even SIGKILL, which no handler sees)."""
+
+_PROCESS_MARK: list[str] = []
+"""This process's part of the mark and the pipe its reaper waits on (started once, lazily)."""
+_REAPER: list[subprocess.Popen[bytes]] = []
+
+
+def marked_env(env: Mapping[str, str] | None = None) -> tuple[dict[str, str], str]:
+    """``env`` (default: this process's) with a fresh :data:`MARK`, and the mark; starts this
+    process's reaper the first time."""
+    if not _PROCESS_MARK or _PROCESS_MARK[0] != f"{os.getpid()}-{_process_token()}":
+        _PROCESS_MARK[:] = [f"{os.getpid()}-{_process_token()}"]
+        _REAPER[:] = [_reaper(_PROCESS_MARK[0])]
+    mark = f"{_PROCESS_MARK[0]}.{uuid.uuid4().hex}"
+    return {**(os.environ if env is None else env), MARK: mark}, mark
+
+
+@functools.cache
+def _process_token() -> str:
+    return uuid.uuid4().hex
+
+
+def _reaper(process_mark: str) -> subprocess.Popen[bytes]:
+    """A small process that waits until this one is gone (its stdin, a pipe only this process
+    holds, reaches end of file) and then kills every process a controller of this one
+    started: what a run's own end would have killed, had it come."""
+    env = {k: v for k, v in os.environ.items() if k != MARK}
+    code = (
+        "import sys; sys.stdin.buffer.read(); "
+        "from sitgen.controllers.external import kill_marked; "
+        f"kill_marked({process_mark + '.'!r}, whole=False)"
+    )
+    return subprocess.Popen(
+        [sys.executable, "-c", code],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+        env=env,
+    )
+
+
+def kill_marked(mark: str, whole: bool = True) -> int:
+    """SIGKILL every process that carries ``mark`` (:func:`marked_env`; ``whole=False``: every
+    mark that starts with it): whatever a controller started, wherever it went. Returns how
+    many were killed. Linux's /proc; a process whose environment cannot be read (another
+    user's) is not one sitgen started."""
+    needle = f"\0{MARK}={mark}".encode() + (b"\0" if whole else b"")
+    killed = 0
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/environ", "rb") as f:
+                if needle not in b"\0" + f.read() + b"\0":
+                    continue
+            os.kill(int(entry.name), signal.SIGKILL)
+            killed += 1
+        except (OSError, ValueError):
+            continue
+    return killed
+
+
 def die_with_parent_prefix() -> list[str]:
     """``setpriv --pdeathsig KILL --`` where util-linux has it: the program is killed if the
     process that started it dies, even by SIGKILL (setpriv execs the program in its place)."""
@@ -190,6 +261,7 @@ class ProcessController(UserController):
         self._step_timeout_s = step_timeout_s
         self._start_timeout_s = start_timeout_s
         self._proc: subprocess.Popen[bytes] | None = None
+        self._mark = ""
         self._failed = False
         self._buffer = b""
         # The program's stderr is a pipe drained whenever sitgen waits on the program (so it
@@ -211,6 +283,7 @@ class ProcessController(UserController):
 
     def _start(self) -> None:
         self._unpinned = pin_to_one_core()
+        env, self._mark = marked_env()
         try:
             self._proc = subprocess.Popen(
                 [*die_with_parent_prefix(), *self._argv],
@@ -218,6 +291,7 @@ class ProcessController(UserController):
                 stdout=subprocess.PIPE,
                 stderr=subprocess.PIPE,
                 start_new_session=True,
+                env=env,
             )
         except OSError as e:
             raise ControllerError(f"controller {self.name} could not start: {e}") from e
@@ -440,9 +514,10 @@ class ProcessController(UserController):
                 unclean = f"did not exit within {END_TIMEOUT_S:g} s of `end` and was killed"
             except (OSError, ValueError):
                 unclean = "closed its input before `end`"
-            # The whole group: the program and anything it started.
+            # The whole group: the program and anything it started, and anything that left it.
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
+            kill_marked(self._mark)
             proc.wait()
             self._selector.close()
             for pipe in (proc.stdin, proc.stdout, proc.stderr):

@@ -64,6 +64,8 @@ from sitgen.controllers.external import (
     UserController,
     command_argv,
     die_with_parent_prefix,
+    kill_marked,
+    marked_env,
     program_path,
     short,
     signal_name,
@@ -328,6 +330,7 @@ class Ros2Controller(UserController):
         ]
         self._start_timeout_s = start_timeout_s
         self._proc: subprocess.Popen[bytes] | None = None
+        self._mark = ""
         self._tail = bytearray()
         self._tail_lock = threading.Lock()
         self._bridge: Bridge | None = None
@@ -392,6 +395,8 @@ class Ros2Controller(UserController):
                     unclean = "did not exit within 2 s of SIGINT and was killed"
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
+            # Anything the node started that left its group (a daemon, a helper it setsid'd).
+            kill_marked(self._mark)
             proc.wait()
             self._proc = None
         return unclean
@@ -401,7 +406,7 @@ class Ros2Controller(UserController):
     def _start(self) -> None:
         bridge = self._bridge
         assert bridge is not None
-        env = dict(os.environ)
+        env, self._mark = marked_env()
         env.update(
             ROS_DOMAIN_ID=str(bridge.domain),
             ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
