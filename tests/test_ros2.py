@@ -318,3 +318,30 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     assert done.returncode in (0, 1), done.stderr
     report = json.loads(done.stdout)
     assert report["situations"] == 6
+
+
+def test_sitgen_s_own_participant_joins_no_multicast_group(
+    situation_file: Path, tmp_path: Path
+) -> None:
+    """A test run must not announce itself to, or hear from, the network: while a node drives
+    a run, no socket of this machine is in DDS's discovery multicast group (239.255.0.1, the
+    kernel's /proc/net/igmp), sitgen's participant being held to localhost as the node is."""
+    import subprocess
+    import time
+
+    from tests.conftest import sitgen_command
+
+    group = "0100FFEF"  # 239.255.0.1 as /proc/net/igmp writes it
+    args = ["run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "3000"]
+    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.PIPE, text=True)
+    try:
+        joined = []
+        deadline = time.monotonic() + 8
+        while time.monotonic() < deadline and proc.poll() is None:
+            joined.append(Path("/proc/net/igmp").read_text().count(group))
+            time.sleep(0.2)
+        assert proc.poll() is None, "the run ended before it could be watched"
+        assert max(joined) == 0, f"a participant joined 239.255.0.1: {joined}"
+    finally:
+        proc.kill()
+        proc.wait()

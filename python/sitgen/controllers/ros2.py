@@ -235,6 +235,10 @@ class Bridge:
 
         self.msg = _messages()
         self.domain = process_domain()
+        # sitgen's own participant is held to this machine as the node is: a test run must
+        # not announce itself to, or hear from, the network (rcl reads these at init).
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        os.environ.pop("ROS_STATIC_PEERS", None)
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain)
         self.node = rclpy.create_node("sitgen_sim", context=self.context)
