@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import sys
 from pathlib import Path
 
 import pytest
@@ -101,3 +102,15 @@ def test_bad_controller_flags_are_one_line_errors(tmp_path: Path) -> None:
     done = run_cli("search", "--controller", "turbo", "--db", str(tmp_path / "z.db"))
     assert done.returncode == 2 and "--controller: unknown controller `turbo`" in done.stderr
     assert not (tmp_path / "x.db").exists() and not (tmp_path / "z.db").exists()
+
+
+def test_the_default_search_runs_a_program_controller_on_one_worker(tmp_path: Path) -> None:
+    """The case a pool worker once hung on (waiting on a lock its fork had copied locked)."""
+    trivial = f"cmd:{sys.executable} {ROOT / 'benches' / 'trivial_cmd.py'}"
+    db = tmp_path / "s.db"
+    done = run_cli(
+        "search", "--controller", trivial, "--budget", "3", "--seed", "2", "--workers", "1",
+        "--reruns", "0", "--db", str(db),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert len(stored(db, "SELECT id FROM runs")) == 3
