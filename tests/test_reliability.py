@@ -1118,3 +1118,14 @@ def test_what_a_controller_started_is_gone_when_its_run_ends_however_sitgen_ends
         proc.kill()
         for p in left():
             p.kill()
+
+
+def test_a_rosbag2_is_never_written_through_a_dangling_link(
+    situation_file: Path, tmp_path: Path
+) -> None:
+    dangling = tmp_path / "bag"
+    dangling.symlink_to(tmp_path / "nowhere" / "x")
+    done = run_cli("run", str(situation_file), "--time-limit", "5", "--rosbag2", str(dangling))
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert done.stderr.startswith(f"error: --rosbag2: {dangling} already exists"), done.stderr
+    assert not (tmp_path / "nowhere").exists()

@@ -125,7 +125,7 @@ def run_command(
     from sitgen.presentation.rosbag import RosbagUnavailable, write_rosbag2
     from sitgen.run import run, run_spec_with
 
-    if rosbag2 is not None and rosbag2.exists():
+    if rosbag2 is not None and (rosbag2.is_symlink() or rosbag2.exists()):
         raise UsageError(f"--rosbag2: {rosbag2} already exists; a rosbag2 is written anew")
     loaded = Situation.load(situation, allow_edited)
     run_spec = run_spec_with(

@@ -222,7 +222,7 @@ def _export_rosbag2(db: Path, run_id: int | None, format: str, output: Path) -> 
         raise UsageError(f"--run: a single run is exported as --format rosbag2, not `{format}`")
     if run_id is None:
         raise UsageError("--format rosbag2: give the run to write with --run ID")
-    if output.exists():
+    if output.is_symlink() or output.exists():
         raise UsageError(f"{output}: already exists; a rosbag2 is written into a new folder")
     try:
         with Store(db) as store, _writing(output, "the rosbag2"):

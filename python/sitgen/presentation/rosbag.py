@@ -198,6 +198,9 @@ def write_rosbag2(
 
     if record.sensed is None:
         raise ValueError("the run was not kept with what the agent sensed (sensed=True)")
+    if folder.is_symlink() or folder.exists():
+        # Never written through, or over: a bag goes into a new folder.
+        raise FileExistsError(f"{folder}: is there already; a rosbag2 is written to a new folder")
     never = QosTime(sec=0, nsec=0)
     latched = Qos(
         QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
