@@ -18,7 +18,6 @@ outcome, and the next run starts a fresh controller.
 from __future__ import annotations
 
 import contextlib
-import functools
 import json
 import os
 import selectors
@@ -169,24 +168,19 @@ group (``setsid``) or whose parent exits, so :func:`kill_marked` finds them all 
 ends, and this process's reaper (:func:`_reaper`) finds them when this process dies, however
 it dies (even SIGKILL, which no handler sees)."""
 
-_PROCESS_MARK: list[str] = []
-"""This process's part of the mark and the pipe its reaper waits on (started once, lazily)."""
-_REAPER: list[subprocess.Popen[bytes]] = []
+_PROCESS: dict[str, Any] = {}
+"""This process's part of the mark (``pid``, ``mark``) and its reaper, made the first time a
+controller starts here (again in a forked child, whose pid differs)."""
 
 
 def marked_env(env: Mapping[str, str] | None = None) -> tuple[dict[str, str], str]:
     """``env`` (default: this process's) with a fresh :data:`MARK`, and the mark; starts this
     process's reaper the first time."""
-    if not _PROCESS_MARK or _PROCESS_MARK[0] != f"{os.getpid()}-{_process_token()}":
-        _PROCESS_MARK[:] = [f"{os.getpid()}-{_process_token()}"]
-        _REAPER[:] = [_reaper(_PROCESS_MARK[0])]
-    mark = f"{_PROCESS_MARK[0]}.{uuid.uuid4().hex}"
+    if _PROCESS.get("pid") != os.getpid():
+        mark = f"{os.getpid()}-{uuid.uuid4().hex}"
+        _PROCESS.update(pid=os.getpid(), mark=mark, reaper=_reaper(mark))
+    mark = f"{_PROCESS['mark']}.{uuid.uuid4().hex}"
     return {**(os.environ if env is None else env), MARK: mark}, mark
-
-
-@functools.cache
-def _process_token() -> str:
-    return uuid.uuid4().hex
 
 
 def _reaper(process_mark: str) -> subprocess.Popen[bytes]:

@@ -37,7 +37,7 @@ from sitgen.generation.fault_report import (
 from sitgen.generation.search import SearchReplay, replay
 from sitgen.generation.search.archive import elite_grid
 from sitgen.presentation.page import _page
-from sitgen.presentation.rosbag import write_stored_run
+from sitgen.presentation.rosbag import is_report_bag, write_stored_run
 from sitgen.presentation.run_page import run_page
 from sitgen.store import KINDS, Store
 from sitgen.triage.coverage import RunCoverage, dimensions, stored, summarise
@@ -595,17 +595,6 @@ def _robustness_line(f: DistinctFailure) -> str:
     )
 
 
-def _own_bag(path: Path) -> bool:
-    """Whether ``path`` is a bag folder as a report writes one (a folder, not a link, holding
-    only its ``metadata.yaml`` and MCAP files): the one thing a report may remove."""
-    if path.is_symlink() or not path.is_dir():
-        return False
-    return all(
-        f.is_file() and not f.is_symlink() and (f.name == "metadata.yaml" or f.suffix == ".mcap")
-        for f in path.iterdir()
-    )
-
-
 def write_report(
     db: str | Path,
     out: str | Path,
@@ -645,7 +634,7 @@ def write_report(
         for r in ranked[: max(0, rosbags)]:
             bag = out / "rosbag2" / f"run-{r['run']}"
             if bag.is_symlink() or bag.exists():
-                if not _own_bag(bag):
+                if not is_report_bag(bag):
                     raise OSError(
                         f"{bag}: is there and is not a rosbag2 a report wrote; move it, or give "
                         "another --output"

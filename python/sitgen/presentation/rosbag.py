@@ -383,3 +383,14 @@ def write_stored_run(store: Store, run_id: int, folder: Path) -> Path:
         raise StoreError(f"{store.path}: run {run_id} has no situation (generation failed)")
     situation, record = resimulate_checked(store, row, sensed=True)
     return write_rosbag2(folder, situation, record, row["run_spec"])
+
+
+def is_report_bag(path: Path) -> bool:
+    """Whether ``path`` is a bag folder as a report writes one (a folder, not a link, holding
+    only its ``metadata.yaml`` and MCAP files): the one thing a report may remove."""
+    if path.is_symlink() or not path.is_dir():
+        return False
+    return all(
+        f.is_file() and not f.is_symlink() and (f.name == "metadata.yaml" or f.suffix == ".mcap")
+        for f in path.iterdir()
+    )

@@ -50,6 +50,8 @@ HORIZON_AFTER_S = 60.0
 """Simulated seconds a copy is watched past the time its run's failure first showed: past
 every detection window (oscillation 10 s, loitering 20 s) and a copy's drift in timing. On the
 default campaign every copy's class is the same as its whole run's (docs/failures.md)."""
+MOST_HORIZON_S = 86_400.0
+"""The core's bound on ``perturbation.horizon_s`` (a day, as the time limit's)."""
 CANDIDATES = 3
 """A distinct failure's highest-scoring runs measured, best first, until one is robust."""
 ERROR = "error"
@@ -75,12 +77,19 @@ def horizon_of(failure: dict[str, Any]) -> dict[str, Any] | None:
     start = failure.get("features", {}).get("start_s")
     if start is None:
         return None
-    return {"horizon_s": float(start) + HORIZON_AFTER_S, "watch_for": str(failure["class"])}
+    # Past a time limit a horizon changes nothing, and the core takes none past a day's.
+    horizon_s = min(float(start) + HORIZON_AFTER_S, MOST_HORIZON_S)
+    return {"horizon_s": horizon_s, "watch_for": str(failure["class"])}
+
+
+def perturbation_sizes() -> dict[str, float]:
+    """The default sizes of a copy's perturbations, as the core resolves them, and how long
+    past a failure a copy is watched."""
+    return dict(_resolved_sizes())
 
 
 @functools.cache
-def perturbation_sizes() -> dict[str, float]:
-    """The default sizes of a copy's perturbations, as the core resolves them."""
+def _resolved_sizes() -> dict[str, float]:
     spec = json.loads(_core.check_run_spec(json.dumps(perturbed({}, 1))))
     sizes: dict[str, float] = spec["perturbation"]
     return {k: v for k, v in sizes.items() if k != "rerun"} | {"horizon_after_s": HORIZON_AFTER_S}
