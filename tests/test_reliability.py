@@ -955,19 +955,19 @@ def test_a_dds_domain_lock_never_follows_a_planted_link_nor_waits_on_a_fifo(
 ) -> None:
     """The lock files live in the shared temp folder: a symlink planted there must not have
     its target truncated, a FIFO must not block; their domains are passed over."""
-    from sitgen.controllers import ros2
+    from sitgen.controllers import dds_domain
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     canary = tmp_path / "canary"
     canary.write_text("keep me")
-    free = ros2.DOMAIN_IDS[-1]
-    for domain in ros2.DOMAIN_IDS[:-1]:
+    free = dds_domain.DOMAIN_IDS[-1]
+    for domain in dds_domain.DOMAIN_IDS[:-1]:
         path = tmp_path / f"sitgen-ros2-domain-{domain}.lock"
         if domain % 2:
             path.symlink_to(canary)
         else:
             os.mkfifo(path)
-    domain, lock = ros2._claim_domain()
+    domain, lock = dds_domain._claim_domain()
     try:
         assert domain == free
         assert canary.read_text() == "keep me"

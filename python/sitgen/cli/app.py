@@ -208,19 +208,17 @@ def check_output(output: Path | None, option: str, *inputs: Path | None) -> None
                 f"{option}: {output} is {given}, which this command reads or stores; "
                 "give another file"
             )
-    try:
-        with open(target, "rb") as f:
-            header = f.read(16)
-    except OSError:
-        return
-    if header == b"SQLite format 3\x00":
+    if _is_sqlite(Path(target)):
         raise UsageError(f"{option}: {output} is a sitgen store (SQLite); give another file")
 
 
 def _is_store(path: Path) -> bool:
     """Whether ``path`` is an SQLite file (a campaign store) rather than a situation."""
-    if path.suffix == ".db":
-        return True
+    return path.suffix == ".db" or _is_sqlite(path)
+
+
+def _is_sqlite(path: Path) -> bool:
+    """Whether ``path`` is a file that starts as an SQLite database does."""
     try:
         with path.open("rb") as f:
             return f.read(16) == b"SQLite format 3\x00"

@@ -42,20 +42,18 @@ REP 105 (frames); docs/ros2.md.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import math
 import os
 import signal
-import stat
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import IO, Any
 
+from sitgen.controllers.dds_domain import process_domain
 from sitgen.controllers.external import (
     START_TIMEOUT_S,
     STDERR_TAIL_BYTES,
@@ -105,9 +103,6 @@ MOST_ANSWER_TIMEOUT_S = 60.0
 is not answering; every wait of a run is bounded."""
 MOST_MISSED_ANSWERS = 100_000
 """Largest ``max_missed_answers``."""
-DOMAIN_IDS = range(1, 102)
-"""DDS domains sitgen may claim: 0 is left to the user's own ROS system; above 101 the
-ports of a domain start to collide with Linux's ephemeral range."""
 MATCH_GRACE_S = 0.3
 """Wall seconds a node that listens is given for all of its subscriptions to match."""
 REPEAT_S = 0.1
@@ -148,44 +143,6 @@ def _messages() -> Any:
     }
 
 
-def _open_lock(path: str) -> IO[bytes] | None:
-    """The lock file at ``path``, opened for locking without following a link or waiting on a
-    special file (the folder is shared: anyone may have put something there); None where what
-    is there is not a regular file, so the domain it stands for is passed over."""
-    try:
-        fd = os.open(
-            path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC, 0o600
-        )
-    except OSError:
-        return None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
-        os.close(fd)
-        return None
-    return os.fdopen(fd, "r+b")
-
-
-def _claim_domain() -> tuple[int, IO[bytes]]:
-    """A DDS domain id no other sitgen process on this machine holds, and the open lock file
-    that holds it for this process's life."""
-    folder = tempfile.gettempdir()
-    start = os.getpid() % len(DOMAIN_IDS)
-    for k in range(len(DOMAIN_IDS)):
-        domain = DOMAIN_IDS[(start + k) % len(DOMAIN_IDS)]
-        lock = _open_lock(os.path.join(folder, f"sitgen-ros2-domain-{domain}.lock"))
-        if lock is None:
-            continue
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            lock.close()
-            continue
-        return domain, lock
-    raise ControllerError(
-        f"ros2: every DDS domain {DOMAIN_IDS.start}-{DOMAIN_IDS.stop - 1} is held by another "
-        f"sitgen process (or its lock file in {folder} is not a regular file)"
-    )
-
-
 def sec_nanosec(t: float) -> tuple[int, int]:
     """Simulated time ``t`` seconds as a ROS time's (sec, nanosec), exact to the nanosecond."""
     ns = round(t * 1e9)
@@ -201,17 +158,6 @@ def stamp(msg: dict[str, Any], t: float) -> Any:
 def quaternion(heading: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation by ``heading`` about z."""
     return (0.0, 0.0, math.sin(heading / 2), math.cos(heading / 2))
-
-
-_claimed: dict[int, tuple[int, IO[bytes]]] = {}
-"""The domain this process holds, by pid (a forked pool worker claims its own)."""
-
-
-def process_domain() -> int:
-    """This process's DDS domain id, claimed on first use and held until it exits."""
-    if os.getpid() not in _claimed:
-        _claimed[os.getpid()] = _claim_domain()
-    return _claimed[os.getpid()][0]
 
 
 class Bridge:

@@ -28,6 +28,11 @@ batches do not depend on the worker count, so the same input gives the same mini
 whatever ``workers``. The recorded choice sequence of the generator is not shrunk: a shrunk
 situation is edited directly, and records in ``provenance.shrunk_from`` the content hash it
 came from.
+
+This module is longer than the project's 600-line guide: :class:`Shrinker` is one algorithm,
+the seven reductions above repeated while any helps, and they read best beside each other and
+beside ddmin, which each of them calls; the entry points (:func:`shrink`, :func:`shrink_run`,
+:func:`shrink_top`) are a few lines each over it.
 """
 
 from __future__ import annotations
