@@ -7,10 +7,14 @@ installed."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
 import sqlite3
+import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +25,7 @@ import sitgen
 from sitgen.controllers.ros2 import ros2_available
 from sitgen.store import Store
 from sitgen.triage.recall import resimulate_checked, stored_run
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli, sitgen_command
 
 UNAVAILABLE = ros2_available()
 pytestmark = pytest.mark.skipif(UNAVAILABLE is not None, reason=str(UNAVAILABLE))
@@ -320,28 +324,107 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     assert report["situations"] == 6
 
 
-def test_sitgen_s_own_participant_joins_no_multicast_group(
-    situation_file: Path, tmp_path: Path
-) -> None:
+def udp_sockets(pids: set[int]) -> set[tuple[str, int]]:
+    """(address, port) of every IPv4 UDP socket the processes ``pids`` hold (/proc/net/udp,
+    matched by socket inode)."""
+    inodes: set[str] = set()
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for fd in Path(f"/proc/{pid}/fd").iterdir():
+                with contextlib.suppress(OSError):
+                    target = os.readlink(fd)
+                    if target.startswith("socket:["):
+                        inodes.add(target[8:-1])
+    out = set()
+    for line in Path("/proc/net/udp").read_text().splitlines()[1:]:
+        fields = line.split()
+        if fields[9] in inodes:
+            address, port = fields[1].split(":")
+            octets = bytes.fromhex(address)[::-1]
+            out.add((".".join(str(b) for b in octets), int(port, 16)))
+    return out
+
+
+def descendants(pid: int) -> set[int]:
+    """``pid`` and every process below it (the node sitgen started, its reaper)."""
+    parents: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                stat = (entry / "stat").read_text()
+                parents[int(entry.name)] = int(stat[stat.rindex(")") + 2 :].split()[1])
+    found, frontier = {pid}, [pid]
+    while frontier:
+        here = frontier.pop()
+        for child, parent in parents.items():
+            if parent == here and child not in found:
+                found.add(child)
+                frontier.append(child)
+    return found
+
+
+def multicast_interfaces(group: str) -> set[str]:
+    """The interfaces on which some socket of this machine is in ``group`` (as
+    /proc/net/igmp writes it)."""
+    interfaces, device = set(), ""
+    for line in Path("/proc/net/igmp").read_text().splitlines()[1:]:
+        if not line.startswith("\t"):
+            device = line.split()[1]
+        elif line.split()[0] == group:
+            interfaces.add(device)
+    return interfaces
+
+
+def test_a_run_neither_hears_nor_is_heard_by_the_network(situation_file: Path) -> None:
     """A test run must not announce itself to, or hear from, the network: while a node drives
-    a run, no socket of this machine is in DDS's discovery multicast group (239.255.0.1, the
-    kernel's /proc/net/igmp), sitgen's participant being held to localhost as the node is."""
-    import subprocess
-    import time
-
-    from tests.conftest import sitgen_command
-
+    a run, every UDP socket of sitgen's process and the node's is bound to 127.0.0.1 (or is
+    the discovery multicast group's own socket), and no socket of this machine is in DDS's
+    discovery multicast group (239.255.0.1) on any interface but the loopback."""
     group = "0100FFEF"  # 239.255.0.1 as /proc/net/igmp writes it
     args = ["run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "3000"]
     proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.PIPE, text=True)
     try:
-        joined = []
+        joined: set[str] = set()
+        bound: set[tuple[str, int]] = set()
         deadline = time.monotonic() + 8
         while time.monotonic() < deadline and proc.poll() is None:
-            joined.append(Path("/proc/net/igmp").read_text().count(group))
+            joined |= multicast_interfaces(group)
+            bound |= udp_sockets(descendants(proc.pid))
             time.sleep(0.2)
         assert proc.poll() is None, "the run ended before it could be watched"
-        assert max(joined) == 0, f"a participant joined 239.255.0.1: {joined}"
+        assert joined <= {"lo"}, f"a participant joined 239.255.0.1 on {joined}"
+        assert len(bound) >= 4, f"the run's DDS sockets were not seen: {bound}"
+        outside = {b for b in bound if b[0] not in ("127.0.0.1", "239.255.0.1")}
+        assert not outside, f"sockets bound beyond the loopback: {sorted(outside)}"
     finally:
         proc.kill()
         proc.wait()
+
+
+def fast_dds_segments() -> set[str]:
+    return {p.name for p in Path("/dev/shm").glob("fast*")} if Path("/dev/shm").is_dir() else set()
+
+
+def test_a_node_that_dies_leaves_nothing_in_dev_shm(situation: sitgen.Situation) -> None:
+    """A node that dies without closing its participant (here ``os._exit``, as a crash or
+    SIGKILL would) leaves no shared-memory segment behind: sitgen's participants talk UDP on
+    the loopback only."""
+    before = fast_dds_segments()
+    record = run_node(situation, "crash")
+    assert record.outcome == "error" and "exited with code 3" in record.reason
+    assert fast_dds_segments() - before == set()
+
+
+def test_an_rmw_that_is_not_installed_is_refused_in_one_line(
+    situation_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """rcl ends the whole process (code 102) as it loads when RMW_IMPLEMENTATION names an rmw
+    that is not there; sitgen refuses it first, in one line that names the variable."""
+    monkeypatch.setenv("RMW_IMPLEMENTATION", "rmw_nope")
+    done = run_cli("campaign", "--n", "2", "--controller", FOLLOWER, "--db", str(tmp_path / "c.db"))
+    assert done.returncode == 2, done.stderr
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("error: ") and "RMW_IMPLEMENTATION=rmw_nope is not installed" in line
+    done = run_cli("run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "1")
+    assert "RMW_IMPLEMENTATION=rmw_nope is not installed" in done.stdout + done.stderr
+    assert "Traceback" not in done.stderr and "exiting with 102" not in done.stderr

@@ -8,9 +8,20 @@ its own). The lock files are opened without following a link or waiting on a spe
 folder is shared, so a symlink or FIFO planted there must neither have its target truncated nor
 block sitgen; a domain whose lock path holds anything but a regular file is passed over.
 
+:func:`confine` holds every participant sitgen creates, its own and the nodes', to this
+machine: for Fast DDS, the profile ``fastdds_loopback.xml`` beside this file — UDP on
+127.0.0.1 only, every socket a participant reads bound there, discovery's multicast group
+joined on the loopback interface only, and no shared-memory transport, whose segments a
+killed node would leave in /dev/shm; for another rmw, or where the user names a Fast DDS
+profile of their own (``FASTDDS_DEFAULT_PROFILES_FILE``), rmw's localhost-only discovery
+(``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Static peers are dropped either way.
+:func:`rmw_problem` refuses an ``RMW_IMPLEMENTATION`` that is not installed, which rcl would
+report only by ending the process with code 102.
+
 Parameters: :data:`DOMAIN_IDS`, 1–101.
 
-Source: the ROS 2 domain id and its UDP port mapping (design.ros2.org, "ROS_DOMAIN_ID").
+Source: the ROS 2 domain id and its UDP port mapping (design.ros2.org, "ROS_DOMAIN_ID");
+Fast DDS's XML profiles (transport descriptors, ``interfaceWhiteList``).
 """
 
 from __future__ import annotations
@@ -19,6 +30,8 @@ import fcntl
 import os
 import stat
 import tempfile
+from collections.abc import MutableMapping
+from pathlib import Path
 from typing import IO
 
 from sitgen.controllers.external import ControllerError
@@ -75,3 +88,47 @@ def process_domain() -> int:
     if os.getpid() not in _claimed:
         _claimed[os.getpid()] = _claim_domain()
     return _claimed[os.getpid()][0]
+
+
+LOOPBACK_PROFILE = Path(__file__).with_name("fastdds_loopback.xml")
+"""Fast DDS's profile for sitgen's participants: UDP on 127.0.0.1, no shared memory."""
+
+DEFAULT_RMW = "rmw_fastrtps_cpp"
+
+
+FAST_DDS_RMWS = ("rmw_fastrtps_cpp", "rmw_fastrtps_dynamic_cpp")
+
+
+def confine(env: MutableMapping[str, str]) -> None:
+    """Hold a participant that starts with ``env`` to this machine (``os.environ`` for
+    sitgen's own, which rcl reads at init; a node's environment for the node).
+
+    With Fast DDS and no profile of the user's, the loopback profile does it (discovery's
+    multicast group is then joined on the loopback interface only); rmw's own
+    ``LOCALHOST`` range is not asked for there, as it opens sockets on every interface
+    besides. Otherwise (another rmw, or the user's profile) the ``LOCALHOST`` range does."""
+    env.pop("ROS_STATIC_PEERS", None)
+    env.setdefault("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    users_profile = env.get("FASTDDS_DEFAULT_PROFILES_FILE")
+    if env["RMW_IMPLEMENTATION"] in FAST_DDS_RMWS and (
+        not users_profile or users_profile == str(LOOPBACK_PROFILE)
+    ):
+        env["FASTDDS_DEFAULT_PROFILES_FILE"] = str(LOOPBACK_PROFILE)
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
+    else:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+def rmw_problem(env: MutableMapping[str, str], lib_dirs: list[str]) -> str | None:
+    """Why ``env``'s ``RMW_IMPLEMENTATION`` cannot be loaded (rcl loads
+    ``lib<name>.so`` from the library path), or None."""
+    name = env.get("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    if not name or "/" in name or not name.isprintable():
+        return f"RMW_IMPLEMENTATION={name!r} is not the name of an rmw implementation"
+    search = [*lib_dirs, *env.get("LD_LIBRARY_PATH", "").split(os.pathsep)]
+    if any(d and os.path.isfile(os.path.join(d, f"lib{name}.so")) for d in search):
+        return None
+    return (
+        f"RMW_IMPLEMENTATION={name} is not installed (no lib{name}.so on the library path; "
+        f"pip install ros-kilted-{name.replace('_', '-')}, or unset it for {DEFAULT_RMW})"
+    )

@@ -29,7 +29,8 @@ process that exits, ends the run as an error, like any controller.
 
 Isolation: each sitgen process talks on a DDS domain of its own (a free id claimed with a lock
 file, so parallel workers and parallel campaigns never see each other), with discovery
-confined to this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``).
+confined to this machine (localhost discovery; for Fast DDS, UDP on 127.0.0.1 and no shared
+memory: dds_domain.py).
 
 Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
 ``answer_timeout_s`` (wall seconds, default the step timeout, 1 s) and ``max_missed_answers``
@@ -53,7 +54,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import IO, Any
 
-from sitgen.controllers.dds_domain import process_domain
+from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import (
     START_TIMEOUT_S,
     STDERR_TAIL_BYTES,
@@ -107,6 +108,8 @@ MATCH_GRACE_S = 0.3
 """Wall seconds a node that listens is given for all of its subscriptions to match."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
+LIB = os.path.join(sys.prefix, "lib")
+"""Where the ROS 2 wheels put their shared libraries (the rmw implementations among them)."""
 SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
 """Controller parameters that are sitgen's, not the node's (the rest become ROS parameters)."""
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
@@ -114,6 +117,11 @@ CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
 def ros2_available() -> str | None:
     """None if rclpy and the messages import, else why not (one line)."""
+    # rcl checks RMW_IMPLEMENTATION as its library loads and ends the whole process (code 102)
+    # when it names an rmw that is not there: checked before rclpy is imported.
+    problem = rmw_problem(os.environ, [LIB])
+    if problem is not None:
+        return problem
     try:
         _messages()
     except ImportError as e:
@@ -180,11 +188,10 @@ class Bridge:
         )
 
         self.msg = _messages()
-        self.domain = process_domain()
         # sitgen's own participant is held to this machine as the node is: a test run must
         # not announce itself to, or hear from, the network (rcl reads these at init).
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-        os.environ.pop("ROS_STATIC_PEERS", None)
+        confine(os.environ)
+        self.domain = process_domain()
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain)
         self.node = rclpy.create_node("sitgen_sim", context=self.context)
@@ -357,17 +364,12 @@ class Ros2Controller(UserController):
         bridge = self._bridge
         assert bridge is not None
         env, self._mark = marked_env()
-        env.update(
-            ROS_DOMAIN_ID=str(bridge.domain),
-            ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-            RMW_IMPLEMENTATION=env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp"),
-            PYTHONUNBUFFERED="1",
-        )
+        env.update(ROS_DOMAIN_ID=str(bridge.domain), PYTHONUNBUFFERED="1")
+        confine(env)
         # The wheels' shared libraries (the rmw implementation among them) live in the
         # environment's lib/; a node started from it finds them there.
-        lib = os.path.join(sys.prefix, "lib")
         env["LD_LIBRARY_PATH"] = os.pathsep.join(
-            p for p in (lib, env.get("LD_LIBRARY_PATH", "")) if p
+            p for p in (LIB, env.get("LD_LIBRARY_PATH", "")) if p
         )
         try:
             self._proc = subprocess.Popen(
