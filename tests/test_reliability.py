@@ -11,6 +11,7 @@ import json
 import os
 import re
 import resource
+import shutil
 import signal
 import sqlite3
 import struct
@@ -48,8 +49,10 @@ def run_limited(
     timeout_s: float = 120.0,
     memory_bytes: int = MEMORY_BYTES,
     file_bytes: int | None = None,
+    prefix: tuple[str, ...] = (),
 ) -> Result:
-    """Run the ``sitgen`` command with bounded memory (and file size), as a user would."""
+    """Run the ``sitgen`` command with bounded memory (and file size), as a user would
+    (behind ``prefix``, a command that runs it, where given)."""
 
     def limit() -> None:
         resource.setrlimit(resource.RLIMIT_AS, (memory_bytes, memory_bytes))
@@ -57,7 +60,7 @@ def run_limited(
             resource.setrlimit(resource.RLIMIT_FSIZE, (file_bytes, file_bytes))
 
     done = subprocess.run(
-        [*sitgen_command(), *args],
+        [*prefix, *sitgen_command(), *args],
         capture_output=True,
         text=True,
         cwd=cwd or ROOT,
@@ -685,18 +688,48 @@ def test_reading_commands_refuse_a_missing_store_and_create_nothing(tmp_path: Pa
     one_line_error(done, 2, f"{folder}: is a folder, not a campaign store")
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only folders")
+def bound_by_permissions() -> tuple[str, ...]:
+    """A prefix that runs a command bound by files' permission bits: nothing for a user;
+    for root, ``setpriv`` without the capabilities that let root write anywhere."""
+    if os.geteuid() != 0:
+        return ()
+    setpriv = shutil.which("setpriv")
+    if setpriv is None:
+        pytest.skip("root writes into read-only folders, and setpriv is not here to stop it")
+    return (setpriv, "--bounding-set=-dac_override,-dac_read_search", "--")
+
+
 def test_a_read_only_folder_for_a_new_store_is_named(tmp_path: Path) -> None:
     folder = tmp_path / "ro"
     folder.mkdir()
     folder.chmod(0o555)
     try:
-        done = run_limited("campaign", "--n", "1", "--db", str(folder / "c.db"))
+        done = run_limited(
+            "campaign", "--n", "1", "--db", str(folder / "c.db"), prefix=bound_by_permissions()
+        )
         one_line_error(
             done, 2, f"{folder / 'c.db'}: cannot create the store: {folder} is read-only"
         )
     finally:
         folder.chmod(0o755)
+
+
+def test_a_store_in_a_read_only_folder_is_named_not_called_garbage(tmp_path: Path) -> None:
+    """SQLite writes its log beside a store even to read it: a store in a folder this user
+    may not write is named as such (it was "not a sitgen campaign store"), and left as it was."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    db = folder / "c.db"
+    assert run_limited("campaign", "--n", "2", "--db", str(db), "--reruns", "0").returncode == 0
+    before = db.read_bytes()
+    folder.chmod(0o555)
+    try:
+        for command in (("rank", str(db)), ("report", str(db), "-o", str(tmp_path / "out"))):
+            done = run_limited(*command, prefix=bound_by_permissions())
+            one_line_error(done, 1, f"{db}: cannot open the store: {folder} is read-only")
+    finally:
+        folder.chmod(0o755)
+    assert db.read_bytes() == before
 
 
 # The parsers never fail other than with a one-line SpecError.

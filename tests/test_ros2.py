@@ -428,3 +428,22 @@ def test_an_rmw_that_is_not_installed_is_refused_in_one_line(
     done = run_cli("run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "1")
     assert "RMW_IMPLEMENTATION=rmw_nope is not installed" in done.stdout + done.stderr
     assert "Traceback" not in done.stderr and "exiting with 102" not in done.stderr
+
+
+def test_run_with_a_spec_passes_its_controller_params_to_the_node(
+    situation_file: Path, tmp_path: Path
+) -> None:
+    """``run --controller ros2:… --spec F``: the node gets F's controller params, as it does
+    them given with ``--param``, and runs otherwise than on its defaults."""
+    spec = tmp_path / "run.toml"
+    spec.write_text(f'[controller]\nname = "{FOLLOWER}"\nparams = {{ speed_m_s = 0.1 }}\n')
+    common = ("run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "5", "--json")
+    records = []
+    for extra in ((), ("--spec", str(spec)), ("--param", "speed_m_s=0.1")):
+        done = run_cli(*common, *extra)
+        assert done.returncode == 0, done.stderr
+        record = json.loads(done.stdout)
+        records.append((record["outcome"], record["coverage"]["failure_at"], record["events"]))
+    defaults, from_spec, from_param = records
+    assert from_spec == from_param
+    assert from_spec != defaults

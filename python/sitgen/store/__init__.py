@@ -100,6 +100,14 @@ class _Connection(sqlite3.Connection):
             raise self._named(e) from None
 
 
+def _read_only_part(path: Path) -> Path | None:
+    """The store's file or its folder where this process may not write to it, else None."""
+    for part in (path, path.parent):
+        if part.exists() and not os.access(part, os.W_OK):
+            return part
+    return None
+
+
 class Store:
     """An open campaign store. Reading (the default) needs an existing store; ``create``
     makes a new one where there is none."""
@@ -146,6 +154,14 @@ class Store:
             self.db.execute("PRAGMA foreign_keys=ON")
         except sqlite3.DatabaseError as e:
             why = str(e).removeprefix(f"{self.path}: ")
+            read_only = _read_only_part(self.path)
+            if isinstance(e, sqlite3.OperationalError) and read_only is not None:
+                # SQLite writes its write-ahead log beside the store even to read it.
+                raise StoreError(
+                    f"{self.path}: cannot open the store: {read_only} is read-only (SQLite "
+                    "writes its log beside the store, even to read it); copy the store to a "
+                    "writable folder"
+                ) from None
             raise StoreError(f"{self.path}: not a sitgen campaign store ({why})") from None
         if version is not None:
             self._check_tables()
