@@ -447,3 +447,67 @@ def test_run_with_a_spec_passes_its_controller_params_to_the_node(
     defaults, from_spec, from_param = records
     assert from_spec == from_param
     assert from_spec != defaults
+
+
+def test_a_damaged_stored_run_spec_is_refused_in_one_line_and_writes_no_bag(
+    bagged: tuple[Path, int, Path], tmp_path: Path
+) -> None:
+    """A stored run spec that is not JSON, not an object, or not a run spec: one line that
+    names the run, and no bag folder left behind."""
+    db, run_id, _ = bagged
+    for k, damaged in enumerate(("{not json", "[]", "null", '{"controller": 5}')):
+        copy = tmp_path / f"damaged{k}.db"
+        copy.write_bytes(db.read_bytes())
+        with sqlite3.connect(copy) as c:
+            c.execute("UPDATE runs SET run_spec = ? WHERE id = ?", (damaged, run_id))
+        out = tmp_path / f"bag{k}"
+        done = run_cli(
+            "export", str(copy), "--run", str(run_id), "--format", "rosbag2", "-o", str(out)
+        )
+        assert done.returncode != 0
+        (line,) = done.stderr.strip().splitlines()
+        assert line.startswith("error: ") and f"run {run_id}: its stored run spec" in line, line
+        assert not out.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_two_exports_into_one_folder_at_once_give_one_whole_bag_and_one_refusal(
+    bagged: tuple[Path, int, Path], tmp_path: Path
+) -> None:
+    db, run_id, first = bagged
+    out = tmp_path / "bag"
+    args = ["export", str(db), "--run", str(run_id), "--format", "rosbag2", "-o", str(out)]
+    procs = [
+        subprocess.Popen([*sitgen_command(), *args], stderr=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    results = [(p.wait(timeout=300), p.communicate()[1]) for p in procs]
+    assert sorted(code for code, _ in results) == [0, 2], results
+    (refusal,) = [err for code, err in results if code != 0]
+    assert len(refusal.strip().splitlines()) == 1 and "is there already" in refusal, refusal
+    assert read_with_rosbags(out).keys() == read_with_rosbags(first).keys()
+    assert sorted(p.name for p in out.iterdir()) == ["bag.mcap", "metadata.yaml"]
+
+
+def test_a_bag_cut_short_by_a_full_disk_is_not_left_behind(
+    bagged: tuple[Path, int, Path], tmp_path: Path
+) -> None:
+    """A write that fails (a file size limit stands in for a full disk) leaves no partial bag
+    folder, and says which one it could not write."""
+    import resource
+
+    db, run_id, _ = bagged
+    out = tmp_path / "bag"
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (64 << 10, 64 << 10))
+
+    done = subprocess.run(
+        [*sitgen_command(), "export", str(db), "--run", str(run_id), "--format", "rosbag2",
+         "-o", str(out)],
+        capture_output=True, text=True, preexec_fn=limit, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode != 0
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("error: ") and str(out) in line, line
+    assert list(tmp_path.iterdir()) == []

@@ -147,6 +147,8 @@ def run_command(
                 write_rosbag2(rosbag2, loaded, record, run_spec_with(run_spec, time_limit))
         except RosbagUnavailable as e:
             raise UsageError(f"--rosbag2: {e}") from None
+        except FileExistsError as e:
+            raise UsageError(f"--rosbag2: {e}") from None
     if as_json:
         typer.echo(json.dumps(record.to_dict(), indent=2))
     else:

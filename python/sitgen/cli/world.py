@@ -229,6 +229,9 @@ def _export_rosbag2(db: Path, run_id: int | None, format: str, output: Path) -> 
             path = write_stored_run(store, run_id, output)
     except RosbagUnavailable as e:
         raise UsageError(f"--format rosbag2: {e}") from None
+    except FileExistsError as e:
+        # Made since the check above: another export into the same folder at the same time.
+        raise UsageError(str(e)) from None
     typer.echo(f"wrote {output} ({path.name}, metadata.yaml)")
 
 

@@ -26,6 +26,10 @@ Source: rosbag2's MCAP storage and metadata (version 9), via the ``rosbags`` lib
 
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
+import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -186,6 +190,55 @@ def write_rosbag2(
     """Write run ``record`` of ``situation`` (run with ``sensed=True`` under ``run_spec``) as
     a rosbag2 folder ``folder`` (which must not exist yet); returns the MCAP file's path."""
     store = _typestore()
+    if record.sensed is None:
+        raise ValueError("the run was not kept with what the agent sensed (sensed=True)")
+    with _claimed(folder) as draft:
+        _write_bag(draft, store, situation, record, run_spec)
+    return next(folder.glob("*.mcap"))
+
+
+@contextlib.contextmanager
+def _claimed(folder: Path) -> Iterator[Path]:
+    """A bag is written whole or not at all, and never over anything: ``folder`` is claimed
+    by creating it (so a second export into it at the same time is refused, not mixed in),
+    the bag is written into a hidden folder beside it and moved into place once complete;
+    on any failure (a full disk) both are removed. Yields where to write the bag (a folder
+    named as ``folder``, so that its MCAP file is named after ``folder``)."""
+    try:
+        folder.mkdir()
+    except FileExistsError:
+        # Never written through, or over: a bag goes into a new folder.
+        raise FileExistsError(
+            f"{folder}: is there already (or another export is writing it); a rosbag2 is "
+            "written to a new folder"
+        ) from None
+    try:
+        scratch = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    except BaseException:
+        folder.rmdir()
+        raise
+    try:
+        yield scratch / folder.name
+        # rename(2) puts a folder in place of an empty one: the claimed folder.
+        os.rename(scratch / folder.name, folder)
+    except BaseException:
+        # The claimed folder is removed only while it is empty: what anyone else put in it
+        # since stays.
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+        raise
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+
+
+def _write_bag(
+    folder: Path,
+    store: Any,
+    situation: Situation,
+    record: RunRecord,
+    run_spec: Mapping[str, Any],
+) -> None:
+    """The bag itself, into ``folder`` (which does not exist yet)."""
     from rosbags.interfaces import (
         Qos,
         QosDurability,
@@ -196,11 +249,6 @@ def write_rosbag2(
     )
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    if record.sensed is None:
-        raise ValueError("the run was not kept with what the agent sensed (sensed=True)")
-    if folder.is_symlink() or folder.exists():
-        # Never written through, or over: a bag goes into a new folder.
-        raise FileExistsError(f"{folder}: is there already; a rosbag2 is written to a new folder")
     never = QosTime(sec=0, nsec=0)
     latched = Qos(
         QosHistory.KEEP_LAST, 1, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL,
@@ -225,7 +273,6 @@ def write_rosbag2(
                 round(t * 1e9),
                 store.serialize_cdr(message, topics[topic]),
             )
-    return next(folder.glob("*.mcap"))
 
 
 def _messages(

@@ -656,6 +656,20 @@ class Store:
     def scores(self) -> list[float]:
         return [r[0] for r in self.db.execute("SELECT score FROM runs ORDER BY id")]
 
+    def _stored_spec(self, text: Any, what: str, run_id: int) -> dict[str, Any]:
+        """A spec as stored (a JSON object), or a StoreError that names the run."""
+        try:
+            spec = json.loads(text)
+        except (TypeError, ValueError) as e:
+            raise StoreError(
+                f"{self.path}: run {run_id}: its stored {what} is damaged ({e})"
+            ) from None
+        if not isinstance(spec, dict):
+            raise StoreError(
+                f"{self.path}: run {run_id}: its stored {what} is damaged (not a JSON object)"
+            )
+        return spec
+
     def run_row(self, run_id: int) -> dict[str, Any]:
         """Run ``run_id`` as stored: its situation (None if it was never generated, or the
         run is kept as a summary: see ``kept``), specs (None for a summary: its job builds
@@ -674,8 +688,10 @@ class Store:
             raise StoreError(f"{self.path}: no run {run_id}")
         kept = row[12] != 0
         situation_spec, run_spec = (
-            (json.loads(row[2]), json.loads(row[5])) if kept else (None, None)
-        )
+            (self._stored_spec(row[2], "situation spec", run_id),
+             self._stored_spec(row[5], "run spec", run_id))
+            if kept else (None, None)
+        )  # fmt: skip
         return {
             "id": row[0],
             "situation_seed": row[1],

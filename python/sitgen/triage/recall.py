@@ -69,7 +69,11 @@ def resimulate(row: dict[str, Any], sensed: bool = False) -> tuple[Situation, Ru
     situation = regenerate(row)
     # The stored run spec names the controller if the campaign gave one (with its parameters
     # and any seeded fault); otherwise the situation's own drives, as it did.
-    return situation, run(situation, seed=row["run_seed"], spec=row["run_spec"], sensed=sensed)
+    try:
+        record = run(situation, seed=row["run_seed"], spec=row["run_spec"], sensed=sensed)
+    except _core.SpecError as e:
+        raise StoreError(f"run {row['id']}: its stored run spec does not load ({e})") from None
+    return situation, record
 
 
 def resimulate_checked(
