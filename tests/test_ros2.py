@@ -379,10 +379,13 @@ def test_a_run_neither_hears_nor_is_heard_by_the_network(situation_file: Path) -
     """A test run must not announce itself to, or hear from, the network: while a node drives
     a run, every UDP socket of sitgen's process and the node's is bound to 127.0.0.1 (or is
     the discovery multicast group's own socket), and no socket of this machine is in DDS's
-    discovery multicast group (239.255.0.1) on any interface but the loopback."""
+    discovery multicast group (239.255.0.1) on any interface but the loopback. Static peers in
+    the environment (here garbage) are dropped, not an error."""
     group = "0100FFEF"  # 239.255.0.1 as /proc/net/igmp writes it
     args = ["run", str(situation_file), "--controller", FOLLOWER, "--time-limit", "3000"]
-    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.PIPE, text=True)
+    # Static peers, garbage or not, are dropped: they would reach beyond this machine.
+    env = dict(os.environ, ROS_STATIC_PEERS="garbage;;::zz;192.0.2.77")
+    proc = subprocess.Popen([*sitgen_command(), *args], stdout=subprocess.PIPE, text=True, env=env)
     try:
         joined: set[str] = set()
         bound: set[tuple[str, int]] = set()
@@ -511,3 +514,32 @@ def test_a_bag_cut_short_by_a_full_disk_is_not_left_behind(
     (line,) = done.stderr.strip().splitlines()
     assert line.startswith("error: ") and str(out) in line, line
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_node_sitgen_did_not_start_on_the_runs_domain_is_found_and_the_domain_passed_over(
+    situation: sitgen.Situation,
+) -> None:
+    """A node left on the run's DDS domain by something else would answer the run as well
+    (and change its score): the run errs naming that process, and the next run moves to
+    another domain, where it runs clean."""
+    from sitgen.controllers.dds_domain import confine, process_domain
+
+    domain = process_domain()
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    confine(env)
+    node = ROOT / "examples/ros2/follower_node.py"
+    stray = subprocess.Popen(
+        [sys.executable, str(node), "--ros-args", "-p", "use_sim_time:=true"],
+        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+    )  # fmt: skip
+    try:
+        time.sleep(2.0)  # up and announced before the run's own node is
+        record = sitgen.run(situation, controller=FOLLOWER, time_limit=5.0)
+        assert record.outcome == "error"
+        assert f"DDS domain {domain} is not free: process {stray.pid}," in record.reason
+        assert process_domain() != domain
+        record = sitgen.run(situation, controller=FOLLOWER, time_limit=5.0)
+        assert record.outcome != "error", record.reason
+    finally:
+        stray.kill()
+        stray.wait()

@@ -16,7 +16,10 @@ killed node would leave in /dev/shm; for another rmw, or where the user names a 
 profile of their own (``FASTDDS_DEFAULT_PROFILES_FILE``), rmw's localhost-only discovery
 (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Static peers are dropped either way.
 :func:`rmw_problem` refuses an ``RMW_IMPLEMENTATION`` that is not installed, which rcl would
-report only by ending the process with code 102.
+report only by ending the process with code 102. :func:`require_free` proves, as a run starts,
+that no process it did not start talks on its topics (a node some other program left on the
+domain would answer the run as well); where one does, the run errs and the domain is passed
+over.
 
 Parameters: :data:`DOMAIN_IDS`, 1–101.
 
@@ -30,7 +33,7 @@ import fcntl
 import os
 import stat
 import tempfile
-from collections.abc import MutableMapping
+from collections.abc import Iterable, MutableMapping
 from pathlib import Path
 from typing import IO
 
@@ -82,12 +85,47 @@ def _claim_domain() -> tuple[int, IO[bytes]]:
 _claimed: dict[int, tuple[int, IO[bytes]]] = {}
 """The domain this process holds, by pid (a forked pool worker claims its own)."""
 
+_passed_over: list[IO[bytes]] = []
+"""Locks of domains found not free (:func:`pass_over_domain`), held so that no sitgen process
+claims them while this one lives."""
+
 
 def process_domain() -> int:
     """This process's DDS domain id, claimed on first use and held until it exits."""
     if os.getpid() not in _claimed:
         _claimed[os.getpid()] = _claim_domain()
     return _claimed[os.getpid()][0]
+
+
+def pass_over_domain() -> None:
+    """Give up this process's domain for the next run (another is claimed then), keeping its
+    lock: a domain some other program talks on is no sitgen process's to use."""
+    claim = _claimed.pop(os.getpid(), None)
+    if claim is not None:
+        _passed_over.append(claim[1])
+
+
+EPROSIMA_VENDOR = b"\x01\x0f"
+"""The vendor id that opens a Fast DDS GUID: its next two bytes are the host's, the two after
+them the low 16 bits of the participant's process id (little-endian)."""
+
+
+def foreign_processes(gids: Iterable[bytes], ours: set[int]) -> set[int]:
+    """The live processes, other than ``ours``, whose Fast DDS participants own endpoints of
+    ``gids`` (a run's topics): proof that the domain is not free. Another rmw's GUIDs say
+    nothing of their process, nor does an endpoint whose process has gone (the graph lists
+    it a while longer: it answers nothing), and a process's id is known to 16 bits, so
+    this finds participants of this machine's processes, not every one."""
+    low = {pid & 0xFFFF for pid in ours}
+    owners = {
+        int.from_bytes(gid[4:6], "little")
+        for gid in gids
+        if gid[:2] == EPROSIMA_VENDOR and int.from_bytes(gid[4:6], "little") not in low
+    }
+    if not owners:
+        return set()
+    live = {int(e) for e in os.listdir("/proc") if e.isdigit()}
+    return {pid for pid in live - ours if pid & 0xFFFF in owners}
 
 
 LOOPBACK_PROFILE = Path(__file__).with_name("fastdds_loopback.xml")
@@ -132,3 +170,17 @@ def rmw_problem(env: MutableMapping[str, str], lib_dirs: list[str]) -> str | Non
         f"RMW_IMPLEMENTATION={name} is not installed (no lib{name}.so on the library path; "
         f"pip install ros-kilted-{name.replace('_', '-')}, or unset it for {DEFAULT_RMW})"
     )
+
+
+def require_free(domain: int, gids: Iterable[bytes], ours: set[int]) -> None:
+    """Raise ControllerError where another process's participant owns one of ``gids`` (a run's
+    endpoints on ``domain``): a node left running by anything else would answer the run as
+    well, and score it. This process then moves to another domain for its next run."""
+    strangers = foreign_processes(gids, ours)
+    if strangers:
+        pass_over_domain()
+        raise ControllerError(
+            f"ros2: DDS domain {domain} is not free: process "
+            f"{', '.join(map(str, sorted(strangers)))}, which this run did not start, talks on "
+            "its topics; the next run moves to another domain"
+        )

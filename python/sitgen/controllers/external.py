@@ -203,24 +203,32 @@ def _reaper(process_mark: str) -> subprocess.Popen[bytes]:
     )
 
 
-def kill_marked(mark: str, whole: bool = True) -> int:
-    """SIGKILL every process that carries ``mark`` (:func:`marked_env`; ``whole=False``: every
-    mark that starts with it): whatever a controller started, wherever it went. Returns how
-    many were killed. Linux's /proc; a process whose environment cannot be read (another
-    user's) is not one sitgen started."""
+def marked_pids(mark: str, whole: bool = True) -> set[int]:
+    """Every live process that carries ``mark`` (:func:`marked_env`; ``whole=False``: every
+    mark that starts with it), other than this one. Linux's /proc; a process whose
+    environment cannot be read (another user's) is not one sitgen started."""
     needle = f"\0{MARK}={mark}".encode() + (b"\0" if whole else b"")
-    killed = 0
+    found = set()
     for entry in os.scandir("/proc"):
         if not entry.name.isdigit() or int(entry.name) == os.getpid():
             continue
         try:
             with open(f"/proc/{entry.name}/environ", "rb") as f:
-                if needle not in b"\0" + f.read() + b"\0":
-                    continue
-            os.kill(int(entry.name), signal.SIGKILL)
-            killed += 1
-        except (OSError, ValueError):
+                if needle in b"\0" + f.read() + b"\0":
+                    found.add(int(entry.name))
+        except OSError:
             continue
+    return found
+
+
+def kill_marked(mark: str, whole: bool = True) -> int:
+    """SIGKILL every process that carries ``mark`` (:func:`marked_pids`): whatever a
+    controller started, wherever it went. Returns how many were killed."""
+    killed = 0
+    for pid in marked_pids(mark, whole):
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+            killed += 1
     return killed
 
 

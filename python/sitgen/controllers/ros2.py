@@ -54,7 +54,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import IO, Any
 
-from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
+from sitgen.controllers.dds_domain import (
+    confine,
+    process_domain,
+    require_free,
+    rmw_problem,
+)
 from sitgen.controllers.external import (
     START_TIMEOUT_S,
     STDERR_TAIL_BYTES,
@@ -65,6 +70,7 @@ from sitgen.controllers.external import (
     die_with_parent_prefix,
     kill_marked,
     marked_env,
+    marked_pids,
     program_path,
     short,
     signal_name,
@@ -232,6 +238,20 @@ class Bridge:
         me = self.node.get_name()
         return sum(1 for i in self.node.get_subscriptions_info_by_topic(topic) if i.node_name != me)
 
+    def endpoint_gids(self) -> list[bytes]:
+        """The GUIDs of every other endpoint on the run's topics: /cmd_vel's publishers and
+        the readers of what sitgen publishes."""
+        me = self.node.get_name()
+        infos = [
+            *self.node.get_publishers_info_by_topic(TOPICS.cmd_vel),
+            *(
+                i
+                for p in (self.clock, self.scan, self.odom, self.plan, self.goal)
+                for i in self.node.get_subscriptions_info_by_topic(p.topic_name)
+            ),
+        ]
+        return [bytes(i.endpoint_gid) for i in infos if i.node_name != me]
+
     def cmd_vel_type(self) -> str | None:
         """The type a node publishes ``/cmd_vel`` as, once one is discovered."""
         for info in self.node.get_publishers_info_by_topic(TOPICS.cmd_vel):
@@ -314,6 +334,8 @@ class Ros2Controller(UserController):
         if self._proc is None:
             self._start()
         self._discover(bridge)
+        # The domain must hold only sitgen and what this run started (or the run errs).
+        require_free(bridge.domain, bridge.endpoint_gids(), {os.getpid(), *marked_pids(self._mark)})
 
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         bridge = self._bridge
