@@ -543,3 +543,18 @@ def test_a_node_sitgen_did_not_start_on_the_runs_domain_is_found_and_the_domain_
     finally:
         stray.kill()
         stray.wait()
+
+
+@pytest.mark.parametrize("strategy", ["mutation", "map-elites", "random", "coverage"])
+def test_every_search_strategy_drives_a_ros2_node(strategy: str, tmp_path: Path) -> None:
+    """Every strategy runs every controller kind: a search of a ros2: node on one worker (the
+    case a forked pool worker once hung on) stores its runs, none in error."""
+    spec = example_campaign(tmp_path, 2, 8.0)
+    db = tmp_path / "search.db"
+    done = run_cli(
+        "search", str(spec), "--strategy", strategy, "--budget", "2", "--seed", "2",
+        "--workers", "1", "--reruns", "0", "--db", str(db), cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    rows = runs(db)
+    assert len(rows) == 2 and all(r[2] != "error" for r in rows), rows
