@@ -317,11 +317,11 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     fast = json.dumps({"name": FOLLOWER, "params": {"speed_m_s": 0.9, "stop_m": 0.2}})
     done = run_cli(
         "diff", "--a", FOLLOWER, "--b", fast, "--situations", str(ros2_campaign / "two.db"),
-        "--n", "6", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
+        "--n", "3", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
     )  # fmt: skip
     assert done.returncode in (0, 1), done.stderr
     report = json.loads(done.stdout)
-    assert report["situations"] == 6
+    assert report["situations"] == 3
 
 
 def udp_sockets(pids: set[int]) -> set[tuple[str, int]]:
