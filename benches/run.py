@@ -205,7 +205,7 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     and a JSON line each way."""
     from user_controllers import Busy, Trivial
 
-    from sitgen.controllers.ros2 import ros2_available
+    from sitgen.controllers.ros2_bridge import ros2_available
 
     situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
     folder = Path(__file__).resolve().parent

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import sitgen
-from sitgen.controllers.ros2 import ros2_available
+from sitgen.controllers.ros2_bridge import ros2_available
 from sitgen.store import Store
 from sitgen.triage.recall import resimulate_checked, stored_run
 from tests.conftest import ROOT, run_cli, sitgen_command

@@ -28,7 +28,7 @@ import subprocess
 import sys
 import time
 import uuid
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -219,6 +219,30 @@ def marked_pids(mark: str, whole: bool = True) -> set[int]:
         except OSError:
             continue
     return found
+
+
+def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:
+    """Wait until every thread of the processes ``pids`` is asleep (blocked, waiting for
+    input: Linux's /proc task states), within ``timeout_s`` of wall time; whether they were.
+    A thread that is running or runnable has work in hand: a message it was woken for."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        busy = False
+        for pid in pids:
+            with contextlib.suppress(OSError):
+                for task in os.scandir(f"/proc/{pid}/task"):
+                    with contextlib.suppress(OSError), open(f"{task.path}/stat", "rb") as f:
+                        stat = f.read()
+                        if stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] in b"RD":
+                            busy = True
+                            break
+            if busy:
+                break
+        if not busy:
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0)
 
 
 def kill_marked(mark: str, whole: bool = True) -> int:

@@ -47,19 +47,12 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import IO, Any
 
-from sitgen.controllers.dds_domain import (
-    confine,
-    process_domain,
-    require_free,
-    rmw_problem,
-)
+from sitgen.controllers.dds_domain import confine, require_free
 from sitgen.controllers.external import (
     START_TIMEOUT_S,
     STDERR_TAIL_BYTES,
@@ -74,35 +67,21 @@ from sitgen.controllers.external import (
     program_path,
     short,
     signal_name,
+    wait_idle,
+)
+from sitgen.controllers.ros2_bridge import (
+    FRAMES,
+    LIB,
+    TOPICS,
+    Bridge,
+    ros2_available,
+    seconds,
+    stamp,
 )
 
 PREFIX = "ros2:"
 
 
-@dataclass(frozen=True)
-class Topics:
-    """sitgen's side of the contract (a node remaps its own names to these)."""
-
-    clock: str = "/clock"
-    scan: str = "/scan"
-    odom: str = "/odom"
-    plan: str = "/plan"
-    goal: str = "/goal_pose"
-    cmd_vel: str = "/cmd_vel"
-
-
-@dataclass(frozen=True)
-class Frames:
-    """REP 105 frame ids, as Nav2's loopback simulator names them."""
-
-    map: str = "map"
-    odom: str = "odom"
-    base: str = "base_link"
-    scan: str = "base_scan"
-
-
-TOPICS = Topics()
-FRAMES = Frames()
 MAX_MISSED_ANSWERS = 10
 """Control periods in a row a node may leave unanswered before its run ends as an error."""
 MOST_ANSWER_TIMEOUT_S = 60.0
@@ -110,160 +89,17 @@ MOST_ANSWER_TIMEOUT_S = 60.0
 is not answering; every wait of a run is bounded."""
 MOST_MISSED_ANSWERS = 100_000
 """Largest ``max_missed_answers``."""
-MATCH_GRACE_S = 0.3
+MATCH_GRACE_S = 1.0
 """Wall seconds a node that listens is given for all of its subscriptions to match."""
+SETTLE_S = 0.02
+"""Wall seconds a node's processes are given to go back to waiting after each message."""
+DISCOVERY_QUIET_S = 0.15
+"""Wall seconds the graph of a starting node must hold still before its first observation."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
-LIB = os.path.join(sys.prefix, "lib")
-"""Where the ROS 2 wheels put their shared libraries (the rmw implementations among them)."""
 SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
 """Controller parameters that are sitgen's, not the node's (the rest become ROS parameters)."""
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
-
-
-def ros2_available() -> str | None:
-    """None if rclpy and the messages import, else why not (one line)."""
-    # rcl checks RMW_IMPLEMENTATION as its library loads and ends the whole process (code 102)
-    # when it names an rmw that is not there: checked before rclpy is imported.
-    problem = rmw_problem(os.environ, [LIB])
-    if problem is not None:
-        return problem
-    try:
-        _messages()
-    except ImportError as e:
-        return f"the ROS 2 wheels do not import ({e}); pip install 'sitgen[ros2]'"
-    return None
-
-
-def _messages() -> Any:
-    # rclpy and the message packages are an optional extra (sitgen[ros2]): imported when a
-    # ros2: controller is first used, never by sitgen's other commands.
-    import rclpy  # noqa: F401
-    from builtin_interfaces.msg import Time
-    from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-    from nav_msgs.msg import Odometry, Path
-    from rosgraph_msgs.msg import Clock
-    from sensor_msgs.msg import LaserScan
-
-    return {
-        "PoseStamped": PoseStamped,
-        "Twist": Twist,
-        "TwistStamped": TwistStamped,
-        "Odometry": Odometry,
-        "Path": Path,
-        "Clock": Clock,
-        "LaserScan": LaserScan,
-        "Time": Time,
-    }
-
-
-def sec_nanosec(t: float) -> tuple[int, int]:
-    """Simulated time ``t`` seconds as a ROS time's (sec, nanosec), exact to the nanosecond."""
-    ns = round(t * 1e9)
-    return ns // 1_000_000_000, ns % 1_000_000_000
-
-
-def stamp(msg: dict[str, Any], t: float) -> Any:
-    """A builtin_interfaces/Time for simulated time ``t`` (``msg``: the message types)."""
-    sec, nanosec = sec_nanosec(t)
-    return msg["Time"](sec=sec, nanosec=nanosec)
-
-
-def quaternion(heading: float) -> tuple[float, float, float, float]:
-    """(x, y, z, w) of a rotation by ``heading`` about z."""
-    return (0.0, 0.0, math.sin(heading / 2), math.cos(heading / 2))
-
-
-class Bridge:
-    """sitgen's side of one run: a ROS 2 context on this process's domain, the simulator's
-    node with its publishers, and an executor. A fresh one per run: a participant that has
-    seen a node die keeps its locators for seconds, and a new node on the same ports would
-    wait that long to be discovered."""
-
-    def __init__(self) -> None:
-        reason = ros2_available()
-        if reason is not None:
-            raise ControllerError(f"ros2: {reason}")
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import (
-            DurabilityPolicy,
-            QoSProfile,
-            ReliabilityPolicy,
-            qos_profile_sensor_data,
-        )
-
-        self.msg = _messages()
-        # sitgen's own participant is held to this machine as the node is: a test run must
-        # not announce itself to, or hear from, the network (rcl reads these at init).
-        confine(os.environ)
-        self.domain = process_domain()
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, domain_id=self.domain)
-        self.node = rclpy.create_node("sitgen_sim", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        latched = QoSProfile(
-            depth=1,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL,
-        )
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        m = self.msg
-        self.clock = self.node.create_publisher(m["Clock"], TOPICS.clock, reliable)
-        self.scan = self.node.create_publisher(m["LaserScan"], TOPICS.scan, qos_profile_sensor_data)
-        self.odom = self.node.create_publisher(m["Odometry"], TOPICS.odom, reliable)
-        self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
-        self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
-
-    def spin(self, timeout_s: float) -> None:
-        self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
-
-    def all_matched(self, listening_will_do: bool = False) -> bool:
-        """Whether the node listens to the scan or the odometry, and (unless
-        ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
-        is matched by sitgen's publisher (so the first observation is not lost to a
-        half-finished discovery)."""
-        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal)
-        listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
-        return listening > 0 and (
-            listening_will_do
-            or all(
-                p.get_subscription_count() >= self._subscriptions_seen(p.topic_name)
-                for p in publishers
-            )
-        )
-
-    def _subscriptions_seen(self, topic: str) -> int:
-        me = self.node.get_name()
-        return sum(1 for i in self.node.get_subscriptions_info_by_topic(topic) if i.node_name != me)
-
-    def endpoint_gids(self) -> list[bytes]:
-        """The GUIDs of every other endpoint on the run's topics: /cmd_vel's publishers and
-        the readers of what sitgen publishes."""
-        me = self.node.get_name()
-        infos = [
-            *self.node.get_publishers_info_by_topic(TOPICS.cmd_vel),
-            *(
-                i
-                for p in (self.clock, self.scan, self.odom, self.plan, self.goal)
-                for i in self.node.get_subscriptions_info_by_topic(p.topic_name)
-            ),
-        ]
-        return [bytes(i.endpoint_gid) for i in infos if i.node_name != me]
-
-    def cmd_vel_type(self) -> str | None:
-        """The type a node publishes ``/cmd_vel`` as, once one is discovered."""
-        for info in self.node.get_publishers_info_by_topic(TOPICS.cmd_vel):
-            if info.node_name != self.node.get_name():
-                return str(info.topic_type)
-        return None
-
-    def shutdown(self) -> None:
-        with contextlib.suppress(Exception):
-            self.executor.shutdown(timeout_sec=0)
-            self.node.destroy_node()
-            self.context.try_shutdown()
 
 
 class Ros2Controller(UserController):
@@ -319,6 +155,7 @@ class Ros2Controller(UserController):
         self._missed = 0
         self._info: dict[str, Any] = {}
         self._goal_index = -1
+        self._pids: set[int] = set()
 
     # --- a run: start, reset, act, close ---------------------------------------------------
 
@@ -335,15 +172,16 @@ class Ros2Controller(UserController):
             self._start()
         self._discover(bridge)
         # The domain must hold only sitgen and what this run started (or the run errs).
-        require_free(bridge.domain, bridge.endpoint_gids(), {os.getpid(), *marked_pids(self._mark)})
+        self._pids = marked_pids(self._mark)
+        require_free(bridge.domain, bridge.endpoint_gids(), {os.getpid(), *self._pids})
 
     def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         bridge = self._bridge
         assert bridge is not None
         t = float(obs["time"])
-        self._publish_goal(bridge, int(obs.get("waypoints_reached", 0)), t)
+        goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
         self._answers.clear()
-        self._publish_observation(bridge, obs, t)
+        bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
         if not self._answered_once:
             self._first_answer(bridge, obs, t)
         elif self._await_answer(bridge, t, self._answer_timeout_s):
@@ -434,16 +272,25 @@ class Ros2Controller(UserController):
         then subscribe to /cmd_vel with the node's type."""
         deadline = time.monotonic() + self._start_timeout_s
         kind, seen = None, None
+        endpoints, still_since = -1, time.monotonic()
         while True:
             self._check_alive("on start")
             kind = bridge.cmd_vel_type()
             if kind is not None and seen is None:
                 seen = time.monotonic()
-            # The graph may still list a previous run's node for a while after it has gone,
-            # so a node that listens is waited on only MATCH_GRACE_S for the rest to match
-            # (the first observation is repeated until answered, which covers a late match).
-            if kind is not None and bridge.all_matched(
-                seen is not None and time.monotonic() - seen > MATCH_GRACE_S
+            # Discovery announces a node's endpoints one by one: the graph is taken as whole
+            # once it has held still for DISCOVERY_QUIET_S (a subscription found after the
+            # first observation would miss it, and a timer on simulated time would have
+            # fired without it). The graph may still list a previous run's node for a while
+            # after it has gone, so a node that listens is waited on only MATCH_GRACE_S for
+            # the rest to match (the first observation is repeated until answered).
+            now = time.monotonic()
+            if (count := len(bridge.endpoint_gids())) != endpoints:
+                endpoints, still_since = count, now
+            if (
+                kind is not None
+                and now - still_since >= DISCOVERY_QUIET_S
+                and bridge.all_matched(seen is not None and now - seen > MATCH_GRACE_S)
             ):
                 break
             if time.monotonic() > deadline:
@@ -481,11 +328,18 @@ class Ros2Controller(UserController):
                 )
             bridge.spin(0.02)
 
+    def _settle(self) -> None:
+        """Wait (at most ``SETTLE_S``) until the node's processes have gone back to waiting:
+        the message just acknowledged has then been taken and its callback run, before the
+        next one arrives to share an executor's turn with it (where a node's callbacks would
+        run in the order its subscriptions were made, not the order of arrival)."""
+        wait_idle(self._pids, SETTLE_S)
+
     def _first_answer(self, bridge: Bridge, obs: Mapping[str, Any], t: float) -> None:
-        """The first period: its observation is published again every ``REPEAT_S`` until the
-        node answers (a subscription that discovery had not finished matching loses the
-        first), within the start timeout; answers to the repeats are then let in and
-        dropped, so that every later answer belongs to its own period."""
+        """The first period: its observation (and the goal) is published again every
+        ``REPEAT_S`` until the node answers (a subscription that discovery had not finished
+        matching loses the first), within the start timeout; answers to the repeats are then
+        let in and dropped, so that every later answer belongs to its own period."""
         deadline = time.monotonic() + self._start_timeout_s
         while not self._await_answer(bridge, t, REPEAT_S):
             if time.monotonic() > deadline:
@@ -493,7 +347,10 @@ class Ros2Controller(UserController):
                     f"controller {self.name} never published {TOPICS.cmd_vel} within "
                     f"{self._start_timeout_s:g} s of its first observation"
                 )
-            self._publish_observation(bridge, obs, t)
+            # The goal too: a subscription that matched late (volatile) missed it.
+            self._goal_index = -1
+            goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
+            bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
         settle = time.monotonic() + REPEAT_S
         while (left := settle - time.monotonic()) > 0:
             bridge.spin(left)
@@ -508,7 +365,7 @@ class Ros2Controller(UserController):
             while self._answers:
                 message = self._answers.pop(0)
                 twist = message.twist if self._stamped else message
-                stamped_at = _seconds(message.header.stamp) if self._stamped else 0.0
+                stamped_at = seconds(message.header.stamp) if self._stamped else 0.0
                 if 0.0 < stamped_at < t - 1e-9:
                     continue  # an answer to an earlier period, arriving late (0: unstamped)
                 v, omega = float(twist.linear.x), float(twist.angular.z)
@@ -535,13 +392,15 @@ class Ros2Controller(UserController):
         bridge.plan.publish(path)
         self._goal_index = -1
 
-    def _publish_goal(self, bridge: Bridge, index: int, t: float) -> None:
+    def _goal(self, bridge: Bridge, index: int, t: float) -> list[tuple[Any, Any]]:
+        """The goal to hand over before the period at ``t``: the waypoint ``index`` when it
+        is a new one."""
         waypoints = self._info.get("waypoints") or []
         index = min(index, len(waypoints) - 1)
         if index == self._goal_index or index < 0:
-            return
+            return []
         self._goal_index = index
-        bridge.goal.publish(self._pose(bridge, waypoints[index], t))
+        return [(bridge.goal, self._pose(bridge, waypoints[index], t))]
 
     def _pose(self, bridge: Bridge, point: Any, t: float) -> Any:
         pose = bridge.msg["PoseStamped"]()
@@ -550,49 +409,6 @@ class Ros2Controller(UserController):
         pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
         pose.pose.orientation.w = 1.0
         return pose
-
-    def _publish_observation(self, bridge: Bridge, obs: Mapping[str, Any], t: float) -> None:
-        m = bridge.msg
-        now = stamp(m, t)
-        odom = m["Odometry"]()
-        odom.header.stamp, odom.header.frame_id, odom.child_frame_id = (
-            now,
-            FRAMES.odom,
-            FRAMES.base,
-        )
-        x, y, heading = (float(c) for c in obs["pose"])
-        odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
-        q = odom.pose.pose.orientation
-        q.x, q.y, q.z, q.w = quaternion(heading)
-        v, omega = (float(c) for c in obs["velocity"])
-        odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
-        bridge.odom.publish(odom)
-        bridge.scan.publish(laser_scan(m, self._info, obs["ranges"], t))
-        clock = m["Clock"]()
-        clock.clock = now
-        bridge.clock.publish(clock)
-
-
-def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: float) -> Any:
-    """A sensor_msgs/LaserScan of ``ranges`` at simulated time ``t``, for the laser that the
-    run's reset info describes (``laser``: ``angles``, ``range_m``, ``min_range_m``)."""
-    laser, angles = info["laser"], info["laser"]["angles"]
-    scan = msg["LaserScan"]()
-    scan.header.stamp, scan.header.frame_id = stamp(msg, t), FRAMES.scan
-    scan.angle_min, scan.angle_max = float(angles[0]), float(angles[-1])
-    scan.angle_increment = (
-        float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
-    )
-    scan.time_increment = 0.0
-    scan.scan_time = float(info.get("control_period_s", info.get("dt_s", 0.1)))
-    scan.range_min = float(laser.get("min_range_m", 0.0))
-    scan.range_max = float(laser["range_m"])
-    scan.ranges = [float(r) for r in ranges]
-    return scan
-
-
-def _seconds(time_msg: Any) -> float:
-    return float(time_msg.sec) + float(time_msg.nanosec) * 1e-9
 
 
 def check_ros2_name(name: str) -> None:

@@ -1,0 +1,293 @@
+"""sitgen's side of a ``ros2:`` run over DDS (the controller is ros2.py): a ROS 2 context on
+this process's domain, the simulator's node, its publishers of the loopback simulator's topics
+and the messages it sends, and the ordered hand-over of one control period's inputs.
+
+What it does: :class:`Bridge` publishes the route and goal (transient local), the odometry,
+the scan (both reliable, so a node's default-QoS subscription matches as a sensor-data one
+does) and the clock. :meth:`Bridge.hand_over` gives the node each of a period's inputs only
+once every reliable reader of the one before has acknowledged it, and the clock last: so a
+node's callbacks see a period's messages in one order, whatever the machine's load, and a node
+that acts on a timer on simulated time finds the period's scan and odometry in when the clock
+moves to fire it.
+
+Why: a node that acts on whatever arrived last (the usual way) computes from the previous
+period's odometry when DDS happens to deliver the scan first, and its runs then differ from one
+try to the next (docs/ros2.md, "Determinism").
+
+Parameters: :data:`ACK_TIMEOUT_S` (wall seconds a reader has to acknowledge a message).
+
+Source: Nav2's loopback simulator (topics, frames, QoS), REP 105 (frames), the DDS
+reliability protocol's acknowledgements (``Publisher.wait_for_all_acked``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
+from sitgen.controllers.external import ControllerError
+
+
+@dataclass(frozen=True)
+class Topics:
+    """sitgen's side of the contract (a node remaps its own names to these)."""
+
+    clock: str = "/clock"
+    scan: str = "/scan"
+    odom: str = "/odom"
+    plan: str = "/plan"
+    goal: str = "/goal_pose"
+    cmd_vel: str = "/cmd_vel"
+
+
+@dataclass(frozen=True)
+class Frames:
+    """REP 105 frame ids, as Nav2's loopback simulator names them."""
+
+    map: str = "map"
+    odom: str = "odom"
+    base: str = "base_link"
+    scan: str = "base_scan"
+
+
+TOPICS = Topics()
+FRAMES = Frames()
+ACK_TIMEOUT_S = 1.0
+"""Wall seconds a node's reliable readers have to acknowledge one message of a period before
+the next is handed over anyway (a node that stops reading is then caught by the answer's
+timeout)."""
+LIB = os.path.join(sys.prefix, "lib")
+"""Where the ROS 2 wheels put their shared libraries (the rmw implementations among them)."""
+
+
+def ros2_available() -> str | None:
+    """None if rclpy and the messages import, else why not (one line)."""
+    # rcl checks RMW_IMPLEMENTATION as its library loads and ends the whole process (code 102)
+    # when it names an rmw that is not there: checked before rclpy is imported.
+    problem = rmw_problem(os.environ, [LIB])
+    if problem is not None:
+        return problem
+    try:
+        _messages()
+    except ImportError as e:
+        return f"the ROS 2 wheels do not import ({e}); pip install 'sitgen[ros2]'"
+    return None
+
+
+def _messages() -> Any:
+    # rclpy and the message packages are an optional extra (sitgen[ros2]): imported when a
+    # ros2: controller is first used, never by sitgen's other commands.
+    import rclpy  # noqa: F401
+    from builtin_interfaces.msg import Time
+    from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+    from nav_msgs.msg import Odometry, Path
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import LaserScan
+
+    return {
+        "PoseStamped": PoseStamped,
+        "Twist": Twist,
+        "TwistStamped": TwistStamped,
+        "Odometry": Odometry,
+        "Path": Path,
+        "Clock": Clock,
+        "LaserScan": LaserScan,
+        "Time": Time,
+    }
+
+
+def sec_nanosec(t: float) -> tuple[int, int]:
+    """Simulated time ``t`` seconds as a ROS time's (sec, nanosec), exact to the nanosecond."""
+    ns = round(t * 1e9)
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
+def stamp(msg: dict[str, Any], t: float) -> Any:
+    """A builtin_interfaces/Time for simulated time ``t`` (``msg``: the message types)."""
+    sec, nanosec = sec_nanosec(t)
+    return msg["Time"](sec=sec, nanosec=nanosec)
+
+
+def quaternion(heading: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation by ``heading`` about z."""
+    return (0.0, 0.0, math.sin(heading / 2), math.cos(heading / 2))
+
+
+class Bridge:
+    """sitgen's side of one run: a ROS 2 context on this process's domain, the simulator's
+    node with its publishers, and an executor. A fresh one per run: a participant that has
+    seen a node die keeps its locators for seconds, and a new node on the same ports would
+    wait that long to be discovered."""
+
+    def __init__(self) -> None:
+        reason = ros2_available()
+        if reason is not None:
+            raise ControllerError(f"ros2: {reason}")
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import (
+            DurabilityPolicy,
+            QoSProfile,
+            ReliabilityPolicy,
+        )
+
+        self.msg = _messages()
+        # sitgen's own participant is held to this machine as the node is: a test run must
+        # not announce itself to, or hear from, the network (rcl reads these at init).
+        confine(os.environ)
+        self.domain = process_domain()
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=self.domain)
+        self.node = rclpy.create_node("sitgen_sim", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        latched = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        reliable = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        m = self.msg
+        self.clock = self.node.create_publisher(m["Clock"], TOPICS.clock, reliable)
+        # Reliable, kept as sensor data keeps it: a node's sensor-data (best-effort)
+        # subscription matches it, and so does one with the default QoS, which a best-effort
+        # publisher would leave without a scan.
+        sensor = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        self.scan = self.node.create_publisher(m["LaserScan"], TOPICS.scan, sensor)
+        self.odom = self.node.create_publisher(m["Odometry"], TOPICS.odom, reliable)
+        self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
+        self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
+
+    def hand_over(
+        self, messages: list[tuple[Any, Any]], settle: Callable[[], None] | None = None
+    ) -> None:
+        """Publish each (publisher, message) in turn, each only once every reliable reader of
+        the one before has acknowledged it (it is in the reader's queue) and ``settle`` has
+        returned (the node has gone back to waiting, its callback for it run), so that the
+        node's callbacks see a period's messages in this order however loaded the machine
+        is."""
+        from rclpy.duration import Duration
+
+        for k, (publisher, message) in enumerate(messages):
+            if k > 0:
+                messages[k - 1][0].wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+                # Not before the clock: a node's executor takes the clock before its other
+                # messages of the same turn (the time source subscribes first), and a timer
+                # it makes ready fires only on the executor's next turn.
+                if settle is not None and publisher is not self.clock:
+                    settle()
+            publisher.publish(message)
+
+    def period(
+        self, info: Mapping[str, Any], obs: Mapping[str, Any], t: float
+    ) -> list[tuple[Any, Any]]:
+        """The messages of the control period that starts at simulated time ``t``, in the
+        order a node gets them: the odometry and the scan stamped ``t``, then the clock at the
+        period's end, ``t`` plus the control period (so a timer on simulated time at the
+        control rate fires once a period, the first included, with the period's scan and
+        odometry in)."""
+        m = self.msg
+        now = stamp(m, t)
+        odom = m["Odometry"]()
+        odom.header.stamp, odom.header.frame_id, odom.child_frame_id = (
+            now,
+            FRAMES.odom,
+            FRAMES.base,
+        )
+        x, y, heading = (float(c) for c in obs["pose"])
+        odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
+        q = odom.pose.pose.orientation
+        q.x, q.y, q.z, q.w = quaternion(heading)
+        v, omega = (float(c) for c in obs["velocity"])
+        odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
+        clock = m["Clock"]()
+        end_ns = round(t * 1e9) + round(control_period_s(info) * 1e9)
+        clock.clock = m["Time"](sec=end_ns // 1_000_000_000, nanosec=end_ns % 1_000_000_000)
+        return [
+            (self.odom, odom),
+            (self.scan, laser_scan(m, info, obs["ranges"], t)),
+            (self.clock, clock),
+        ]
+
+    def spin(self, timeout_s: float) -> None:
+        self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
+
+    def all_matched(self, listening_will_do: bool = False) -> bool:
+        """Whether the node listens to the scan or the odometry, and (unless
+        ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
+        is matched by sitgen's publisher (so the first observation is not lost to a
+        half-finished discovery)."""
+        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal)
+        listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
+        return listening > 0 and (
+            listening_will_do
+            or all(
+                p.get_subscription_count() >= self._subscriptions_seen(p.topic_name)
+                for p in publishers
+            )
+        )
+
+    def _subscriptions_seen(self, topic: str) -> int:
+        me = self.node.get_name()
+        return sum(1 for i in self.node.get_subscriptions_info_by_topic(topic) if i.node_name != me)
+
+    def endpoint_gids(self) -> list[bytes]:
+        """The GUIDs of every other endpoint on the run's topics: /cmd_vel's publishers and
+        the readers of what sitgen publishes."""
+        me = self.node.get_name()
+        infos = [
+            *self.node.get_publishers_info_by_topic(TOPICS.cmd_vel),
+            *(
+                i
+                for p in (self.clock, self.scan, self.odom, self.plan, self.goal)
+                for i in self.node.get_subscriptions_info_by_topic(p.topic_name)
+            ),
+        ]
+        return [bytes(i.endpoint_gid) for i in infos if i.node_name != me]
+
+    def cmd_vel_type(self) -> str | None:
+        """The type a node publishes ``/cmd_vel`` as, once one is discovered."""
+        for info in self.node.get_publishers_info_by_topic(TOPICS.cmd_vel):
+            if info.node_name != self.node.get_name():
+                return str(info.topic_type)
+        return None
+
+    def shutdown(self) -> None:
+        with contextlib.suppress(Exception):
+            self.executor.shutdown(timeout_sec=0)
+            self.node.destroy_node()
+            self.context.try_shutdown()
+
+
+def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: float) -> Any:
+    """A sensor_msgs/LaserScan of ``ranges`` at simulated time ``t``, for the laser that the
+    run's reset info describes (``laser``: ``angles``, ``range_m``, ``min_range_m``)."""
+    laser, angles = info["laser"], info["laser"]["angles"]
+    scan = msg["LaserScan"]()
+    scan.header.stamp, scan.header.frame_id = stamp(msg, t), FRAMES.scan
+    scan.angle_min, scan.angle_max = float(angles[0]), float(angles[-1])
+    scan.angle_increment = (
+        float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
+    )
+    scan.time_increment = 0.0
+    scan.scan_time = control_period_s(info)
+    scan.range_min = float(laser.get("min_range_m", 0.0))
+    scan.range_max = float(laser["range_m"])
+    scan.ranges = [float(r) for r in ranges]
+    return scan
+
+
+def control_period_s(info: Mapping[str, Any]) -> float:
+    """The run's control period (its reset info's), in seconds."""
+    return float(info.get("control_period_s", info.get("dt_s", 0.1)))
+
+
+def seconds(time_msg: Any) -> float:
+    """A builtin_interfaces/Time in seconds."""
+    return float(time_msg.sec) + float(time_msg.nanosec) * 1e-9
