@@ -94,7 +94,10 @@ def test_a_ros2_campaigns_runs_are_measured_reported_and_exported(
 
 
 def run_node(situation: sitgen.Situation, mode: str) -> sitgen.RunRecord:
-    return sitgen.run(situation, controller=f"{MISBEHAVING} {mode}", time_limit=30.0)
+    return sitgen.run(
+        situation, controller=f"{MISBEHAVING} {mode}", time_limit=30.0,
+        params={"start_timeout_s": 5.0},
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -102,7 +105,7 @@ def run_node(situation: sitgen.Situation, mode: str) -> sitgen.RunRecord:
     [
         ("crash", "exited with code 3 at 0.4 s: 'misbehaving: crashing on purpose'"),
         ("hang", "did not publish /cmd_vel for 10 control periods in a row"),
-        ("silent", "never published /cmd_vel within 10 s of its first observation"),
+        ("silent", "never published /cmd_vel within 5 s of its first observation"),
     ],
 )
 def test_a_node_that_crashes_hangs_or_never_publishes_ends_its_run_as_an_error(

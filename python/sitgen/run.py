@@ -387,4 +387,41 @@ def check_controller(
     finally:
         unclean = user.close()
     checks.append(Check("close", unclean is None, unclean or "shut down on `end`"))
+    if isinstance(controller, str):
+        checks.append(repeats(controller, situation, steps, params))
     return checks
+
+
+def repeats(
+    controller: str,
+    situation: Situation,
+    steps: int = 50,
+    params: Mapping[str, float] | None = None,
+) -> Check:
+    """Whether ``controller`` drives ``situation`` the same way twice (``steps`` control
+    periods): a controller whose commands depend on timing (a node that acts on whatever
+    message arrived last, a program that reads the clock) cannot show its user a failure
+    again. Names the first step where the second run's poses differ from the first's."""
+    info = reset_info(situation, {}, 0)
+    period, dt_s = float(info["control_period_s"]), float(info["dt_s"])
+    first, second = (
+        run(situation, controller=controller, time_limit=steps * period, params=params)
+        for _ in range(2)
+    )
+    if "error" in (first.outcome, second.outcome):
+        why = first.reason if first.outcome == "error" else second.reason
+        return Check("repeats", False, f"a run of the two ended in error: {why}")
+    a, b = first.trajectory, second.trajectory
+    rows = min(len(a), len(b))
+    differ = [i for i in range(rows) if not np.array_equal(a[i], b[i])]
+    if differ or len(a) != len(b):
+        # A pose row is a simulation step; the command that moved it came one period before.
+        at_s = (differ[0] if differ else rows) * dt_s - period
+        return Check(
+            "repeats",
+            False,
+            f"a second run of the same situation differs from the first: its command of the "
+            f"control period at {max(0.0, at_s):.1f} s was another; its commands depend on "
+            'timing, not only on what it was given (docs/ros2.md, "Determinism")',
+        )
+    return Check("repeats", True, f"the same {rows} poses on a second run")

@@ -12,7 +12,11 @@ from what the laser sees ahead, in one of four styles:
 - ``approximate_sync``: pairs scan and odometry by stamp within a slop, as message_filters'
   ApproximateTimeSynchronizer does (message_filters has no wheel), and acts on each pair;
 - ``goal_once``: reads the route from ``/plan`` once at start (then drops the subscription) and
-  acts in its scan callback with the latest odometry.
+  acts in its scan callback with the latest odometry;
+- ``wall_clock``: a mistake, not a style: acts in its scan callback, but integrates its heading
+  error over the wall clock's time between scans (a steady clock, not the messages' stamps),
+  so what it answers depends on the machine's timing and no run repeats;
+  ``sitgen check-controller`` must say so.
 
 Default QoS everywhere except the scan (sensor data, as Nav2 subscribes to it).
 """
@@ -23,6 +27,7 @@ import contextlib
 import itertools
 import math
 import sys
+import time
 from typing import Any
 
 import rclpy
@@ -65,7 +70,7 @@ class Usual(Node):
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
         self.goal: tuple[float, float] | None = None
-        if STYLE in ("scan_callback", "goal_once"):
+        if STYLE in ("scan_callback", "goal_once", "wall_clock"):
             self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
         else:
             self.create_subscription(LaserScan, "/scan", self.keep_scan, qos_profile_sensor_data)
@@ -81,6 +86,7 @@ class Usual(Node):
             self.create_subscription(PoseStamped, "/goal_pose", self.on_goal, 10)
         if STYLE == "timer":
             self.create_timer(0.1, self.on_timer)
+        self.integral, self.last_wall = 0.0, time.monotonic()
         self.pending: dict[str, dict[float, Any]] = {"scan": {}, "odom": {}}
 
     def on_goal(self, goal: PoseStamped) -> None:
@@ -124,7 +130,13 @@ class Usual(Node):
     def act(self) -> None:
         if self.scan is None or self.odom is None or self.goal is None:
             return
-        self.cmd.publish(steer(self.odom, self.goal, self.scan))
+        command = steer(self.odom, self.goal, self.scan)
+        if STYLE == "wall_clock":
+            now = time.monotonic()
+            self.integral += command.angular.z * (now - self.last_wall)
+            self.last_wall = now
+            command.angular.z = max(-1.5, min(1.5, command.angular.z + 0.5 * self.integral))
+        self.cmd.publish(command)
 
 
 def main() -> None:

@@ -19,9 +19,10 @@ that needs only ``/odom`` has the robot's pose; no ``/tf`` is published while a 
 tf2_msgs wheel exists for pip; the rosbag2 export carries it).
 
 Why lockstep: a run's result must not depend on the machine's load. Every control period
-sitgen publishes the odometry, the scan and then the clock for simulated time *t*, and waits
-until the node answers with a ``/cmd_vel`` message (for TwistStamped, one not stamped before
-*t*); only then does simulated time move on. A node that does not answer within
+sitgen hands the node the odometry and the scan for simulated time *t*, each once the node has
+taken the one before, then the clock at the period's end (ros2_bridge.py), and waits until
+the node answers with a ``/cmd_vel`` message (for TwistStamped, one not stamped before *t*);
+only then does simulated time move on. A node that does not answer within
 ``answer_timeout_s`` of wall time has its last command held for that period (the only way
 machine load can reach a result, so the timeout is generous); ``max_missed_answers`` periods
 in a row without an answer, a node that never publishes within the start timeout, or a node
@@ -33,7 +34,8 @@ confined to this machine (localhost discovery; for Fast DDS, UDP on 127.0.0.1 an
 memory: dds_domain.py).
 
 Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
-``answer_timeout_s`` (wall seconds, default the step timeout, 1 s) and ``max_missed_answers``
+``answer_timeout_s`` (wall seconds, default the step timeout, 1 s), ``start_timeout_s`` (wall
+seconds to start and answer the first observation, default 30) and ``max_missed_answers``
 (periods, default 10), which are sitgen's.
 
 Source: Nav2's loopback simulator (nav2_loopback_sim: topics, frames, stamped cmd_vel) and
@@ -54,7 +56,6 @@ from typing import IO, Any
 
 from sitgen.controllers.dds_domain import confine, require_free
 from sitgen.controllers.external import (
-    START_TIMEOUT_S,
     STDERR_TAIL_BYTES,
     STEP_TIMEOUT_S,
     ControllerError,
@@ -82,6 +83,13 @@ from sitgen.controllers.ros2_bridge import (
 PREFIX = "ros2:"
 
 
+NODE_START_TIMEOUT_S = 30.0
+"""Wall seconds a node has to start (its process, rclpy, discovery) and to answer its first
+observation: seconds on an idle machine, over 10 s (the other kinds' START_TIMEOUT_S) for a
+Python node on a 2-core machine loaded three times over."""
+MOST_START_TIMEOUT_S = 600.0
+"""Largest ``start_timeout_s`` (wall seconds): a stack that takes longer to come up is not
+coming up."""
 MAX_MISSED_ANSWERS = 10
 """Control periods in a row a node may leave unanswered before its run ends as an error."""
 MOST_ANSWER_TIMEOUT_S = 60.0
@@ -97,7 +105,7 @@ DISCOVERY_QUIET_S = 0.15
 """Wall seconds the graph of a starting node must hold still before its first observation."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
-SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers")
+SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers", "start_timeout_s")
 """Controller parameters that are sitgen's, not the node's (the rest become ROS parameters)."""
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 
@@ -111,18 +119,23 @@ class Ros2Controller(UserController):
         name: str,
         params: Mapping[str, float] | None = None,
         step_timeout_s: float = STEP_TIMEOUT_S,
-        start_timeout_s: float = START_TIMEOUT_S,
+        start_timeout_s: float = NODE_START_TIMEOUT_S,
     ) -> None:
         self.name = name
         argv = command_argv(command_line, name)
         params = dict(params or {})
         own = {k: params.pop(k) for k in SITGEN_PARAMS if k in params}
         self._answer_timeout_s = float(own.get("answer_timeout_s", step_timeout_s))
-        if not 0 < self._answer_timeout_s <= MOST_ANSWER_TIMEOUT_S:
-            raise ControllerError(
-                f"controller {name}: params.answer_timeout_s: {self._answer_timeout_s!r} is not "
-                f"in (0, {MOST_ANSWER_TIMEOUT_S:g}] wall seconds"
-            )
+        self._start_timeout_s = float(own.get("start_timeout_s", start_timeout_s))
+        for param, value, most in (
+            ("answer_timeout_s", self._answer_timeout_s, MOST_ANSWER_TIMEOUT_S),
+            ("start_timeout_s", self._start_timeout_s, MOST_START_TIMEOUT_S),
+        ):
+            if not 0 < value <= most:
+                raise ControllerError(
+                    f"controller {name}: params.{param}: {value!r} is not in (0, {most:g}] "
+                    "wall seconds"
+                )
         missed = own.get("max_missed_answers", MAX_MISSED_ANSWERS)
         if not (
             math.isfinite(missed) and missed == int(missed) and 0 <= missed <= MOST_MISSED_ANSWERS
@@ -141,7 +154,6 @@ class Ros2Controller(UserController):
             "use_sim_time:=true",
             *ros_params,
         ]
-        self._start_timeout_s = start_timeout_s
         self._proc: subprocess.Popen[bytes] | None = None
         self._mark = ""
         self._tail = bytearray()
