@@ -561,3 +561,22 @@ def test_every_search_strategy_drives_a_ros2_node(strategy: str, tmp_path: Path)
     assert done.returncode == 0, done.stderr
     rows = runs(db)
     assert len(rows) == 2 and all(r[2] != "error" for r in rows), rows
+
+
+def test_a_node_reads_the_situations_map_on_map_as_a_map_server_serves_it(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    """/map is live: a node subscribed to it (transient local, as a costmap's static layer is)
+    reads the situation's grid, ROS's way up (row 0 at the origin), 100 occupied, 0 free."""
+    out = tmp_path / "map.json"
+    node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/map_reader.py'} {out}"
+    record = sitgen.run(situation, controller=node, time_limit=1.0)
+    assert record.outcome != "error", record.reason
+    got = json.loads(out.read_text())
+    grid = situation.grid
+    rows, cols = grid.occupied.shape
+    assert (got["frame"], got["width"], got["height"]) == ("map", cols, rows)
+    assert got["resolution"] == pytest.approx(grid.resolution)
+    data = np.asarray(got["data"]).reshape(rows, cols)
+    assert set(np.unique(data)) <= {0, 100} and (data == 100).any()
+    np.testing.assert_array_equal(data[::-1] == 100, grid.occupied)

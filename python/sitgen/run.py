@@ -100,9 +100,11 @@ def _controller_name(controller: Any) -> str:
     return f"python:{type(controller).__module__}:{type(controller).__qualname__}"
 
 
-def reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict[str, Any]:
-    """What a user controller is told at the start: its route, body, laser and limits, and the
-    params its controller table gives it."""
+def reset_info(
+    situation: Situation, run: Mapping[str, Any], agent: int, with_map: bool = False
+) -> dict[str, Any]:
+    """What a user controller is told at the start: its route, body, laser and limits, the
+    params its controller table gives it, and (``with_map``) the situation's map."""
     robot = situation.robots[agent]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
     resolved = json.loads(_core.check_run_spec(spec_json(dict(run), "run")))
@@ -123,7 +125,13 @@ def reset_info(situation: Situation, run: Mapping[str, Any], agent: int) -> dict
         "time_limit_s": float(resolved["time_limit_s"]),
         "control_period_s": float(controller.get("control_period_s") or sim["dt_s"]),
         "params": dict(controller.get("params") or {}),
+        **({"map": _map_info(situation)} if with_map else {}),
     }
+
+
+def _map_info(situation: Situation) -> dict[str, Any]:
+    grid = situation.grid
+    return {"occupied": grid.occupied, "resolution_m": float(grid.resolution)}
 
 
 def run_spec_with(
@@ -263,7 +271,7 @@ def _drive(
         core.fail(str(e))
         return
     try:
-        user.reset(reset_info(situation, run_spec, core.agent))
+        user.reset(reset_info(situation, run_spec, core.agent, user.wants_map))
         # Between the controller's decisions (its control period) its last command stays in
         # force and it is not asked.
         if senses is None:
@@ -293,7 +301,7 @@ def robots_at(
     named = spec.get("controller") or situation.agent.controller
     user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
     try:
-        user.reset(reset_info(situation, spec, core.agent))
+        user.reset(reset_info(situation, spec, core.agent, user.wants_map))
         while (obs := core.observe_agent())["time"] < t_s - 1e-9:
             if core.step(user.act(obs) if core.agent_acts else None):
                 break

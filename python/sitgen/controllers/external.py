@@ -72,6 +72,9 @@ class UserController:
     """A user controller behind the interface a run drives: reset, act, close."""
 
     name: str
+    wants_map = False
+    """Whether its reset info carries the situation's map (``map``: ``occupied`` rows, top
+    row first, and ``resolution_m``): a ROS 2 node gets it as /map."""
 
     def reset(self, info: dict[str, Any]) -> None:
         raise NotImplementedError

@@ -113,6 +113,8 @@ CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 class Ros2Controller(UserController):
     """A ROS 2 node's process, driven in lockstep through this process's :class:`Bridge`."""
 
+    wants_map = True
+
     def __init__(
         self,
         command_line: str,
@@ -178,8 +180,11 @@ class Ros2Controller(UserController):
     def reset(self, info: dict[str, Any]) -> None:
         self._info = info
         bridge = self._bridge = self._bridge or Bridge()
-        # The route goes out before the node starts: transient-local keeps it for the node.
+        # The route and map go out before the node starts: transient-local keeps them for
+        # the node.
         self._publish_route(bridge, info)
+        if "map" in info:
+            bridge.publish_map(info["map"])
         if self._proc is None:
             self._start()
         self._discover(bridge)

@@ -30,6 +30,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import ControllerError
 
@@ -43,6 +46,7 @@ class Topics:
     odom: str = "/odom"
     plan: str = "/plan"
     goal: str = "/goal_pose"
+    map: str = "/map"
     cmd_vel: str = "/cmd_vel"
 
 
@@ -86,7 +90,7 @@ def _messages() -> Any:
     import rclpy  # noqa: F401
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
-    from nav_msgs.msg import Odometry, Path
+    from nav_msgs.msg import OccupancyGrid, Odometry, Path
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import LaserScan
 
@@ -96,6 +100,7 @@ def _messages() -> Any:
         "TwistStamped": TwistStamped,
         "Odometry": Odometry,
         "Path": Path,
+        "OccupancyGrid": OccupancyGrid,
         "Clock": Clock,
         "LaserScan": LaserScan,
         "Time": Time,
@@ -163,6 +168,7 @@ class Bridge:
         self.odom = self.node.create_publisher(m["Odometry"], TOPICS.odom, reliable)
         self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
         self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
+        self.map = self.node.create_publisher(m["OccupancyGrid"], TOPICS.map, latched)
 
     def hand_over(
         self, messages: list[tuple[Any, Any]], settle: Callable[[], None] | None = None
@@ -214,6 +220,19 @@ class Bridge:
             (self.scan, laser_scan(m, info, obs["ranges"], t)),
             (self.clock, clock),
         ]
+
+    def publish_map(self, grid: Mapping[str, Any]) -> None:
+        """The situation's map (reset info's ``map``) as nav_msgs/OccupancyGrid in frame
+        ``map``, transient local, as a map server serves it."""
+        m = self.msg
+        occupied = np.asarray(grid["occupied"], dtype=bool)
+        message = m["OccupancyGrid"]()
+        message.header.frame_id, message.header.stamp = FRAMES.map, stamp(m, 0.0)
+        message.info.resolution = float(grid["resolution_m"])
+        message.info.height, message.info.width = (int(n) for n in occupied.shape)
+        message.info.origin.orientation.w = 1.0
+        message.data = occupancy_data(occupied).tolist()
+        self.map.publish(message)
 
     def spin(self, timeout_s: float) -> None:
         self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
@@ -281,6 +300,12 @@ def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: flo
     scan.range_max = float(laser["range_m"])
     scan.ranges = [float(r) for r in ranges]
     return scan
+
+
+def occupancy_data(occupied: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
+    """An OccupancyGrid's ``data`` for a map whose row 0 is its top edge (sitgen's): row-major
+    from the bottom edge (ROS's: row 0 at the origin), 100 occupied and 0 free."""
+    return np.where(np.flipud(occupied), 100, 0).astype(np.int8).ravel()
 
 
 def control_period_s(info: Mapping[str, Any]) -> float:

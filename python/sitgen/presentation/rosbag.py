@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from sitgen.controllers.ros2_bridge import FRAMES, quaternion, sec_nanosec
+from sitgen.controllers.ros2_bridge import FRAMES, occupancy_data, quaternion, sec_nanosec
 from sitgen.run import RunRecord, reset_info
 from sitgen.store import Store, StoreError
 from sitgen.triage.recall import resimulate_checked, stored_run
@@ -348,8 +348,7 @@ def _messages(
 def _occupancy_grid(m: _Messages, situation: Situation) -> Any:
     grid = situation.grid
     rows, cols = grid.occupied.shape
-    # ROS: row 0 is the bottom edge (at the origin); sitgen's row 0 is the top.
-    data = np.where(np.flipud(grid.occupied), 100, 0).astype(np.int8).ravel()
+    data = occupancy_data(grid.occupied)
     meta = m.blank(
         "nav_msgs/msg/MapMetaData",
         resolution=float(grid.resolution),
