@@ -63,6 +63,10 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
         f'n = {RUNS}\n[situation.terrain]\npreset = "open_field"\n'
         "[situation.mission]\npeers_min = 0\npeers_max = 2\n"
         f'[run]\ntime_limit_s = 6.0\n[run.controller]\nname = "{USUAL} {style}"\n'
+        # What is tested is the order a node gets its inputs in; an answer later than its
+        # timeout (1 s by default, which a machine loaded several times over can miss) holds
+        # the last command, the one way load may change a run, so it is made generous.
+        "params = { answer_timeout_s = 10.0 }\n"
     )
     campaigns = []
     for name, workers in (("two", "2"), ("one", "1"), ("again", "2")):
