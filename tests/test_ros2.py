@@ -54,7 +54,7 @@ def runs(db: Path) -> list[tuple[Any, ...]]:
 @pytest.fixture(scope="module")
 def ros2_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("ros2")
-    spec = example_campaign(folder, 20, 40.0)
+    spec = example_campaign(folder, 12, 30.0)
     for name, workers in (("two", "2"), ("one", "1"), ("again", "2")):
         args = ("--db", str(folder / f"{name}.db"), "--workers", workers, "--reruns", "0")
         done = run_cli("campaign", str(spec), *args, cwd=ROOT)
@@ -302,7 +302,7 @@ def test_a_ros2_runs_failure_shrinks_and_reruns_the_same(
         ).fetchone()
     out = tmp_path / "min.json"
     done = run_cli(
-        "shrink", str(db), str(run_id), "--max-probes", "40", "-o", str(out), "--format", "json",
+        "shrink", str(db), str(run_id), "--max-probes", "20", "-o", str(out), "--format", "json",
         cwd=ROOT,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -320,11 +320,11 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     fast = json.dumps({"name": FOLLOWER, "params": {"speed_m_s": 0.9, "stop_m": 0.2}})
     done = run_cli(
         "diff", "--a", FOLLOWER, "--b", fast, "--situations", str(ros2_campaign / "two.db"),
-        "--n", "3", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
+        "--n", "2", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
     )  # fmt: skip
     assert done.returncode in (0, 1), done.stderr
     report = json.loads(done.stdout)
-    assert report["situations"] == 3
+    assert report["situations"] == 2
 
 
 def udp_sockets(pids: set[int]) -> set[tuple[str, int]]:
@@ -530,13 +530,20 @@ def test_a_node_sitgen_did_not_start_on_the_runs_domain_is_found_and_the_domain_
     domain = process_domain()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     confine(env)
-    node = ROOT / "examples/ros2/follower_node.py"
+    # A node that says when its endpoints exist (the run then finds it as it starts).
+    code = (
+        "import rclpy; from geometry_msgs.msg import Twist; from sensor_msgs.msg import "
+        "LaserScan; rclpy.init(); n = rclpy.create_node('stray'); "
+        "n.create_publisher(Twist, '/cmd_vel', 10); "
+        "n.create_subscription(LaserScan, '/scan', lambda m: None, 10); "
+        "print('ready', flush=True); rclpy.spin(n)"
+    )
     stray = subprocess.Popen(
-        [sys.executable, str(node), "--ros-args", "-p", "use_sim_time:=true"],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+        [sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True,
+        stderr=subprocess.DEVNULL, start_new_session=True,
     )  # fmt: skip
     try:
-        time.sleep(2.0)  # up and announced before the run's own node is
+        assert stray.stdout is not None and stray.stdout.readline().strip() == "ready"
         record = sitgen.run(situation, controller=FOLLOWER, time_limit=5.0)
         assert record.outcome == "error"
         assert f"DDS domain {domain} is not free: process {stray.pid}," in record.reason
