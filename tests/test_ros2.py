@@ -66,7 +66,7 @@ def test_a_ros2_node_drives_a_campaign_the_same_on_1_and_2_workers_and_on_a_repe
     ros2_campaign: Path,
 ) -> None:
     two = runs(ros2_campaign / "two.db")
-    assert len(two) == 20
+    assert len(two) == 12
     assert runs(ros2_campaign / "one.db") == two
     assert runs(ros2_campaign / "again.db") == two
     outcomes = {r[2] for r in two}
