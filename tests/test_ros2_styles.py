@@ -1,12 +1,12 @@
 """ROS 2 nodes written the usual ways (tests/ros2_nodes/usual.py: acting in the scan callback on
 the latest odometry and goal, on a timer on simulated time, through an approximate-time
 synchroniser, reading the route once) drive campaigns that store the same runs, trajectories
-included, on 1 and 2 workers and on a repeat, with every core of the machine kept busy
-beside them; ``sitgen check-controller`` says when a node's runs do not repeat. Skipped, with
-the reason, where the ROS 2 wheels (sitgen[ros2]) are not installed.
+included, on 2 workers and again on 1, with every core of the machine kept busy beside them;
+``sitgen check-controller`` says when a node's runs do not repeat. Skipped, with the reason,
+where the ROS 2 wheels (sitgen[ros2]) are not installed.
 
-``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 6, to keep CI short; 20 were
-checked by hand)."""
+``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 6, to keep CI short; the
+issue's figure is 20)."""
 
 from __future__ import annotations
 
@@ -71,7 +71,9 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
         "params = { answer_timeout_s = 10.0 }\n"
     )
     campaigns = []
-    for name, workers in (("two", "2"), ("one", "1"), ("again", "2")):
+    # The campaign on 1 worker repeats the one on 2: the same runs on both are the same runs
+    # again, whatever the number of workers.
+    for name, workers in (("two", "2"), ("one", "1")):
         db = tmp_path / f"{name}.db"
         done = run_cli(
             "campaign", str(spec), "--db", str(db), "--workers", workers, "--reruns", "0",
@@ -79,11 +81,10 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
         campaigns.append(stored(db))
-    two, one, again = campaigns
+    two, one = campaigns
     assert len(two) == RUNS and all(r[1] != "error" for r in two), [r[:3] for r in two]
     assert all(r[7] is not None for r in two)
     assert one == two
-    assert again == two
 
 
 def test_check_controller_says_when_a_nodes_runs_do_not_repeat() -> None:
