@@ -117,11 +117,7 @@ def foreign_processes(gids: Iterable[bytes], ours: set[int]) -> set[int]:
     it a while longer: it answers nothing), and a process's id is known to 16 bits, so
     this finds participants of this machine's processes, not every one."""
     low = {pid & 0xFFFF for pid in ours}
-    owners = {
-        int.from_bytes(gid[4:6], "little")
-        for gid in gids
-        if gid[:2] == EPROSIMA_VENDOR and int.from_bytes(gid[4:6], "little") not in low
-    }
+    owners = {int.from_bytes(g[4:6], "little") for g in gids if g[:2] == EPROSIMA_VENDOR} - low
     if not owners:
         return set()
     live = {int(e) for e in os.listdir("/proc") if e.isdigit()}

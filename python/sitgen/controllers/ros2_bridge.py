@@ -107,15 +107,17 @@ def _messages() -> Any:
     }
 
 
-def sec_nanosec(t: float) -> tuple[int, int]:
-    """Simulated time ``t`` seconds as a ROS time's (sec, nanosec), exact to the nanosecond."""
-    ns = round(t * 1e9)
+def sec_nanosec(t: float, later_s: float = 0.0) -> tuple[int, int]:
+    """Simulated time ``t`` seconds (plus ``later_s``, added in whole nanoseconds, so that
+    a period's end is exactly a timer's deadline) as a ROS time's (sec, nanosec)."""
+    ns = round(t * 1e9) + round(later_s * 1e9)
     return ns // 1_000_000_000, ns % 1_000_000_000
 
 
-def stamp(msg: dict[str, Any], t: float) -> Any:
-    """A builtin_interfaces/Time for simulated time ``t`` (``msg``: the message types)."""
-    sec, nanosec = sec_nanosec(t)
+def stamp(msg: dict[str, Any], t: float, later_s: float = 0.0) -> Any:
+    """A builtin_interfaces/Time for simulated time ``t`` (plus ``later_s``; ``msg``: the
+    message types)."""
+    sec, nanosec = sec_nanosec(t, later_s)
     return msg["Time"](sec=sec, nanosec=nanosec)
 
 
@@ -213,8 +215,7 @@ class Bridge:
         v, omega = (float(c) for c in obs["velocity"])
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
         clock = m["Clock"]()
-        end_ns = round(t * 1e9) + round(control_period_s(info) * 1e9)
-        clock.clock = m["Time"](sec=end_ns // 1_000_000_000, nanosec=end_ns % 1_000_000_000)
+        clock.clock = stamp(m, t, control_period_s(info))
         return [
             (self.odom, odom),
             (self.scan, laser_scan(m, info, obs["ranges"], t)),
