@@ -18,7 +18,8 @@ install: $(BIN)/python
 # so that `make wheel` after it finds everything compiled.
 install-test: $(BIN)/python
 	$(BIN)/pip install -q 'maturin>=1.7,<2'
-	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test,ros2]' \
+	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test,ros2,navground]' \
+		|| PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test,navground]' \
 		|| PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test]'
 	$(MAKE) -s test-artifacts/junit-10.xsd || echo "warning: no JUnit schema; its tests will skip" >&2
 

@@ -8,6 +8,7 @@ on the same machine only. Nothing here is asserted: speed is measured, not teste
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import platform
@@ -157,8 +158,10 @@ def own_cost_python(factory: Callable[[], Any], situation: sitgen.Situation) -> 
         ranges=o["ranges"], angles=o["angles"], pose=o["pose"], velocity=o["velocity"],
         stalled=o["stalled"], time=o["time"], tracks=tuple(o["tracks"]),
     )  # fmt: skip
+    from sitgen.run import reset_info
+
     controller = factory()
-    controller.reset({})
+    controller.reset(reset_info(situation, {}, situation.agent.id))
     calls = 2000
     start = time.perf_counter()
     for _ in range(calls):
@@ -198,13 +201,17 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
       a run redone after its worker died use it);
     - ``cmd:`` programs: a trivial reply, and the route follower of examples/ros2;
     - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
-      installed.
+      installed;
+    - ``navground:`` HL and ORCA with the sensed perception (on the fast path, as a campaign
+      runs them), where sitgen[navground] is installed: their own cost is the adapter and the
+      behaviour's compute, called in a loop.
 
     What limits each: the fast path adds a few µs to the built-in run's own step (the scene's
     simulation, laser and monitor, printed as ``straight``); a program pays a pipe round trip
     and a JSON line each way."""
     from user_controllers import Busy, Trivial
 
+    from sitgen.controllers.navground import NavgroundController
     from sitgen.controllers.ros2_bridge import ros2_available
 
     situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
@@ -232,6 +239,16 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     if reason is not None:
         print(f"skipped ros2: {reason}")
         kinds.pop("ros2 route follower")
+    try:
+        for behavior in ("HL", "ORCA"):
+            factory = functools.partial(NavgroundController, behavior)
+            kinds[f"navground {behavior}, in process"] = (
+                f"navground:{behavior}",
+                True,
+                own_cost_python(factory, situation),
+            )
+    except ValueError as e:  # navground is not installed
+        print(f"skipped navground: {e}")
     out: dict[str, Any] = {}
     for kind, (name, in_process, own_s) in kinds.items():
         steps: list[int] = []

@@ -55,20 +55,21 @@ def runs(db: Path) -> list[tuple[Any, ...]]:
 def ros2_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("ros2")
     spec = example_campaign(folder, 12, 30.0)
-    for name, workers in (("two", "2"), ("one", "1"), ("again", "2")):
+    # The campaign on 1 worker is the repeat of the one on 2 (test_ros2_styles.py repeats the
+    # usual node styles the same way).
+    for name, workers in (("two", "2"), ("one", "1")):
         args = ("--db", str(folder / f"{name}.db"), "--workers", workers, "--reruns", "0")
         done = run_cli("campaign", str(spec), *args, cwd=ROOT)
         assert done.returncode == 0, done.stderr
     return folder
 
 
-def test_a_ros2_node_drives_a_campaign_the_same_on_1_and_2_workers_and_on_a_repeat(
+def test_a_ros2_node_drives_a_campaign_the_same_on_2_workers_and_on_a_repeat_on_1(
     ros2_campaign: Path,
 ) -> None:
     two = runs(ros2_campaign / "two.db")
     assert len(two) == 12
     assert runs(ros2_campaign / "one.db") == two
-    assert runs(ros2_campaign / "again.db") == two
     outcomes = {r[2] for r in two}
     assert "error" not in outcomes, [r[3] for r in two if r[2] == "error"][:3]
     # The node is driven, not bypassed: it moves, and its failures are classified.
@@ -302,7 +303,7 @@ def test_a_ros2_runs_failure_shrinks_and_reruns_the_same(
         ).fetchone()
     out = tmp_path / "min.json"
     done = run_cli(
-        "shrink", str(db), str(run_id), "--max-probes", "20", "-o", str(out), "--format", "json",
+        "shrink", str(db), str(run_id), "--max-probes", "10", "-o", str(out), "--format", "json",
         cwd=ROOT,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -320,11 +321,11 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     fast = json.dumps({"name": FOLLOWER, "params": {"speed_m_s": 0.9, "stop_m": 0.2}})
     done = run_cli(
         "diff", "--a", FOLLOWER, "--b", fast, "--situations", str(ros2_campaign / "two.db"),
-        "--n", "2", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
+        "--n", "1", "--db", str(tmp_path / "d.db"), "--format", "json", cwd=ROOT,
     )  # fmt: skip
     assert done.returncode in (0, 1), done.stderr
     report = json.loads(done.stdout)
-    assert report["situations"] == 2
+    assert report["situations"] == 1
 
 
 def udp_sockets(pids: set[int]) -> set[tuple[str, int]]:

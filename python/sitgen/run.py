@@ -23,6 +23,7 @@ from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.user import is_user_controller, load_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
+from sitgen.world.terrain import wall_segments
 
 
 @dataclass(frozen=True)
@@ -125,8 +126,16 @@ def reset_info(
         "time_limit_s": float(resolved["time_limit_s"]),
         "control_period_s": float(controller.get("control_period_s") or sim["dt_s"]),
         "params": dict(controller.get("params") or {}),
+        "perception": controller.get("perception") or "sensed",
         **({"map": _map_info(situation)} if with_map else {}),
+        **({"walls": _walls(situation)} if controller.get("perception") == "exact" else {}),
     }
+
+
+def _walls(situation: Situation) -> list[list[float]]:
+    """The situation's walls as segments ``[x1, y1, x2, y2]`` (m), for the exact perception."""
+    grid = situation.grid
+    return wall_segments(grid.occupied, float(grid.resolution)).tolist()  # type: ignore[no-any-return]
 
 
 def _map_info(situation: Situation) -> dict[str, Any]:
@@ -140,27 +149,30 @@ def run_spec_with(
     controller: str | None = None,
     params: Mapping[str, float] | None = None,
     base: Mapping[str, Any] | None = None,
+    perception: str | None = None,
 ) -> dict[str, Any]:
     """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
-    with ``params`` over its own) given on top, as the commands' options give them. The
-    controller table given on top of is the spec's, else ``base`` (the situation's agent's):
-    for the same controller its params, fault and ``control_period_s`` stay; another
-    controller keeps only the ``control_period_s``."""
+    with ``params`` over its own, and its ``perception``) given on top, as the commands'
+    options give them. The controller table given on top of is the spec's, else ``base`` (the
+    situation's agent's): for the same controller its params, fault, ``control_period_s`` and
+    ``perception`` stay; another controller keeps only the last two."""
     run_spec: dict[str, Any] = dict(spec or {})
     if time_limit is not None:
         run_spec["time_limit_s"] = time_limit
-    if not controller and not params:
+    if not controller and not params and not perception:
         return run_spec
     given = dict(run_spec.get("controller") or base or {})
     if controller and given.get("name") not in (None, controller):
-        given = {k: v for k, v in given.items() if k == "control_period_s"}
+        given = {k: v for k, v in given.items() if k in ("control_period_s", "perception")}
     name = controller or given.get("name")
     if not name:
-        raise _core.SpecError("--param: no controller to give it to; name one with --controller")
+        option = "--param" if params else "--perception"
+        raise _core.SpecError(f"{option}: no controller to give it to; name one with --controller")
     run_spec["controller"] = {
         **given,
         "name": name,
         "params": {**dict(given.get("params") or {}), **dict(params or {})},
+        **({"perception": perception} if perception else {}),
     }
     return run_spec
 

@@ -27,6 +27,7 @@ pub fn robot(id: u32, start: (f64, f64, f64), waypoints: &[[f64; 2]], controller
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         },
         at_end: AtEnd::Stop,
     }

@@ -285,6 +285,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
         params: Default::default(),
         fault: None,
         control_period_s: None,
+        perception: None,
     };
     control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
 }

@@ -85,8 +85,9 @@ ControllerOption = Annotated[
         "--controller",
         "-c",
         help="snd_follow, snd, follow, vo, dwa, straight, python:MODULE:CLASS (or "
-        "python:FILE.py:CLASS), 'cmd:PROGRAM ARGS' or 'ros2:PROGRAM ARGS'. Default: the "
-        "spec's, else the situation's.",
+        "python:FILE.py:CLASS), 'cmd:PROGRAM ARGS', 'ros2:PROGRAM ARGS' or "
+        "navground:BEHAVIOR (HL, ORCA, HRVO, SocialForce, …). Default: the spec's, else the "
+        "situation's.",
     ),
 ]
 
@@ -99,6 +100,17 @@ ParamOption = Annotated[
         help="NAME=VALUE: a parameter of the controller, a number, over the spec's "
         "(repeatable). A python: class gets them as keyword arguments, a cmd: program in its "
         "reset message, a ros2: node as ROS parameters.",
+    ),
+]
+
+
+PerceptionOption = Annotated[
+    str | None,
+    typer.Option(
+        "--perception",
+        help="What the agent's controller is given of the other robots and the walls: sensed "
+        "(its laser and the robots the laser sees, the default) or exact (every robot's true "
+        "state, and the map's walls as segments). Over the spec's.",
     ),
 ]
 

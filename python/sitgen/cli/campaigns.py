@@ -31,6 +31,7 @@ from sitgen.cli.app import (
     ControllerOption,
     OnProgress,
     ParamOption,
+    PerceptionOption,
     RerunsOption,
     SeedOption,
     T,
@@ -50,27 +51,34 @@ from sitgen.cli.world import _coverage_target
 
 
 def _campaign_spec(
-    spec: Path | None, controller: str | None = None, params: list[str] | None = None
+    spec: Path | None,
+    controller: str | None = None,
+    params: list[str] | None = None,
+    perception: str | None = None,
 ) -> CampaignSpec:
-    """The campaign spec in file ``spec``, or the paper's, with the agent's controller and its
-    params as ``--controller`` and ``--param`` give them (:func:`_with_controller`)."""
+    """The campaign spec in file ``spec``, or the paper's, with the agent's controller, its
+    params and perception as ``--controller``, ``--param`` and ``--perception`` give them
+    (:func:`_with_controller`)."""
     from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
-    return _with_controller(parsed, controller, params)
+    return _with_controller(parsed, controller, params, perception)
 
 
 def _with_controller(
-    parsed: CampaignSpec, controller: str | None, params: list[str] | None
+    parsed: CampaignSpec,
+    controller: str | None,
+    params: list[str] | None,
+    perception: str | None = None,
 ) -> CampaignSpec:
     """``parsed`` whose runs give the agent ``controller`` (over the spec's run controller, or
-    its mission's) with ``params`` over its own; unchanged without either."""
+    its mission's) with ``params`` over its own and ``perception``; unchanged without any."""
     from sitgen.execution.jobs import campaign_from_data
     from sitgen.run import run_spec_with
 
     given = parse_params(params)
-    if not controller and not given:
+    if not controller and not given and not perception:
         return parsed
     if controller:
         _core.check_controller(controller, "--controller")
@@ -80,7 +88,7 @@ def _with_controller(
     source = copy.deepcopy(parsed.source)
     mission = source.get("situation", {}).get("mission", {}).get("agent_controller")
     source["run"] = run_spec_with(
-        source.get("run"), None, controller, given, mission or {"name": "snd_follow"}
+        source.get("run"), None, controller, given, mission or {"name": "snd_follow"}, perception
     )
     return campaign_from_data(source)
 
@@ -110,6 +118,7 @@ def campaign(
     ] = None,
     controller: ControllerOption = None,
     param: ParamOption = None,
+    perception: PerceptionOption = None,
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
@@ -165,7 +174,7 @@ def campaign(
     _check_reruns(reruns)
     check_output(junit, "--junit", db, spec)
     check_output(summary_json, "--summary", db, spec, junit)
-    parsed = _campaign_spec(spec, controller, param)
+    parsed = _campaign_spec(spec, controller, param, perception)
     total_n = parsed.n if n is None else n
     result = _stored(
         "campaign",
@@ -324,6 +333,7 @@ def search(
     ] = None,
     controller: ControllerOption = None,
     param: ParamOption = None,
+    perception: PerceptionOption = None,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -405,7 +415,7 @@ def search(
         source.setdefault("run", {})["scoring"] = learned.table()
         parsed = campaign_from_data(source)
     # Last: a directed search varies the run it starts from, driven by this controller.
-    parsed = _with_controller(parsed, controller, param)
+    parsed = _with_controller(parsed, controller, param, perception)
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
         plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)

@@ -22,6 +22,7 @@ from sitgen.cli.app import (
     AllowEditedOption,
     ControllerOption,
     ParamOption,
+    PerceptionOption,
     RunSpecOption,
     SensorSeedOption,
     TimeLimitOption,
@@ -105,6 +106,7 @@ def run_command(
     situation: Annotated[Path, typer.Argument(help="Situation file (JSON).")],
     controller: ControllerOption = None,
     param: ParamOption = None,
+    perception: PerceptionOption = None,
     time_limit: TimeLimitOption = None,
     seed: SensorSeedOption = 0,
     spec: RunSpecOption = None,
@@ -129,7 +131,12 @@ def run_command(
         raise UsageError(f"--rosbag2: {rosbag2} already exists; a rosbag2 is written anew")
     loaded = Situation.load(situation, allow_edited)
     run_spec = run_spec_with(
-        _read_run_spec(spec), None, controller, parse_params(param), loaded.agent.controller
+        _read_run_spec(spec),
+        None,
+        controller,
+        parse_params(param),
+        loaded.agent.controller,
+        perception,
     )
     record = run(
         loaded,
@@ -191,7 +198,8 @@ def check_controller_command(
 
     if not controller.startswith(USER_PREFIXES):
         raise UsageError(
-            f"controller `{controller}`: expected python:MODULE:CLASS, cmd:PROGRAM or ros2:PROGRAM"
+            f"controller `{controller}`: expected python:MODULE:CLASS, cmd:PROGRAM, "
+            "ros2:PROGRAM or navground:BEHAVIOR"
         )
     loaded = (
         Situation.load(situation, allow_edited)

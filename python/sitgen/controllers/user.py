@@ -1,7 +1,7 @@
-"""User controllers by name: ``python:module:Class``, ``cmd:program args…`` and
-``ros2:command args…`` (or any object with ``reset`` and ``act``), loaded and checked here so
-that the rest of sitgen asks one place what a name means (docs/controller-protocol.md,
-docs/ros2.md)."""
+"""User controllers by name: ``python:module:Class``, ``cmd:program args…``,
+``ros2:command args…`` and ``navground:BEHAVIOR`` (or any object with ``reset`` and ``act``),
+loaded and checked here so that the rest of sitgen asks one place what a name means
+(docs/controller-protocol.md, docs/ros2.md, docs/navground.md)."""
 
 from __future__ import annotations
 
@@ -18,11 +18,14 @@ from sitgen.controllers.external import (
     command_argv,
     program_path,
 )
+from sitgen.controllers.host import find_class, instantiate
 from sitgen.controllers.inprocess import InProcessController
+from sitgen.controllers.navground import PREFIX as NAVGROUND_PREFIX
+from sitgen.controllers.navground import NavgroundController
 from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name
 
-USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX)
+USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX, NAVGROUND_PREFIX)
 """How a user controller's name starts (the core runs every other name itself)."""
 
 
@@ -40,9 +43,14 @@ def load_controller(
     its own. Raises ControllerError if it cannot be started."""
     if not isinstance(name, str):
         return InProcessController(name, f"`{type(name).__name__}`", step_timeout_s)
+    shown = f"`{name}`"
+    if name.startswith(NAVGROUND_PREFIX):
+        # A navground behaviour is a Python class of sitgen's, on the path a `python:` class
+        # takes: called in a pool worker, in a host process of its own elsewhere.
+        name = f"python:{navground_target(name)}"
     if name.startswith("python:") and in_process:
         target = name.removeprefix("python:")
-        return InProcessController(target, f"`{name}`", step_timeout_s, True, params)
+        return InProcessController(target, shown, step_timeout_s, True, params)
     if name.startswith("python:"):
         # Not `-m`: the package imports the host module, and runpy would warn that it ran a
         # module already imported.
@@ -50,14 +58,19 @@ def load_controller(
         host = [sys.executable, "-c", start, name.removeprefix("python:")]
         if params:
             host.append(json.dumps(dict(params)))
-        return ProcessController(host, f"`{name}`", step_timeout_s, host=True)
+        return ProcessController(host, shown, step_timeout_s, host=True)
     if name.startswith("cmd:"):
         command_line = name.removeprefix("cmd:")
         argv = command_argv(command_line, f"`{name}`")
         return ProcessController(argv, f"`{name}`", step_timeout_s)
     if name.startswith(ROS2_PREFIX):
         return Ros2Controller(name.removeprefix(ROS2_PREFIX), f"`{name}`", params, step_timeout_s)
-    raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…")
+    raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…, navground:…")
+
+
+def navground_target(name: str) -> str:
+    """The ``module:Class`` target that runs the ``navground:BEHAVIOR`` controller ``name``."""
+    return f"{NavgroundController.__module__}:{name.removeprefix(NAVGROUND_PREFIX)}"
 
 
 def check_controller_name(name: str, params: Mapping[str, float] | None = None) -> None:
@@ -70,6 +83,11 @@ def check_controller_name(name: str, params: Mapping[str, float] | None = None) 
         program_path(command_argv(name.removeprefix("cmd:"), f"`{name}`"), f"`{name}`")
     elif name.startswith(ROS2_PREFIX):
         check_ros2_name(name)
+    elif name.startswith(NAVGROUND_PREFIX):
+        try:  # cheap to make here: the behaviour's name and parameters are checked
+            instantiate(find_class(navground_target(name)), params)
+        except ValueError as e:
+            raise ControllerError(f"controller `{name}` {e}") from None
     elif name.startswith("python:"):
         controller = load_controller(name, params=params)
         try:
@@ -79,5 +97,6 @@ def check_controller_name(name: str, params: Mapping[str, float] | None = None) 
 
 
 def is_user_controller(name: Any) -> bool:
-    """Whether ``name`` is run by Python (``python:``, ``cmd:``, ``ros2:``, or an object)."""
+    """Whether ``name`` is run by Python (``python:``, ``cmd:``, ``ros2:``, ``navground:``, or
+    an object)."""
     return not isinstance(name, str) or name.startswith(USER_PREFIXES)

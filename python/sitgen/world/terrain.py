@@ -93,3 +93,32 @@ def generate_terrain(spec: SpecLike, seed: int = 0) -> Grid:
         stages=stages,
         spec=json.loads(out["spec"]),
     )
+
+
+def wall_segments(occupied: npt.NDArray[np.bool_], resolution: float) -> npt.NDArray[np.float64]:
+    """The walls of an occupancy map as line segments, shape (n, 4): ``x1, y1, x2, y2`` in the
+    world frame (metres), one per maximal straight run of cell edges between an occupied and a
+    free cell. Outside the map counts as occupied, so the map's border is a wall where a free
+    cell meets it. The exact perception hands these to a controller that avoids lines (rather
+    than one disc per laser return), as a map-based simulator would."""
+    rows, _ = occupied.shape
+    occ = occupied.astype(bool)
+
+    def runs(edges: npt.NDArray[np.bool_]) -> tuple[npt.NDArray[np.intp], ...]:
+        # Each row of `edges` as runs of True: (row, first, one past last).
+        padded = np.pad(edges.astype(np.int8), ((0, 0), (1, 1)))
+        step = np.diff(padded, axis=1)
+        starts, ends = np.argwhere(step == 1), np.argwhere(step == -1)
+        return starts[:, 0], starts[:, 1], ends[:, 1]
+
+    # Horizontal edges: boundary b lies between rows b-1 and b (b = 0 the top border).
+    tall = np.pad(occ, ((1, 1), (0, 0)), constant_values=True)
+    b, c0, c1 = runs(tall[:-1, :] != tall[1:, :])
+    y = (rows - b) * resolution
+    horizontal = np.column_stack([c0 * resolution, y, c1 * resolution, y])
+    # Vertical edges: boundary b lies between columns b-1 and b, along the rows.
+    wide = np.pad(occ, ((0, 0), (1, 1)), constant_values=True)
+    b, r0, r1 = runs((wide[:, :-1] != wide[:, 1:]).T)
+    x = b * resolution
+    vertical = np.column_stack([x, (rows - r1) * resolution, x, (rows - r0) * resolution])
+    return np.vstack([horizontal, vertical]).astype(np.float64)

@@ -641,6 +641,7 @@ mod tests {
                 .collect(),
             fault: None,
             control_period_s: None,
+            perception: None,
         };
         assert!(crate::control::build(&spec, "c").is_ok());
     }
@@ -795,6 +796,7 @@ mod tests {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         };
         let mut failures = Vec::new();
         for seed in 1..=10 {
@@ -841,6 +843,7 @@ mod tests {
                 params: Default::default(),
                 fault: None,
                 control_period_s: None,
+                perception: None,
             };
             run_situation(&s, &driver, 600, |w| {
                 if w.steps() % 10 == 0 {
@@ -854,6 +857,7 @@ mod tests {
                     params: Default::default(),
                     fault: None,
                     control_period_s: None,
+                    perception: None,
                 };
                 let mut c = crate::control::build(&spec, "c").unwrap();
                 c.reset(&s.robots[0]);

@@ -244,6 +244,7 @@ mod tests {
                 params: Default::default(),
                 fault: None,
                 control_period_s: None,
+                perception: None,
             },
             at_end,
         }
@@ -263,6 +264,7 @@ mod tests {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         }
     }
 

@@ -104,8 +104,9 @@ pub fn period_steps(spec: &ControllerSpec, dt_s: f64, path: &str) -> Result<u64,
 }
 
 /// How the names of controllers run outside the core (by the Python layer) start:
-/// `python:MODULE:CLASS`, `cmd:PROGRAM …`, `ros2:PROGRAM …` (a ROS 2 node, docs/ros2.md).
-pub const EXTERNAL_PREFIXES: [&str; 3] = ["python:", "cmd:", "ros2:"];
+/// `python:MODULE:CLASS`, `cmd:PROGRAM …`, `ros2:PROGRAM …` (a ROS 2 node, docs/ros2.md),
+/// `navground:BEHAVIOR` (a navground behaviour, docs/navground.md).
+pub const EXTERNAL_PREFIXES: [&str; 4] = ["python:", "cmd:", "ros2:", "navground:"];
 
 /// Whether a controller name is run outside the core (by the Python layer).
 pub fn is_external(name: &str) -> bool {
@@ -146,6 +147,13 @@ pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
             return Err(SpecError::new(
                 name_path,
                 format!("`{prefix}` names no program; expected {prefix}PROGRAM ARGS"),
+            ));
+        }
+    } else if let Some(behavior) = spec.name.strip_prefix("navground:") {
+        if behavior.trim().is_empty() || behavior.contains(char::is_whitespace) {
+            return Err(SpecError::new(
+                name_path,
+                format!("`{}`: expected navground:BEHAVIOR (HL, ORCA, …)", spec.name),
             ));
         }
     } else {

@@ -149,6 +149,7 @@ mod tests {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         }
     }
 
@@ -291,6 +292,7 @@ mod tests {
             params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
             fault: None,
             control_period_s: None,
+            perception: None,
         };
         let err = |p: &[(&str, f64)]| {
             crate::control::build(&spec(p), "mission.agent_controller")

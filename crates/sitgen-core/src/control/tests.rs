@@ -72,6 +72,7 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
         params: Default::default(),
         fault: None,
         control_period_s: None,
+        perception: None,
     };
     run_situation(&s, &straight, steps, |_| false)
 }
@@ -106,6 +107,7 @@ pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> Str
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
         fault: None,
         control_period_s: None,
+        perception: None,
     };
     build(&spec, path)
         .err()
@@ -144,6 +146,7 @@ fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
         params: Default::default(),
         fault: None,
         control_period_s: None,
+        perception: None,
     };
     let start = s.robots[1].start;
     let dt = SimSpec::default().dt_s;

@@ -378,6 +378,7 @@ mod tests {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         }
     }
 

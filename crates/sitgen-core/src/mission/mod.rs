@@ -76,6 +76,24 @@ pub struct ControllerSpec {
     /// a Stage running faster than real time). Default: every step.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub control_period_s: Option<f64>,
+    /// What the controller is given of the other robots and the walls (docs/controller-protocol.md,
+    /// "Perception"); default [`Perception::Sensed`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perception: Option<Perception>,
+}
+
+/// What a controller perceives of the world beyond its own state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Perception {
+    /// What the robot's sensors give, as on a deployed robot: the laser scan, and as tracks the
+    /// robots the scan sees now.
+    #[default]
+    Sensed,
+    /// What a simulator knows: the scan, and as tracks every other robot's true position and
+    /// velocity, seen or not; a user controller is also given the map's walls as line
+    /// segments when it starts.
+    Exact,
 }
 
 impl ControllerSpec {
@@ -86,6 +104,7 @@ impl ControllerSpec {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         }
     }
 }

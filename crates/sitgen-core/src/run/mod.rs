@@ -26,7 +26,7 @@ use crate::control::{self, Command, Controller};
 use crate::coverage::{CoverageRecord, Observer};
 use crate::error::{join, SpecError};
 use crate::failure::{self, Failure, FailureClass};
-use crate::mission::ControllerSpec;
+use crate::mission::{ControllerSpec, Perception};
 use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
 use crate::scoring::{self, Score, ScoringSpec};
 use crate::sim::{Observation, SimSpec, World};
@@ -217,6 +217,8 @@ pub struct Run {
     controllers: Vec<Option<Box<dyn Controller>>>,
     /// Steps between each robot's decisions (its controller's `control_period_s`).
     periods: Vec<u64>,
+    /// Whether each robot's controller has the exact perception ([`Perception::Exact`]).
+    exact: Vec<bool>,
     /// The agent's observation of the world as it stands, once asked for before the step.
     agent_scan: Option<Observation>,
     agent: u32,
@@ -277,9 +279,11 @@ impl Run {
         let coverage = Observer::new(&world, agent, spec.monitor.attribution_window_s);
         let mut controllers = Vec::with_capacity(situation.robots.len());
         let mut periods = Vec::with_capacity(situation.robots.len());
+        let mut exact = Vec::with_capacity(situation.robots.len());
         for r in &situation.robots {
             let (controller, path) = controller_spec(situation, spec, r.id);
             periods.push(control::period_steps(controller, spec.sim.dt_s, &path)?);
+            exact.push(controller.perception == Some(Perception::Exact));
             if is_external(&controller.name) {
                 if r.id != agent {
                     return Err(SpecError::new(
@@ -310,6 +314,7 @@ impl Run {
             coverage: Some(coverage),
             controllers,
             periods,
+            exact,
             agent_scan: None,
             agent,
             scoring: spec.scoring.clone(),
@@ -354,13 +359,25 @@ impl Run {
     /// coming step, which would otherwise cast the same beams again (noise is keyed by step and
     /// robot, so it is the same scan either way).
     pub fn agent_observation(&mut self) -> Observation {
-        self.agent_scan
+        let obs = self
+            .agent_scan
             .get_or_insert_with(|| {
                 self.world
                     .observe(self.agent)
                     .expect("the agent is in the world")
             })
-            .clone()
+            .clone();
+        self.perceived(self.agent, obs)
+    }
+
+    /// What robot `id`'s controller is given of its observation `obs`: with the exact
+    /// perception, every other robot's true state as its tracks in place of those its laser
+    /// sees (the monitor still knows which the laser saw).
+    fn perceived(&self, id: u32, mut obs: Observation) -> Observation {
+        if self.exact[id as usize] {
+            obs.tracks = self.world.true_tracks(id);
+        }
+        obs
     }
 
     /// How many waypoints of its route the agent has reached, as the monitor sees it (the
@@ -467,6 +484,7 @@ impl Run {
                     continue;
                 }
             }
+            let obs = self.perceived(id, obs);
             let command = match &mut self.controllers[id as usize] {
                 Some(c) => c.act(&obs),
                 None => agent_command.unwrap_or((0.0, 0.0)),

@@ -19,6 +19,7 @@ pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
             params: Default::default(),
             fault: None,
             control_period_s: None,
+            perception: None,
         }),
         time_limit_s,
         ..RunSpec::default()
@@ -512,6 +513,19 @@ fn a_run_spec_with_an_unknown_controller_or_too_many_steps_is_refused_before_run
         e.starts_with("run.controller.name: `cmd:` names no program"),
         "{e}"
     );
+    let e = error(r#"{"controller": {"name": "navground:"}}"#);
+    assert_eq!(
+        e,
+        "run.controller.name: `navground:`: expected navground:BEHAVIOR (HL, ORCA, …)"
+    );
+    assert!(RunSpec::from_json(r#"{"controller": {"name": "navground:ORCA"}}"#, "run").is_ok());
+    let e = error(r#"{"controller": {"name": "vo", "perception": "psychic"}}"#);
+    assert!(
+        e.starts_with(
+            "run.controller.perception: unknown variant `psychic`, expected `sensed` or `exact`"
+        ),
+        "{e}"
+    );
     let e = error(r#"{"sim": {"dt_s": 1e-9}}"#);
     assert!(e.starts_with("run.sim.dt_s: 600 s at 0.000000001 s per step is 600000000000 steps; a run may take at most 10000000"), "{e}");
     assert!(RunSpec::from_json(r#"{"time_limit_s": 86400, "sim": {"dt_s": 0.01}}"#, "run").is_ok());
@@ -870,4 +884,32 @@ fn a_copy_watching_for_a_class_stops_past_its_horizon_only_once_it_has_shown_it(
         e.to_string().starts_with("run.perturbation.watch_for"),
         "{e}"
     );
+}
+
+#[test]
+fn the_exact_perception_tracks_every_robot_and_leaves_the_monitor_what_the_laser_saw() {
+    // The peer is behind the agent, outside its 180° laser: sensed, the agent tracks nothing;
+    // exact, it tracks the peer where it truly is, with its velocity once it moves.
+    let s = rear_approach();
+    let mut sensed = Run::new(&s, &spec(Some("cmd:still"), 10.0), 0).unwrap();
+    assert!(sensed.agent_observation().tracks.is_empty());
+    let mut exact_spec = spec(Some("cmd:still"), 10.0);
+    exact_spec.controller.as_mut().unwrap().perception = Some(Perception::Exact);
+    let mut exact = Run::new(&s, &exact_spec, 0).unwrap();
+    let tracks = exact.agent_observation().tracks;
+    assert_eq!(tracks.len(), 1);
+    assert_eq!((tracks[0].id, tracks[0].position), (1, (6.0, 10.0)));
+    for _ in 0..20 {
+        exact.step(Some((0.0, 0.0)));
+    }
+    let t = exact.agent_observation().tracks[0];
+    assert!(
+        close(t.velocity.0, 0.5) && close(t.velocity.1, 0.0),
+        "{t:?}"
+    );
+    // The same commands give the same run: the peer still strikes an agent that never saw it.
+    while !exact.step(Some((0.0, 0.0))) {}
+    let (exact, sensed) = (exact.finish(), run_with_still_agent(&s, 10.0));
+    assert_eq!(exact.events, sensed.events);
+    assert!(!of_kind(&exact, EventKind::Collision).is_empty());
 }

@@ -137,6 +137,16 @@ pub struct RobotState {
 }
 
 impl RobotState {
+    /// This robot as another robot's perception tracks it: position and world-frame velocity.
+    pub fn track(&self) -> Track {
+        let (s, c) = self.pose.heading_rad.sin_cos();
+        Track {
+            id: self.id,
+            position: (self.pose.x_m, self.pose.y_m),
+            velocity: (self.velocity.0 * c, self.velocity.0 * s),
+        }
+    }
+
     /// The footprint at `pose`.
     pub fn footprint_at(&self, pose: &Pose) -> Rect {
         let (s, c) = pose.heading_rad.sin_cos();
@@ -740,14 +750,7 @@ impl World {
                 .robots
                 .iter()
                 .filter(|o| seen.contains(&o.id))
-                .map(|o| {
-                    let (s, c) = o.pose.heading_rad.sin_cos();
-                    Track {
-                        id: o.id,
-                        position: (o.pose.x_m, o.pose.y_m),
-                        velocity: (o.velocity.0 * c, o.velocity.0 * s),
-                    }
-                })
+                .map(RobotState::track)
                 .collect();
             (ranges, self.bearings.clone(), tracks)
         } else {
@@ -763,6 +766,16 @@ impl World {
             time_s: self.time_s,
             tracks,
         })
+    }
+
+    /// Every robot but `id` as it truly is now (the exact perception's tracks, in id order),
+    /// whether or not a laser would see it.
+    pub fn true_tracks(&self, id: u32) -> Vec<Track> {
+        self.robots
+            .iter()
+            .filter(|o| o.id != id)
+            .map(RobotState::track)
+            .collect()
     }
 
     /// One laser scan of robot `i` from its current pose.

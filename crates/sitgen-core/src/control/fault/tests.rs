@@ -21,6 +21,7 @@ fn spec(name: &str, fault: Option<&str>) -> ControllerSpec {
         params: BTreeMap::new(),
         fault: fault.map(str::to_string),
         control_period_s: None,
+        perception: None,
     }
 }
 

@@ -415,6 +415,7 @@ fn parameters_are_checked_and_named() {
         params: params.iter().map(|&(k, v)| (k.to_string(), v)).collect(),
         fault: None,
         control_period_s: None,
+        perception: None,
     };
     let err = |p: &[(&str, f64)]| {
         crate::control::build(&spec(p), "agent")
@@ -468,6 +469,7 @@ fn named(name: &str) -> ControllerSpec {
         params: Default::default(),
         fault: None,
         control_period_s: None,
+        perception: None,
     }
 }
 

@@ -1,0 +1,183 @@
+"""navground's behaviours as the agent (``navground:BEHAVIOR``), with both perceptions:
+campaigns without errors, the same on 1 and 2 workers and on either controller path, the map's
+walls as the exact perception gives them, and one-line errors for a bad name or parameter."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+
+import sitgen
+from sitgen.run import reset_info
+from sitgen.world.terrain import wall_segments
+from tests.conftest import ROOT, run_cli
+
+navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
+
+BEHAVIOURS = ["HL", "ORCA", "HRVO", "SocialForce"]
+PERCEPTIONS = ("sensed", "exact")
+
+CAMPAIGN = """
+n = {n}
+[situation.terrain]
+preset = "rocky_desert"
+width_m = 24.0
+height_m = 24.0
+[situation.mission]
+peers_min = 1
+peers_max = 4
+min_route_length_m = 12.0
+[run]
+time_limit_s = 40.0
+[run.controller]
+name = "navground:{behavior}"
+[vary]
+"run.controller.perception" = {{ choice = ["sensed", "exact"] }}
+"""
+
+
+def stored_runs(db: Path) -> list[tuple[Any, ...]]:
+    with sqlite3.connect(db) as c:
+        return c.execute(
+            "SELECT id, run_spec, outcome, reason, score, failure_class, steps, waypoints_reached, "
+            "events_sha256 FROM runs ORDER BY id"
+        ).fetchall()
+
+
+@pytest.mark.parametrize("behavior", BEHAVIOURS)
+def test_a_behaviour_drives_a_campaign_with_both_perceptions_the_same_on_1_and_2_workers(
+    behavior: str, tmp_path: Path
+) -> None:
+    spec = tmp_path / "c.toml"
+    spec.write_text(CAMPAIGN.format(n=8, behavior=behavior))
+    for workers in ("2", "1"):
+        done = run_cli(
+            "campaign", str(spec), "--db", str(tmp_path / f"{workers}.db"), "--workers", workers,
+            "--reruns", "0", cwd=ROOT,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+    two = stored_runs(tmp_path / "2.db")
+    assert stored_runs(tmp_path / "1.db") == two
+    assert len(two) == 8 and not [r for r in two if r[2] == "error"], [r[3] for r in two]
+    perceptions = {json.loads(r[1])["controller"]["perception"] for r in two}
+    assert perceptions == {"sensed", "exact"}
+    # Driven by the behaviour, not standing still: most runs reach a waypoint.
+    assert sum(r[7] > 0 for r in two) >= 6, [r[7] for r in two]
+
+
+def test_the_host_process_and_the_fast_path_give_the_same_run(situation: sitgen.Situation) -> None:
+    for perception in PERCEPTIONS:
+        spec = {"controller": {"name": "navground:ORCA", "perception": perception}}
+        host = sitgen.run(situation, time_limit=30.0, spec=spec)
+        fast = sitgen.run(situation, time_limit=30.0, spec=spec, in_process=True)
+        assert host.outcome != "error", host.reason
+        assert np.array_equal(host.trajectory, fast.trajectory) and host.events == fast.events
+
+
+def test_the_perceptions_differ_where_a_robot_is_out_of_sight(
+    situation: sitgen.Situation,
+) -> None:
+    """The same behaviour sensed and exact drives differently: the exact one knows the peers
+    its laser does not see (a finding for a user is in exactly that difference)."""
+    specs = [{"controller": {"name": "navground:HL", "perception": p}} for p in PERCEPTIONS]
+    runs = [sitgen.run(situation, time_limit=30.0, spec=spec) for spec in specs]
+    assert not np.array_equal(runs[0].trajectory, runs[1].trajectory)
+
+
+def test_params_reach_the_behaviour_under_its_own_names(situation: sitgen.Situation) -> None:
+    slow = sitgen.run(
+        situation, controller="navground:ORCA", time_limit=20.0,
+        params={"optimal_speed": 0.2, "time_horizon": 4.0}, in_process=True,
+    )  # fmt: skip
+    fast = sitgen.run(situation, controller="navground:ORCA", time_limit=20.0, in_process=True)
+    agent = situation.agent.id
+    top = [
+        float(np.max(np.hypot(*np.diff(r.trajectory[:, agent, :2], axis=0).T))) / 0.1
+        for r in (slow, fast)
+    ]
+    assert top[0] <= 0.2 + 1e-6 < top[1]
+
+
+def test_a_bad_behaviour_parameter_or_perception_is_one_line_before_any_run(
+    tmp_path: Path,
+) -> None:
+    cases = [
+        (["--controller", "navground:Nope"], "no navground behaviour `Nope`; registered: "),
+        (["--controller", "navground:HL", "-p", "bogus=1"], "unknown parameter `bogus` of HL"),
+        (["--controller", "navground:HL", "-p", "resolution=2.5"], "`resolution` is a whole"),
+        (["--controller", "navground:HL", "--perception", "psychic"], "unknown variant"),
+    ]
+    for args, said in cases:
+        db = tmp_path / "x.db"
+        done = run_cli("campaign", *args, "--n", "2", "--db", str(db))
+        assert done.returncode == 2 and said in done.stderr, done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+        assert not db.exists()
+
+
+def test_check_controller_passes_every_behaviour() -> None:
+    for behavior in BEHAVIOURS:
+        done = run_cli("check-controller", f"navground:{behavior}")
+        assert done.returncode == 0, done.stdout
+
+
+def test_the_exact_perception_is_told_the_maps_walls(situation: sitgen.Situation) -> None:
+    exact = {"controller": {"name": "navground:HL", "perception": "exact"}}
+    info = reset_info(situation, exact, situation.agent.id)
+    grid = situation.grid
+    assert info["perception"] == "exact"
+    assert np.array_equal(info["walls"], wall_segments(grid.occupied, grid.resolution))
+    sensed = reset_info(situation, {"controller": {"name": "navground:HL"}}, situation.agent.id)
+    assert sensed["perception"] == "sensed" and "walls" not in sensed
+
+
+def edges_of(occupied: np.ndarray[Any, Any]) -> set[tuple[float, float, float, float]]:
+    """Every unit cell edge between an occupied cell and a free one (outside occupied), cell by
+    cell: the reference the merged segments must cover exactly."""
+    rows, cols = occupied.shape
+
+    def occ(r: int, c: int) -> bool:
+        return not (0 <= r < rows and 0 <= c < cols) or bool(occupied[r, c])
+
+    edges = set()
+    for r in range(-1, rows + 1):
+        for c in range(-1, cols + 1):
+            if occ(r, c):
+                continue
+            y0, x0 = rows - 1 - r, c  # the free cell's bottom-left corner
+            for (dr, dc), edge in {
+                (-1, 0): (x0, y0 + 1, x0 + 1, y0 + 1), (1, 0): (x0, y0, x0 + 1, y0),
+                (0, -1): (x0, y0, x0, y0 + 1), (0, 1): (x0 + 1, y0, x0 + 1, y0 + 1),
+            }.items():  # fmt: skip
+                if occ(r + dr, c + dc):
+                    edges.add(edge)
+    return {e for e in edges if all(v >= -1e-9 for v in e)}
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.bool_, st.tuples(st.integers(1, 7), st.integers(1, 7))))
+def test_walls_are_the_free_cells_edges_merged_into_straight_runs(
+    occupied: np.ndarray[Any, Any],
+) -> None:
+    segments = wall_segments(occupied, 1.0)
+    unit = set()
+    for x1, y1, x2, y2 in segments:
+        assert x1 == x2 or y1 == y2, "axis-aligned"
+        n = round(abs(x2 - x1) + abs(y2 - y1))
+        for k in range(n):
+            if x1 == x2:
+                unit.add((x1, y1 + k, x1, y1 + k + 1))
+            else:
+                unit.add((x1 + k, y1, x1 + k + 1, y1))
+    # Every edge between free and occupied is covered once, and no other.
+    total = sum(abs(s[2] - s[0]) + abs(s[3] - s[1]) for s in segments)
+    reference = edges_of(occupied)
+    assert unit == reference and total == len(reference)
