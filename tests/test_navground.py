@@ -5,7 +5,9 @@ walls as the exact perception gives them, and one-line errors for a bad name or 
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +20,7 @@ from hypothesis.extra.numpy import arrays
 import sitgen
 from sitgen.run import reset_info
 from sitgen.world.terrain import wall_segments
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli, sitgen_command
 
 navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
 
@@ -181,3 +183,41 @@ def test_walls_are_the_free_cells_edges_merged_into_straight_runs(
     total = sum(abs(s[2] - s[0]) + abs(s[3] - s[1]) for s in segments)
     reference = edges_of(occupied)
     assert unit == reference and total == len(reference)
+
+
+PLUGIN = '''
+import numpy as np
+from navground.core import Behavior
+
+
+class Cautious(Behavior, name="SitgenTestCautious"):
+    """Heads for the target at a third of its optimal speed, avoiding nothing."""
+
+    def desired_velocity_towards_point(self, point, speed, time_step):
+        delta = np.asarray(point) - self.pose.position
+        distance = float(np.linalg.norm(delta))
+        return delta / distance * min(speed, distance) / 3 if distance > 0 else delta
+'''
+
+
+def test_a_behaviour_a_users_plugin_registers_is_a_controller(tmp_path: Path) -> None:
+    """A Python behaviour written as navground's docs say, registered through its plugin entry
+    point, is found by name in every process of a campaign."""
+    (tmp_path / "cautious_plugin.py").write_text(PLUGIN)
+    info = tmp_path / "cautious_plugin-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: cautious-plugin\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(
+        "[navground_behaviors]\ncautious = cautious_plugin:Cautious\n"
+    )
+    db = tmp_path / "c.db"
+    env = {**os.environ, "PYTHONPATH": str(tmp_path)}
+    done = subprocess.run(
+        [*sitgen_command(), "campaign", "--controller", "navground:SitgenTestCautious",
+         "--n", "3", "--db", str(db), "--reruns", "0"],
+        capture_output=True, text=True, env=env, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode in (0, 1), done.stderr
+    rows = stored_runs(db)
+    assert len(rows) == 3 and not [r for r in rows if r[2] == "error"], [r[3] for r in rows]
+    assert any(r[7] > 0 for r in rows), "it drove"

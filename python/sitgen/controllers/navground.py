@@ -1,8 +1,8 @@
 """navground's navigation behaviours as sitgen controllers: ``navground:BEHAVIOR``.
 
 What it does: drives a robot with one of navground's behaviours — ``HL`` (human-like),
-``ORCA``, ``HRVO``, ``SocialForce``, or any behaviour a user has registered with navground
-(a plugin, or a Python class registered before the run) — towards the next waypoint of its
+``ORCA``, ``HRVO``, ``SocialForce``, or any behaviour a navground plugin registers (C++ or
+Python, found by navground's plugin mechanism) — towards the next waypoint of its
 route. Each decision it sets the behaviour's state from the observation (pose, velocity,
 neighbours, obstacles), targets the waypoint the monitor counts as next as a point, and returns
 the behaviour's command for two-wheel differential kinematics at the robot's limits (the wheel
@@ -62,13 +62,16 @@ COMMON_PARAMS = ("horizon", "safety_margin", "optimal_speed", "rotation_tau")
 """Parameters every navground behaviour has (attributes of ``navground.core.Behavior``)."""
 
 
+@functools.cache
 def _core() -> Any:
-    """navground's core module, or a one-line ValueError saying how to install it."""
+    """navground's core module with its plugins loaded (once a process), or a one-line
+    ValueError saying how to install it."""
     try:
         # An optional dependency (sitgen[navground]), loaded when a navground controller is.
         import navground.core as core
     except ImportError as e:
         raise ValueError(f"navground is not installed ({e}); install sitgen[navground]") from None
+    core.load_plugins()
     return core
 
 
@@ -193,8 +196,12 @@ class NavgroundController:
         return v_cmd, min(max(float(cmd.angular_speed), -omega_max), omega_max)
 
     def _perceive(self, obs: Any, x: float, y: float, heading: float) -> None:
-        """Set the behaviour's environment state from what the perception gives."""
+        """Set the behaviour's environment state from what the perception gives (a behaviour
+        whose state is not geometric — none, or navground's raw sensing buffers — is given
+        nothing: it avoids nothing this adapter could tell it of)."""
         core, state = self._core, self.behavior.environment_state
+        if not isinstance(state, core.GeometricState):
+            return
         r = self.radius_m
         tracks = obs.tracks
         state.neighbors = [
