@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import sitgen
+from sitgen.controllers.navground import thinned
 from sitgen.run import reset_info
 from sitgen.world.terrain import wall_segments
 from tests.conftest import ROOT, run_cli, sitgen_command
@@ -221,3 +222,19 @@ def test_a_behaviour_a_users_plugin_registers_is_a_controller(tmp_path: Path) ->
     rows = stored_runs(db)
     assert len(rows) == 3 and not [r for r in rows if r[2] == "error"], [r[3] for r in rows]
     assert any(r[7] > 0 for r in rows), "it drove"
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.float64, st.tuples(st.integers(0, 60), st.just(2)), elements=st.floats(-5, 5)))
+def test_thinned_laser_points_keep_one_in_each_cell_and_cover_the_rest(
+    points: np.ndarray[Any, Any],
+) -> None:
+    cell = 0.2
+    kept = thinned(points, cell)
+    cells = [tuple(c) for c in np.floor(kept / cell).astype(int)]
+    assert len(set(cells)) == len(cells), "one a cell"
+    # In scan order, each the first of its cell.
+    indices = [int(np.flatnonzero((points == k).all(axis=1))[0]) for k in kept]
+    assert indices == sorted(indices)
+    for p in points:  # every point has a kept one in its own cell
+        assert tuple(np.floor(p / cell).astype(int)) in set(cells)
