@@ -229,8 +229,8 @@ class NavgroundController:
         ranges = np.asarray(obs.ranges)
         # Beyond the behaviour's horizon a return changes nothing it decides; a beam at
         # maximum range hit nothing.
-        near = min(float(obs.max_range), float(self.behavior.horizon) + r)
-        hit = ranges < near
+        reach_m = min(float(obs.max_range), float(self.behavior.horizon) + r)
+        hit = ranges < reach_m
         bearing = np.asarray(obs.angles)[hit] + heading
         points = np.column_stack(
             [x + ranges[hit] * np.cos(bearing), y + ranges[hit] * np.sin(bearing)]
