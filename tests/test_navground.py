@@ -187,14 +187,22 @@ def test_walls_are_the_free_cells_edges_merged_into_straight_runs(
 
 
 PLUGIN = '''
+import time
+
 import numpy as np
 from navground.core import Behavior
 
 
 class Cautious(Behavior, name="SitgenTestCautious"):
-    """Heads for the target at a third of its optimal speed, avoiding nothing."""
+    """Heads for the target at a third of its optimal speed, avoiding nothing; its first
+    decision stalls for longer than a user controller's default step timeout."""
+
+    stalled = False
 
     def desired_velocity_towards_point(self, point, speed, time_step):
+        if not Cautious.stalled:
+            Cautious.stalled = True
+            time.sleep(1.5)
         delta = np.asarray(point) - self.pose.position
         distance = float(np.linalg.norm(delta))
         return delta / distance * min(speed, distance) / 3 if distance > 0 else delta
@@ -203,7 +211,8 @@ class Cautious(Behavior, name="SitgenTestCautious"):
 
 def test_a_behaviour_a_users_plugin_registers_is_a_controller(tmp_path: Path) -> None:
     """A Python behaviour written as navground's docs say, registered through its plugin entry
-    point, is found by name in every process of a campaign."""
+    point, is found by name in every process of a campaign; a decision that stalls 1.5 s (a
+    loaded machine) does not end its run."""
     (tmp_path / "cautious_plugin.py").write_text(PLUGIN)
     info = tmp_path / "cautious_plugin-0.1.dist-info"
     info.mkdir()

@@ -52,6 +52,12 @@ import numpy.typing as npt
 PREFIX = "navground:"
 """How a navground controller's name starts: ``navground:BEHAVIOR``."""
 
+STEP_TIMEOUT_S = 10.0
+"""Wall-clock seconds a navground controller's decision may take before its run ends as an
+error (a user controller's default is 1 s): a behaviour decides in milliseconds (ORCA's
+slowest decision in the case study's worst run, 45 ms on a loaded machine), so only a hang
+should end a run, not a stall of a loaded machine (one such stall passed 1 s)."""
+
 PERCEPTIONS = ("sensed", "exact")
 """What a controller may perceive (the run spec's ``controller.perception``)."""
 

@@ -21,6 +21,7 @@ from sitgen.controllers.external import (
 from sitgen.controllers.host import find_class, instantiate
 from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.navground import PREFIX as NAVGROUND_PREFIX
+from sitgen.controllers.navground import STEP_TIMEOUT_S as NAVGROUND_STEP_TIMEOUT_S
 from sitgen.controllers.navground import NavgroundController
 from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name
@@ -46,8 +47,11 @@ def load_controller(
     shown = f"`{name}`"
     if name.startswith(NAVGROUND_PREFIX):
         # A navground behaviour is a Python class of sitgen's, on the path a `python:` class
-        # takes: called in a pool worker, in a host process of its own elsewhere.
+        # takes: called in a pool worker, in a host process of its own elsewhere. Its steps
+        # take milliseconds; a wall-clock limit near that would make a loaded machine's
+        # stall the behaviour's error, so only a step that hangs ends its run.
         name = f"python:{navground_target(name)}"
+        step_timeout_s = max(step_timeout_s, NAVGROUND_STEP_TIMEOUT_S)
     if name.startswith("python:") and in_process:
         target = name.removeprefix("python:")
         return InProcessController(target, shown, step_timeout_s, True, params)
