@@ -119,7 +119,7 @@ def thinned(points: npt.NDArray[np.float64], cell_m: float) -> npt.NDArray[np.fl
     """The first of ``points`` (in order) in each square of a ``cell_m`` grid. Discs of radius
     ``cell_m / 2`` on what is left still wall off what the points did from a robot wider than
     ``2 cell_m``, with a few dozen obstacles where a scan has a hundred or more: HRVO's cost
-    grows with their cube and Social Force's (in Python) with their number."""
+    grows with their cube and Social Force's (in Python) with their number (docs/navground.md)."""
     if not len(points):
         return points
     cells = np.floor(points / cell_m).astype(np.int64)
