@@ -17,7 +17,9 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from sitgen.triage.shrink import ShrinkResult, ddmin, shrink
+from sitgen.triage.candidate import ShrinkResult
+from sitgen.triage.ddmin import ddmin
+from sitgen.triage.shrink import shrink
 from sitgen.world.situation import Situation
 from tests.conftest import ROOT, run_cli
 from tests.test_campaign import write_spec

@@ -5,10 +5,11 @@ Writes happen one batch per transaction, so a process killed at any moment leave
 committed run intact and loses only the runs it had in flight; a resumed campaign skips the
 runs already stored.
 
-:class:`Store` is longer than the project's 600-line guide: it is the one class that opens,
-upgrades and writes stores, and its writes read best beside each other, under the transaction
-rule above. The schema is in :mod:`sitgen.store.schema`, the records the store hands out in
-:mod:`sitgen.store.records`; both are named here too, where users of the store look."""
+:class:`Store` opens, upgrades and writes stores; what it keeps of judged runs (fault kills,
+diffs, shrinks, robustness, judgements) is its base :class:`~sitgen.store.verdicts.Verdicts`,
+its connection :mod:`sitgen.store.connection`. The schema is in :mod:`sitgen.store.schema`, the
+records the store hands out in :mod:`sitgen.store.records`; both are named here too, where users
+of the store look."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from sitgen.store.connection import Connection, read_only_part
 from sitgen.store.records import (
     MAX_RUN_ID,
     WORSE,
@@ -54,61 +56,12 @@ from sitgen.store.schema import (
     SHRINK_SCHEMA,
     TABLES,
     TRAJECTORY_ENCODING,
-    add_columns,
     upgrade,
 )
+from sitgen.store.verdicts import Verdicts
 
 
-class _Connection(sqlite3.Connection):
-    """A store's connection: an error from SQLite (a full disk, a damaged page) names the
-    store's file, whichever command met it. It stays an ``sqlite3.Error`` of the same kind, so
-    whatever catches one still does."""
-
-    path = ""
-
-    def _named(self, e: sqlite3.Error) -> sqlite3.Error:
-        return type(e)(f"{self.path}: {e}")
-
-    def execute(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
-        try:
-            return super().execute(*args, **kwargs)
-        except sqlite3.Error as e:
-            raise self._named(e) from None
-
-    def executemany(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
-        try:
-            return super().executemany(*args, **kwargs)
-        except sqlite3.Error as e:
-            raise self._named(e) from None
-
-    def executescript(self, *args: Any, **kwargs: Any) -> sqlite3.Cursor:
-        try:
-            return super().executescript(*args, **kwargs)
-        except sqlite3.Error as e:
-            raise self._named(e) from None
-
-    def commit(self) -> None:
-        try:
-            super().commit()
-        except sqlite3.Error as e:
-            raise self._named(e) from None
-
-    def __exit__(self, *args: Any) -> Any:
-        try:
-            return super().__exit__(*args)
-        except sqlite3.Error as e:
-            raise self._named(e) from None
-
-
-def _read_only_part(path: Path) -> Path | None:
-    """The store's file or its folder where this process may not write to it, else None."""
-    for part in (path, path.parent):
-        if part.exists() and not os.access(part, os.W_OK):
-            return part
-    return None
-
-
-class Store:
+class Store(Verdicts):
     """An open campaign store. Reading (the default) needs an existing store; ``create``
     makes a new one where there is none."""
 
@@ -139,7 +92,7 @@ class Store:
 
     def _open(self, create: bool) -> None:
         try:
-            self.db = sqlite3.connect(self.path, timeout=30.0, factory=_Connection)
+            self.db = sqlite3.connect(self.path, timeout=30.0, factory=Connection)
             self.db.path = str(self.path)
             version = self._schema_version()
             if version is None and not create:
@@ -154,7 +107,7 @@ class Store:
             self.db.execute("PRAGMA foreign_keys=ON")
         except sqlite3.DatabaseError as e:
             why = str(e).removeprefix(f"{self.path}: ")
-            read_only = _read_only_part(self.path)
+            read_only = read_only_part(self.path)
             if isinstance(e, sqlite3.OperationalError) and read_only is not None:
                 # SQLite writes its write-ahead log beside the store even to read it.
                 raise StoreError(
@@ -338,169 +291,6 @@ class Store:
         """The stored plan of a ``fault_evaluation`` or ``search``; None if it holds none."""
         row = self.db.execute(f"SELECT plan FROM {kind} WHERE id = 1").fetchone()
         return None if row is None else dict(json.loads(row[0]))
-
-    def record_fault_chunk(self, first: int, copies: int, trials: Iterable[dict[str, Any]]) -> None:
-        """Store one chunk of a fault evaluation's kill checks in one transaction: the copies
-        it ran, each trial (the columns of ``fault_trials``, ``classes`` a list, and the run id
-        of the faulty run it tested as ``run_id``), and as a kill each trial that killed."""
-        with self.db:
-            add_columns(self.db, "fault_kills", *KILL_TEST_COLUMNS)
-            self.db.execute(
-                "INSERT OR REPLACE INTO fault_chunks (first, copies) VALUES (?, ?)",
-                (first, copies),
-            )
-            for t in trials:
-                test = (t["faulty_recurs"], t["correct_recurs"], t["copies"], t["p_value"])
-                self.db.execute(
-                    "INSERT OR REPLACE INTO fault_trials (fault, situation, by, classes, "
-                    "faulty_recurs, correct_recurs, copies, p_value, killed) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (
-                        t["fault"],
-                        t["situation"],
-                        t["by"],
-                        json.dumps(t["classes"]),
-                        *test,
-                        int(t["killed"]),
-                    ),
-                )
-                if t["killed"]:
-                    self.db.execute(
-                        "INSERT OR REPLACE INTO fault_kills (fault, situation, run_id, by, "
-                        "classes, score_delta, faulty_recurs, correct_recurs, copies, p_value) "
-                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                        (
-                            t["fault"],
-                            t["situation"],
-                            t["run_id"],
-                            t["by"],
-                            json.dumps(t["classes"]),
-                            t["score_delta"],
-                            *test,
-                        ),
-                    )
-
-    def record_diff_chunk(
-        self,
-        first: int,
-        copies: int,
-        judged: Iterable[dict[str, Any]],
-        alike: Iterable[tuple[int, str]],
-    ) -> None:
-        """Store one chunk of a controller diff in one transaction: the copies it ran, each
-        judged class (the columns of ``diff_results``) and each class both sides showed alike
-        (verdict ``unchanged``)."""
-        with self.db:
-            self.db.execute(
-                "INSERT OR REPLACE INTO diff_chunks (first, copies) VALUES (?, ?)",
-                (first, copies),
-            )
-            for j in judged:
-                self.db.execute(
-                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, a_recurs, "
-                    "b_recurs, copies, verdict) VALUES (?, ?, ?, ?, ?, ?)",
-                    (j["situation"], j["failure_class"], j["a_recurs"], j["b_recurs"],
-                     j["copies"], j["verdict"]),
-                )  # fmt: skip
-            for situation, failure_class in alike:
-                self.db.execute(
-                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, copies, "
-                    "verdict) VALUES (?, ?, 0, 'unchanged')",
-                    (situation, failure_class),
-                )
-
-    def record_shrink(self, run_id: int, row: dict[str, Any]) -> None:
-        """Store (or replace) the shrink result of run ``run_id``: the columns of ``shrinks``."""
-        columns = ["run_id", *row]
-        with self.db:
-            self.db.execute(
-                f"INSERT OR REPLACE INTO shrinks ({', '.join(columns)}) "
-                f"VALUES ({', '.join('?' for _ in columns)})",
-                (run_id, *row.values()),
-            )
-
-    def record_robustness(self, rows: Iterable[dict[str, Any]]) -> None:
-        """Store (or replace) failing runs' robustness: the columns of ``robustness``
-        (``classes`` and ``perturbation`` as JSON-able values), in one transaction."""
-        with self.db:
-            for row in rows:
-                self.db.execute(
-                    "INSERT OR REPLACE INTO robustness (run_id, failure_class, reruns, recurs, "
-                    "classes, perturbation, sitgen_version) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    (
-                        row["run_id"],
-                        row["failure_class"],
-                        row["reruns"],
-                        row["recurs"],
-                        json.dumps(row["classes"]),
-                        json.dumps(row["perturbation"], sort_keys=True),
-                        row["sitgen_version"],
-                    ),
-                )
-
-    def robustness(self, run_ids: Iterable[int] | None = None) -> dict[int, dict[str, Any]]:
-        """The stored robustness of ``run_ids`` (every measured run if None), by run id; a run
-        never measured is absent."""
-        rows = self.db.execute(
-            "SELECT run_id, failure_class, reruns, recurs, classes, perturbation, "
-            "sitgen_version FROM robustness ORDER BY run_id"
-        ).fetchall()
-        wanted = None if run_ids is None else set(run_ids)
-        out: dict[int, dict[str, Any]] = {}
-        for run_id, key, reruns, recurs, classes, perturbation, version in rows:
-            if wanted is not None and run_id not in wanted:
-                continue
-            out[run_id] = {
-                "run_id": run_id,
-                "failure_class": key,
-                "reruns": reruns,
-                "recurs": recurs,
-                "classes": json.loads(classes),
-                "perturbation": json.loads(perturbation),
-                "sitgen_version": version,
-            }
-        return out
-
-    def shrink(self, run_id: int) -> dict[str, Any] | None:
-        """Run ``run_id``'s shrink result (JSON columns parsed), or None."""
-        if not is_run_id(run_id):
-            return None
-        cursor = self.db.execute("SELECT * FROM shrinks WHERE run_id = ?", (run_id,))
-        row = cursor.fetchone()
-        if row is None:
-            return None
-        names = [d[0] for d in cursor.description]
-        out = dict(zip(names, row, strict=True))
-        for key in ("run_spec", "before", "after", "reductions"):
-            out[key] = json.loads(out[key])
-        return out
-
-    def add_judgements(
-        self, judgements: Iterable[Judgement], source: str, new_only: bool = False
-    ) -> int:
-        """Store judgements (all or none, in one transaction); ``source`` says where they came
-        from (``page``, ``import FILE``). With ``new_only``, one the store already holds (the
-        same runs, verdict, judge and time: the same file imported again) is skipped. Returns
-        how many were stored."""
-        rows = [(j.a, j.b, j.worse, j.who, j.at, source) for j in judgements]
-        if new_only:
-            held = set(self.db.execute("SELECT a, b, worse, who, at FROM judgements"))
-            rows = [r for r in rows if r[:5] not in held]
-        with self.db:
-            self.db.executemany(
-                "INSERT INTO judgements (a, b, worse, who, at, source) VALUES (?, ?, ?, ?, ?, ?)",
-                rows,
-            )
-        return len(rows)
-
-    def judgements(self) -> list[Judgement]:
-        """Every stored judgement, in the order made."""
-        return [
-            Judgement(a, b, worse, who, at)
-            for a, b, worse, who, at in self.db.execute(
-                "SELECT a, b, worse, who, at FROM judgements ORDER BY id"
-            )
-        ]
 
     def has_runs(self, ids: Iterable[int]) -> set[int]:
         """Those of ``ids`` that are runs of this store."""

@@ -29,22 +29,20 @@ whatever ``workers``. The recorded choice sequence of the generator is not shrun
 situation is edited directly, and records in ``provenance.shrunk_from`` the content hash it
 came from.
 
-This module is longer than the project's 600-line guide: :class:`Shrinker` is one algorithm,
-the seven reductions above repeated while any helps, and they read best beside each other and
-beside ddmin, which each of them calls; the entry points (:func:`shrink`, :func:`shrink_run`,
+:class:`Shrinker` is one algorithm, the seven reductions above repeated while any helps, read
+beside each other; ddmin, which several call, is :mod:`sitgen.triage.ddmin`, what they edit and
+give :mod:`sitgen.triage.candidate`. The entry points (:func:`shrink`, :func:`shrink_run`,
 :func:`shrink_top`) are a few lines each over it.
 """
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, replace
-from functools import cached_property
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +56,8 @@ from sitgen.execution.campaign import Executor
 from sitgen.execution.jobs import Job, check_workers
 from sitgen.run import robots_at, run
 from sitgen.store import Store
+from sitgen.triage.candidate import Candidate, Measure, ShrinkResult, Target
+from sitgen.triage.ddmin import ddmin
 from sitgen.triage.failures import distinct_failures
 from sitgen.triage.recall import stored_run, whole_run
 from sitgen.world.config import spec_json
@@ -93,145 +93,6 @@ NOTHING_TO_SHRINK = "the run does not fail (it has no failure class): nothing to
 
 class ShrinkError(ValueError):
     """A situation that cannot be shrunk (it does not fail, or not the way asked)."""
-
-
-@dataclass(frozen=True)
-class Target:
-    """What a candidate must keep: the run's failure class is ``failure_class`` or, with
-    ``shown``, ``failure_class`` is among the classes its events show (to shrink toward a
-    failure that a more severe one hides)."""
-
-    failure_class: str
-    shown: bool = False
-
-    def met(self, probe: dict[str, Any]) -> bool:
-        if not probe["ok"]:
-            return False
-        if self.shown:
-            return any(key == self.failure_class for key, _ in probe["first_s"])
-        return bool(probe["class"] == self.failure_class)
-
-    def time_s(self, probe: dict[str, Any]) -> float:
-        """When the first event of the class began in ``probe``'s run."""
-        return float(dict(probe["first_s"])[self.failure_class])
-
-
-@dataclass(frozen=True)
-class Measure:
-    """How big a situation is, as the summary compares them."""
-
-    peers: int
-    obstacle_cells: int
-    route_length_m: float
-    """The agent's route: start, then its waypoints."""
-    time_to_failure_s: float
-    """Simulated seconds to the first event of the class."""
-    map_m: tuple[float, float]
-    """Width and height, metres."""
-
-
-@dataclass
-class ShrinkResult:
-    """A shrink: the original and the smallest situation found that still fails the same way."""
-
-    original: Situation
-    minimal: Situation
-    failure_class: str
-    run_spec: dict[str, Any]
-    run_seed: int
-    before: Measure
-    after: Measure
-    probes: int
-    """Runs made: the original's, every valid candidate's, and the runs that find where
-    robots stood or drove (a restart's partial run counts as one)."""
-    skipped: int
-    """Invalid candidates skipped without a run."""
-    wall_s: float
-    reductions: list[str] = field(default_factory=list)
-    """What helped, in order, e.g. ``peers 5 → 1``."""
-    exhausted: bool = False
-    """Whether the probe budget ran out before shrinking was done."""
-
-    def summary(self) -> dict[str, Any]:
-        return {
-            "class": self.failure_class,
-            "before": asdict(self.before),
-            "after": asdict(self.after),
-            "probes": self.probes,
-            "skipped": self.skipped,
-            "wall_s": round(self.wall_s, 3),
-            "reductions": self.reductions,
-            "exhausted": self.exhausted,
-        }
-
-    def store_row(self) -> dict[str, Any]:
-        """The columns of the store's ``shrinks`` table (docs/store.md)."""
-        return {
-            "failure_class": self.failure_class,
-            "situation": self.minimal.to_json(),
-            "run_spec": json.dumps(self.run_spec, sort_keys=True),
-            "run_seed": self.run_seed,
-            "before": json.dumps(asdict(self.before)),
-            "after": json.dumps(asdict(self.after)),
-            "reductions": json.dumps(self.reductions),
-            "probes": self.probes,
-            "skipped": self.skipped,
-            "wall_s": self.wall_s,
-            "sitgen_version": _core.__version__,
-        }
-
-
-@dataclass(frozen=True)
-class Candidate:
-    """A situation as shrinking edits it: the occupancy grid and the robots (as in the file)."""
-
-    occupied: npt.NDArray[np.bool_]
-    robots: tuple[dict[str, Any], ...]
-
-    @cached_property
-    def key(self) -> str:
-        h = hashlib.sha256(self.occupied.tobytes())
-        h.update(repr(self.occupied.shape).encode())
-        h.update(json.dumps(self.robots, sort_keys=True).encode())
-        return h.hexdigest()
-
-    def with_robots(self, robots: Sequence[dict[str, Any]]) -> Candidate:
-        """These robots, numbered in order (the agent first)."""
-        return replace(self, robots=tuple({**r, "id": i} for i, r in enumerate(robots)))
-
-
-def ddmin(items: Sequence[Any], fails: Callable[[list[list[Any]]], list[bool]]) -> list[Any]:
-    """Zeller and Hildebrandt's ddmin: a 1-minimal subset of ``items`` (order kept) for which
-    ``fails`` holds, given that it holds for all of them. ``fails`` takes a batch of subsets
-    and returns, in order, which fail: each round tries the subsets, then the complements, as
-    one batch each, and takes the first that fails."""
-    current = list(items)
-    if current and fails([[]])[0]:
-        return []
-    n = 2
-    while len(current) >= 2:
-        size = math.ceil(len(current) / n)
-        chunks = [current[i : i + size] for i in range(0, len(current), size)]
-        found = _first(chunks, fails)
-        if found is not None:
-            current, n = found, 2
-            continue
-        dropped = [set(chunk) for chunk in chunks]
-        complements = [[x for x in current if x not in d] for d in dropped]
-        found = _first(complements if len(chunks) > 2 else [], fails)
-        if found is not None:
-            current, n = found, max(n - 1, 2)
-            continue
-        if n >= len(current):
-            break
-        n = min(2 * n, len(current))
-    return current
-
-
-def _first(subsets: list[list[Any]], fails: Callable[[list[list[Any]]], list[bool]]) -> Any:
-    if not subsets:
-        return None
-    return next((s for s, f in zip(subsets, fails(subsets), strict=True) if f), None)
 
 
 def user_probes(

@@ -1,0 +1,183 @@
+"""What the store keeps of judged runs: fault evaluations' kill checks, controller diffs,
+shrink results, robustness verdicts and a person's judgements. A part of :class:`Store`
+(its base class), apart so that each file reads whole; every write is one transaction, as
+the store's rule says."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from collections.abc import Iterable
+from typing import Any
+
+from sitgen.store.records import Judgement, is_run_id
+from sitgen.store.schema import KILL_TEST_COLUMNS, add_columns
+
+
+class Verdicts:
+    """The store's verdict tables, written and read."""
+
+    db: sqlite3.Connection
+
+    def record_fault_chunk(self, first: int, copies: int, trials: Iterable[dict[str, Any]]) -> None:
+        """Store one chunk of a fault evaluation's kill checks in one transaction: the copies
+        it ran, each trial (the columns of ``fault_trials``, ``classes`` a list, and the run id
+        of the faulty run it tested as ``run_id``), and as a kill each trial that killed."""
+        with self.db:
+            add_columns(self.db, "fault_kills", *KILL_TEST_COLUMNS)
+            self.db.execute(
+                "INSERT OR REPLACE INTO fault_chunks (first, copies) VALUES (?, ?)",
+                (first, copies),
+            )
+            for t in trials:
+                test = (t["faulty_recurs"], t["correct_recurs"], t["copies"], t["p_value"])
+                self.db.execute(
+                    "INSERT OR REPLACE INTO fault_trials (fault, situation, by, classes, "
+                    "faulty_recurs, correct_recurs, copies, p_value, killed) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        t["fault"],
+                        t["situation"],
+                        t["by"],
+                        json.dumps(t["classes"]),
+                        *test,
+                        int(t["killed"]),
+                    ),
+                )
+                if t["killed"]:
+                    self.db.execute(
+                        "INSERT OR REPLACE INTO fault_kills (fault, situation, run_id, by, "
+                        "classes, score_delta, faulty_recurs, correct_recurs, copies, p_value) "
+                        "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                        (
+                            t["fault"],
+                            t["situation"],
+                            t["run_id"],
+                            t["by"],
+                            json.dumps(t["classes"]),
+                            t["score_delta"],
+                            *test,
+                        ),
+                    )
+
+    def record_diff_chunk(
+        self,
+        first: int,
+        copies: int,
+        judged: Iterable[dict[str, Any]],
+        alike: Iterable[tuple[int, str]],
+    ) -> None:
+        """Store one chunk of a controller diff in one transaction: the copies it ran, each
+        judged class (the columns of ``diff_results``) and each class both sides showed alike
+        (verdict ``unchanged``)."""
+        with self.db:
+            self.db.execute(
+                "INSERT OR REPLACE INTO diff_chunks (first, copies) VALUES (?, ?)",
+                (first, copies),
+            )
+            for j in judged:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, a_recurs, "
+                    "b_recurs, copies, verdict) VALUES (?, ?, ?, ?, ?, ?)",
+                    (j["situation"], j["failure_class"], j["a_recurs"], j["b_recurs"],
+                     j["copies"], j["verdict"]),
+                )  # fmt: skip
+            for situation, failure_class in alike:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO diff_results (situation, failure_class, copies, "
+                    "verdict) VALUES (?, ?, 0, 'unchanged')",
+                    (situation, failure_class),
+                )
+
+    def record_shrink(self, run_id: int, row: dict[str, Any]) -> None:
+        """Store (or replace) the shrink result of run ``run_id``: the columns of ``shrinks``."""
+        columns = ["run_id", *row]
+        with self.db:
+            self.db.execute(
+                f"INSERT OR REPLACE INTO shrinks ({', '.join(columns)}) "
+                f"VALUES ({', '.join('?' for _ in columns)})",
+                (run_id, *row.values()),
+            )
+
+    def record_robustness(self, rows: Iterable[dict[str, Any]]) -> None:
+        """Store (or replace) failing runs' robustness: the columns of ``robustness``
+        (``classes`` and ``perturbation`` as JSON-able values), in one transaction."""
+        with self.db:
+            for row in rows:
+                self.db.execute(
+                    "INSERT OR REPLACE INTO robustness (run_id, failure_class, reruns, recurs, "
+                    "classes, perturbation, sitgen_version) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    (
+                        row["run_id"],
+                        row["failure_class"],
+                        row["reruns"],
+                        row["recurs"],
+                        json.dumps(row["classes"]),
+                        json.dumps(row["perturbation"], sort_keys=True),
+                        row["sitgen_version"],
+                    ),
+                )
+
+    def robustness(self, run_ids: Iterable[int] | None = None) -> dict[int, dict[str, Any]]:
+        """The stored robustness of ``run_ids`` (every measured run if None), by run id; a run
+        never measured is absent."""
+        rows = self.db.execute(
+            "SELECT run_id, failure_class, reruns, recurs, classes, perturbation, "
+            "sitgen_version FROM robustness ORDER BY run_id"
+        ).fetchall()
+        wanted = None if run_ids is None else set(run_ids)
+        out: dict[int, dict[str, Any]] = {}
+        for run_id, key, reruns, recurs, classes, perturbation, version in rows:
+            if wanted is not None and run_id not in wanted:
+                continue
+            out[run_id] = {
+                "run_id": run_id,
+                "failure_class": key,
+                "reruns": reruns,
+                "recurs": recurs,
+                "classes": json.loads(classes),
+                "perturbation": json.loads(perturbation),
+                "sitgen_version": version,
+            }
+        return out
+
+    def shrink(self, run_id: int) -> dict[str, Any] | None:
+        """Run ``run_id``'s shrink result (JSON columns parsed), or None."""
+        if not is_run_id(run_id):
+            return None
+        cursor = self.db.execute("SELECT * FROM shrinks WHERE run_id = ?", (run_id,))
+        row = cursor.fetchone()
+        if row is None:
+            return None
+        names = [d[0] for d in cursor.description]
+        out = dict(zip(names, row, strict=True))
+        for key in ("run_spec", "before", "after", "reductions"):
+            out[key] = json.loads(out[key])
+        return out
+
+    def add_judgements(
+        self, judgements: Iterable[Judgement], source: str, new_only: bool = False
+    ) -> int:
+        """Store judgements (all or none, in one transaction); ``source`` says where they came
+        from (``page``, ``import FILE``). With ``new_only``, one the store already holds (the
+        same runs, verdict, judge and time: the same file imported again) is skipped. Returns
+        how many were stored."""
+        rows = [(j.a, j.b, j.worse, j.who, j.at, source) for j in judgements]
+        if new_only:
+            held = set(self.db.execute("SELECT a, b, worse, who, at FROM judgements"))
+            rows = [r for r in rows if r[:5] not in held]
+        with self.db:
+            self.db.executemany(
+                "INSERT INTO judgements (a, b, worse, who, at, source) VALUES (?, ?, ?, ?, ?, ?)",
+                rows,
+            )
+        return len(rows)
+
+    def judgements(self) -> list[Judgement]:
+        """Every stored judgement, in the order made."""
+        return [
+            Judgement(a, b, worse, who, at)
+            for a, b, worse, who, at in self.db.execute(
+                "SELECT a, b, worse, who, at FROM judgements ORDER BY id"
+            )
+        ]
