@@ -9,8 +9,9 @@ here, and whatever goes wrong in it ends the run with outcome ``error`` and a re
 
 from __future__ import annotations
 
+import contextlib
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,7 +21,8 @@ import numpy.typing as npt
 
 from sitgen import _core
 from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
-from sitgen.controllers.user import is_user_controller, load_controller
+from sitgen.controllers.inprocess import InProcessController
+from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
 from sitgen.world.terrain import wall_segments
@@ -102,19 +104,22 @@ def _controller_name(controller: Any) -> str:
 
 
 def reset_info(
-    situation: Situation, run: Mapping[str, Any], agent: int, with_map: bool = False
+    situation: Situation, run: Mapping[str, Any], robot_id: int, with_map: bool = False
 ) -> dict[str, Any]:
-    """What a user controller is told at the start: its route, body, laser and limits, the
-    params its controller table gives it, and (``with_map``) the situation's map."""
-    robot = situation.robots[agent]
+    """What a user controller is told at the start: its robot's id and role, route, body,
+    laser and limits, the params its controller table gives it (the run spec's for the agent,
+    if it names one, else the robot's own), and (``with_map``) the situation's map."""
+    robot = situation.robots[robot_id]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
     resolved = json.loads(_core.check_run_spec(spec_json(dict(run), "run")))
     sim, laser = resolved["sim"], resolved["sim"]["laser"]
-    controller = resolved.get("controller") or robot.controller
+    given = resolved.get("controller") if robot.role == "agent" else None
+    controller = given or robot.controller
     n, fov = int(laser["beams"]), float(np.radians(laser["fov_deg"]))
     angles = [-fov / 2 + i * fov / (n - 1) for i in range(n)] if n > 1 else [0.0]
     return {
         "robot_id": robot.id,
+        "role": robot.role,
         "start": [robot.start.x_m, robot.start.y_m, robot.start.heading_rad],
         "waypoints": [list(w) for w in robot.waypoints],
         "at_end": robot.at_end,
@@ -206,7 +211,7 @@ def run(
     run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
     core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
-    if core.agent_is_external:
+    if core.agent_is_external or core.external_peers:
         _drive(core, controller, situation, run_spec, step_timeout_s, senses, in_process)
     elif senses is not None:
         _step(core, None, senses)
@@ -272,16 +277,36 @@ def _drive(
     senses: list[Mapping[str, Any]] | None = None,
     in_process: bool = False,
 ) -> None:
-    """Step a run whose agent is a user controller, turning its failures into the outcome."""
+    """Step a run whose agent or some peer has a user controller, turning their failures
+    into the outcome."""
+    try:
+        with _peers(core, situation, run_spec, in_process):
+            if core.agent_is_external:
+                _drive_agent(
+                    core, controller, situation, run_spec, step_timeout_s, senses, in_process
+                )
+            elif senses is None:
+                core.run_to_end()
+            else:
+                _step(core, None, senses)
+    except ControllerError as e:
+        core.fail(str(e))
+
+
+def _drive_agent(
+    core: _core.Run,
+    controller: Any,
+    situation: Situation,
+    run_spec: Mapping[str, Any],
+    step_timeout_s: float,
+    senses: list[Mapping[str, Any]] | None,
+    in_process: bool,
+) -> None:
     named = run_spec.get("controller") or situation.agent.controller
     if controller is None:
         controller = named["name"]
     assert is_user_controller(controller)
-    try:
-        user = load_controller(controller, step_timeout_s, named.get("params"), in_process)
-    except ControllerError as e:
-        core.fail(str(e))
-        return
+    user = load_controller(controller, step_timeout_s, named.get("params"), in_process)
     try:
         user.reset(reset_info(situation, run_spec, core.agent, user.wants_map))
         # Between the controller's decisions (its control period) its last command stays in
@@ -290,10 +315,32 @@ def _drive(
             user.drive(core)
         else:
             _step(core, user.act, senses)
-    except ControllerError as e:
-        core.fail(str(e))
     finally:
         user.close()
+
+
+@contextlib.contextmanager
+def _peers(
+    core: _core.Run, situation: Situation, run_spec: Mapping[str, Any], isolated: bool
+) -> Iterator[None]:
+    """The run's peers that have ``python:`` or ``navground:`` controllers, loaded and reset in
+    this process and handed to the core, which calls each whenever its peer decides; closed
+    at the end. ``isolated``: this process is a disposable pool worker."""
+    loaded: list[InProcessController] = []
+    try:
+        for i in core.external_peers:
+            named = situation.robots[i].controller
+            name = str(named["name"])
+            peer = load_peer_controller(
+                name, f"`{name}` of peer {i}", named.get("params"), isolated
+            )
+            loaded.append(peer)
+            peer.reset(reset_info(situation, run_spec, i))
+        core.set_peers({i: p.peer_act() for i, p in zip(core.external_peers, loaded, strict=True)})
+        yield
+    finally:
+        for peer in loaded:
+            peer.close()
 
 
 def robots_at(
@@ -305,20 +352,25 @@ def robots_at(
     restarts only its own controllers part-way)."""
     spec_text = spec_json(dict(spec), "run")
     core = _core.Run(situation.to_json(), spec_text, seed)
-    if not core.agent_is_external:
+    if not core.agent_is_external and not core.external_peers:
         robots: list[dict[str, Any]] = json.loads(
             _core.robots_at(situation.to_json(), spec_text, seed, t_s)
         )
         return robots
-    named = spec.get("controller") or situation.agent.controller
-    user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
-    try:
-        user.reset(reset_info(situation, spec, core.agent, user.wants_map))
-        while (obs := core.observe_agent())["time"] < t_s - 1e-9:
-            if core.step(user.act(obs) if core.agent_acts else None):
-                break
-    finally:
-        user.close()
+    with _peers(core, situation, spec, False):
+        if not core.agent_is_external:
+            while core.observe_agent()["time"] < t_s - 1e-9 and not core.step(None):
+                pass
+        else:
+            named = spec.get("controller") or situation.agent.controller
+            user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
+            try:
+                user.reset(reset_info(situation, spec, core.agent, user.wants_map))
+                while (obs := core.observe_agent())["time"] < t_s - 1e-9:
+                    if core.step(user.act(obs) if core.agent_acts else None):
+                        break
+            finally:
+                user.close()
     robots = json.loads(core.robots_now(situation.to_json()))
     return robots
 

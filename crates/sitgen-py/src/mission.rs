@@ -2,7 +2,8 @@
 
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use sitgen_core::mission::{self, astar};
+use sitgen_core::control::route::RouteFollower;
+use sitgen_core::mission::{self, astar, AtEnd};
 use sitgen_core::rng::ChoiceSource;
 use sitgen_core::situation::Situation;
 
@@ -69,7 +70,37 @@ fn continued_route(situation_json: &str, seed: u64) -> PyResult<Option<Vec<(f64,
     Ok(mission::continue_agent_route(&map, spec, from, &mut choices).ok())
 }
 
+/// Where a robot is on its route, as the built-in controllers follow one (the start, then
+/// the waypoints, then `at_end`: `stop`, `reverse` or `loop`), switching to the next point
+/// within `switch_m` metres: for a Python controller that follows a route as they do.
+#[pyclass(name = "RouteFollower", module = "sitgen._core")]
+pub struct PyRouteFollower(RouteFollower);
+
+#[pymethods]
+impl PyRouteFollower {
+    #[new]
+    fn new(
+        start: (f64, f64),
+        waypoints: Vec<(f64, f64)>,
+        at_end: &str,
+        switch_m: f64,
+    ) -> PyResult<Self> {
+        let at_end: AtEnd = serde_json::from_value(serde_json::Value::from(at_end))
+            .map_err(|e| SpecError::new_err(format!("at_end: {e}")))?;
+        Ok(Self(RouteFollower::through(
+            start, &waypoints, at_end, switch_m,
+        )))
+    }
+
+    /// The point to head for from `position`, after switching past every point within
+    /// reach; None once a `stop` route is complete.
+    fn target(&mut self, position: (f64, f64)) -> Option<(f64, f64)> {
+        self.0.target(position)
+    }
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyRouteFollower>()?;
     m.add_function(wrap_pyfunction!(continued_route, m)?)?;
     m.add_function(wrap_pyfunction!(shortest_path, m)?)?;
     m.add_function(wrap_pyfunction!(shortest_path_lengths, m)?)?;

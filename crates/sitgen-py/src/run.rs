@@ -30,6 +30,9 @@ pub struct PyRun {
     /// Behind a mutex because Python objects must be shareable between threads, and a
     /// controller's state is only ever used by one step at a time.
     run: Option<Mutex<Run>>,
+    /// The external peers' controllers (`set_peers`): each called, as `drive`'s `act` is,
+    /// whenever its peer decides, before every step this run takes.
+    peers: Vec<(u32, Py<PyAny>)>,
 }
 
 fn finished() -> PyErr {
@@ -46,6 +49,81 @@ impl PyRun {
         let run = self.run.as_mut().ok_or_else(finished)?;
         Ok(run.get_mut().unwrap_or_else(|e| e.into_inner()))
     }
+
+    /// `drive`'s loop, the peers' controllers given.
+    fn drive_with(
+        &mut self,
+        py: Python<'_>,
+        act: &Bound<'_, PyAny>,
+        watchdog: Option<Watchdog>,
+        line: bool,
+        peers: &[(u32, Py<PyAny>)],
+    ) -> PyResult<()> {
+        let run = self.live_mut()?;
+        if !run.agent_is_external() {
+            return Err(PyValueError::new_err(
+                "the agent's controller is built in: run it to its end",
+            ));
+        }
+        loop {
+            let command = if run.agent_acts_now() {
+                let reached = run.agent_waypoints_reached();
+                let o = run.agent_observation();
+                let watched = watchdog.as_ref().map(Watchdog::watch);
+                let reply = if line {
+                    let message = protocol::observation_line(&o, reached);
+                    act.call1((PyBytes::new(py, message.as_bytes()), o.time_s))
+                } else {
+                    act.call1(observation_args(py, o, reached)?)
+                };
+                drop(watched);
+                Some(reply?.extract::<(f64, f64)>()?)
+            } else {
+                None
+            };
+            if step_all(py, run, peers, command)? {
+                return Ok(());
+            }
+        }
+    }
+}
+
+/// The commands of the external peers that decide on `run`'s coming step, each asked of its
+/// controller in `peers` with its observation; a peer without one is refused (it would stand
+/// still unseen).
+fn peer_commands(
+    py: Python<'_>,
+    run: &mut Run,
+    peers: &[(u32, Py<PyAny>)],
+) -> PyResult<Vec<(u32, (f64, f64))>> {
+    let mut commands = Vec::new();
+    for id in run.external() {
+        if id == run.agent() || !run.acts_now(id) {
+            continue;
+        }
+        let Some((_, act)) = peers.iter().find(|(who, _)| *who == id) else {
+            return Err(PyValueError::new_err(format!(
+                "robot {id}'s controller is external: give it with set_peers before stepping"
+            )));
+        };
+        let reached = run.waypoints_reached(id);
+        let o = run.observation(id);
+        let reply = act.bind(py).call1(observation_args(py, o, reached)?)?;
+        commands.push((id, reply.extract::<(f64, f64)>()?));
+    }
+    Ok(commands)
+}
+
+/// One step of `run`: the agent's `command` with the external peers' (see `peer_commands`).
+fn step_all(
+    py: Python<'_>,
+    run: &mut Run,
+    peers: &[(u32, Py<PyAny>)],
+    command: Option<(f64, f64)>,
+) -> PyResult<bool> {
+    let mut commands = peer_commands(py, run, peers)?;
+    commands.extend(command.map(|c| (run.agent(), c)));
+    Ok(run.step_with(&commands))
 }
 
 #[pymethods]
@@ -58,6 +136,7 @@ impl PyRun {
         let run = Run::new(&situation, &spec, seed).map_err(spec_error)?;
         Ok(Self {
             run: Some(Mutex::new(run)),
+            peers: Vec::new(),
         })
     }
 
@@ -65,6 +144,39 @@ impl PyRun {
     #[getter]
     fn agent_is_external(&self) -> PyResult<bool> {
         Ok(self.live()?.agent_is_external())
+    }
+
+    /// The peers whose commands must come from Python (`python:`, `navground:`), by id.
+    #[getter]
+    fn external_peers(&self) -> PyResult<Vec<u32>> {
+        let run = self.live()?;
+        let agent = run.agent();
+        Ok(run
+            .external()
+            .into_iter()
+            .filter(|&id| id != agent)
+            .collect())
+    }
+
+    /// The external peers' controllers, by id: each is called as `drive`'s `act` is (the
+    /// observation's parts, `waypoints_reached` as the monitor counts the peer's first pass),
+    /// whenever its peer decides, before each `step` and each step of `drive` and
+    /// `run_to_end`. An exception from one stops the step and propagates.
+    fn set_peers(&mut self, peers: Bound<'_, PyDict>) -> PyResult<()> {
+        let external = self.external_peers()?;
+        let mut given = Vec::new();
+        for (id, act) in peers.iter() {
+            let id: u32 = id.extract()?;
+            if !external.contains(&id) {
+                return Err(PyValueError::new_err(format!(
+                    "robot {id} is not a peer with an external controller"
+                )));
+            }
+            given.push((id, act.unbind()));
+        }
+        given.sort_by_key(|(id, _)| *id);
+        self.peers = given;
+        Ok(())
     }
 
     /// The agent's id.
@@ -97,8 +209,11 @@ impl PyRun {
     /// One step with the agent's command (ignored for a built-in agent); returns whether the
     /// run has ended.
     #[pyo3(signature = (command=None))]
-    fn step(&mut self, command: Option<(f64, f64)>) -> PyResult<bool> {
-        Ok(self.live_mut()?.step(command))
+    fn step(&mut self, py: Python<'_>, command: Option<(f64, f64)>) -> PyResult<bool> {
+        let peers = std::mem::take(&mut self.peers);
+        let ended = step_all(py, self.live_mut()?, &peers, command);
+        self.peers = peers;
+        ended
     }
 
     /// Every robot of `situation_json` (the run's situation) as it stands now: at its pose
@@ -127,32 +242,10 @@ impl PyRun {
         line: bool,
     ) -> PyResult<()> {
         let watchdog = kill_after_s.map(Watchdog::new);
-        let run = self.live_mut()?;
-        if !run.agent_is_external() {
-            return Err(PyValueError::new_err(
-                "the agent's controller is built in: run it to its end",
-            ));
-        }
-        loop {
-            let command = if run.agent_acts_now() {
-                let reached = run.agent_waypoints_reached();
-                let o = run.agent_observation();
-                let watched = watchdog.as_ref().map(Watchdog::watch);
-                let reply = if line {
-                    let message = protocol::observation_line(&o, reached);
-                    act.call1((PyBytes::new(py, message.as_bytes()), o.time_s))
-                } else {
-                    act.call1(observation_args(py, o, reached)?)
-                };
-                drop(watched);
-                Some(reply?.extract::<(f64, f64)>()?)
-            } else {
-                None
-            };
-            if run.step(command) {
-                return Ok(());
-            }
-        }
+        let peers = std::mem::take(&mut self.peers);
+        let driven = self.drive_with(py, act, watchdog, line, &peers);
+        self.peers = peers;
+        driven
     }
 
     /// End the run with outcome `error` for `reason`.
@@ -161,16 +254,29 @@ impl PyRun {
         Ok(())
     }
 
-    /// Step a run of built-in controllers to its end, without the GIL.
+    /// Step a run of built-in controllers to its end, without the GIL (with external peers,
+    /// stepped here calling them).
     fn run_to_end(&mut self, py: Python<'_>) -> PyResult<()> {
+        let peers = std::mem::take(&mut self.peers);
         let run = self.live_mut()?;
         if run.agent_is_external() {
             return Err(PyValueError::new_err(
                 "the agent's controller is external: step the run from Python",
             ));
         }
-        py.detach(|| run.run_to_end());
-        Ok(())
+        let ended = if run.any_external() {
+            loop {
+                match step_all(py, run, &peers, None) {
+                    Ok(false) => continue,
+                    done => break done.map(|_| ()),
+                }
+            }
+        } else {
+            py.detach(|| run.run_to_end());
+            Ok(())
+        };
+        self.peers = peers;
+        ended
     }
 
     /// End the run; returns the record (see `record_dict`).

@@ -161,6 +161,27 @@ class InProcessController(UserController):
             except StepTimeout:
                 raise ControllerError(self._late(timeout_s, f"at {at[0]:.1f} s")) from None
 
+    def peer_act(self) -> Callable[..., tuple[float, float]]:
+        """The call the core makes whenever the peer this controller drives decides (the
+        arguments of ``_core.Run.drive``'s ``act``; ``_core.Run.set_peers``): each call under
+        the step timeout, a failure a ControllerError naming the controller."""
+        target_act, observation, timeout_s = (
+            self._target.act,
+            self._observation,
+            self._step_timeout_s,
+        )
+
+        def act(
+            ranges: Any, pose: Any, velocity: Any, stalled: bool, time_s: float, tracks: Any, k: int
+        ) -> tuple[float, float]:
+            obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
+            when = f"at {time_s:.1f} s"
+            with self._watched(timeout_s):
+                value = self._call(lambda: target_act(obs), when, timeout_s)
+            return self._command(value, when)
+
+        return act
+
     def _observation(
         self,
         ranges: Any,

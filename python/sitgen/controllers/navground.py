@@ -49,6 +49,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from sitgen import _core as sitgen_core
+
 PREFIX = "navground:"
 """How a navground controller's name starts: ``navground:BEHAVIOR``."""
 
@@ -63,6 +65,10 @@ PERCEPTIONS = ("sensed", "exact")
 
 OWN_PARAMS = {"tolerance_m": 0.25, "obstacle_radius_m": 0.1}
 """sitgen's parameters of the adapter, with their defaults."""
+
+PEER_SWITCH_M = 0.3
+"""How near its next waypoint a peer switches to the one after (m; at least ``tolerance_m``):
+as sitgen's ``straight`` peers do."""
 
 COMMON_PARAMS = ("horizon", "safety_margin", "optimal_speed", "rotation_tau")
 """Parameters every navground behaviour has (attributes of ``navground.core.Behavior``)."""
@@ -148,6 +154,7 @@ class NavgroundController:
             self._set(name, value)
         self.radius_m = 0.0
         self.waypoints: list[list[float]] = []
+        self.route: Any = None
         self.walls = np.zeros((0, 4))
         self.exact = False
         self.dt_s = 0.1
@@ -195,19 +202,38 @@ class NavgroundController:
         b.radius = self.radius_m = enclosing_radius_m(info["body"])
         b.optimal_speed = float(self._optimal_speed or max_speed)
         self.waypoints = [list(w) for w in info["waypoints"]]
+        # A peer goes on past its route's end as its `at_end` says, which the monitor (one
+        # pass, for the agent) does not count: it follows its route as sitgen's peers do.
+        start = info["start"]
+        self.route = (
+            None
+            if info.get("role", "agent") == "agent"
+            else sitgen_core.RouteFollower(
+                (start[0], start[1]),
+                [(w[0], w[1]) for w in self.waypoints],
+                str(info.get("at_end", "stop")),
+                max(PEER_SWITCH_M, self.tolerance_m),
+            )
+        )
         self.dt_s = float(info.get("control_period_s", info.get("dt_s", 0.1)))
 
     def act(self, obs: Any) -> tuple[float, float]:
-        if obs.waypoints_reached >= len(self.waypoints):
+        x, y, heading = obs.pose
+        if self.route is not None:
+            target = self.route.target((x, y))
+        elif obs.waypoints_reached < len(self.waypoints):
+            target = self.waypoints[obs.waypoints_reached]
+        else:
+            target = None
+        if target is None:
             return 0.0, 0.0
         core, b = self._core, self.behavior
-        x, y, heading = obs.pose
         v, omega = obs.velocity
         b.position = (x, y)
         b.orientation = heading
         b.velocity = (v * math.cos(heading), v * math.sin(heading))
         b.angular_speed = omega
-        b.target = core.Target.Point(self.waypoints[obs.waypoints_reached], self.tolerance_m)
+        b.target = core.Target.Point(target, self.tolerance_m)
         self._perceive(obs, x, y, heading)
         cmd = b.compute_cmd(self.dt_s, core.Frame.relative, True)
         # navground computes in single precision: a feasible command can exceed a limit by

@@ -72,6 +72,25 @@ def load_controller(
     raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…, navground:…")
 
 
+def load_peer_controller(
+    name: str, shown: str, params: Mapping[str, float] | None, isolated: bool
+) -> InProcessController:
+    """A peer's controller (``python:…`` or ``navground:…``, the only kinds a peer may run),
+    called in this process, ``shown`` in its errors; ``isolated``: this process is a
+    disposable pool worker. Raises ControllerError if it cannot be loaded."""
+    if name.startswith(NAVGROUND_PREFIX):
+        target, timeout_s = navground_target(name), NAVGROUND_STEP_TIMEOUT_S
+    elif name.startswith("python:"):
+        target, timeout_s = name.removeprefix("python:"), STEP_TIMEOUT_S
+    else:
+        raise ControllerError(
+            f"controller {shown}: a peer's controller is built in, python: or navground:"
+        )
+    controller = InProcessController(target, shown, timeout_s, isolated, params)
+    controller.load()
+    return controller
+
+
 def navground_target(name: str) -> str:
     """The ``module:Class`` target that runs the ``navground:BEHAVIOR`` controller ``name``."""
     return f"{NavgroundController.__module__}:{name.removeprefix(NAVGROUND_PREFIX)}"

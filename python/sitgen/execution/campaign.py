@@ -38,14 +38,13 @@ from sitgen import _core
 from sitgen import _core as core
 from sitgen.controllers.external import pin_to_one_core
 from sitgen.controllers.host import die_with_parent
-from sitgen.controllers.user import is_user_controller
 from sitgen.execution.jobs import (
     MAX_RUNS,
     CampaignSpec,
     Job,
     check_campaign,
     check_workers,
-    controller_names,
+    runs_in_python,
     stream_jobs,
 )
 from sitgen.run import run
@@ -331,18 +330,25 @@ class Executor:
         return batch
 
     def _stream_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
-        """Built-in controllers: Rust threads, each job yielded as soon as it is done."""
+        """Built-in controllers: Rust threads, each job yielded as soon as it is done. A job
+        whose run the Python layer must drive (a peer's ``navground:`` controller in a stored
+        situation, say) is set aside and run in a process pool after the rest."""
         stream = self._stream = _core.JobStream(self.workers)
         inflight: dict[int, Job] = {}
+        in_python: list[Job] = []
         try:
             while True:
-                batch = yield from self._take(jobs, self.window - len(inflight))
+                taken = yield from self._take(jobs, self.window - len(inflight))
+                batch = [j for j in taken if not j.in_python]
+                in_python += [j for j in taken if j.in_python]
                 if batch:
                     inflight.update((j.index, j) for j in batch)
                     rule = self.pack_rule()
                     stream.submit([(j.index, _core_args(j), rule) for j in batch])
+                if not inflight and not taken:
+                    break
                 if not inflight:
-                    return
+                    continue
                 index, result = next(stream)
                 job = inflight.pop(index)
                 if result is not None:
@@ -350,6 +356,8 @@ class Executor:
         finally:
             stream.stop()
             stream.close()
+        if in_python:
+            yield from self._pool_results(iter(in_python))
 
     def _pool_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         """Python and external controllers: a process pool. A worker that dies breaks the
@@ -527,7 +535,7 @@ def run_campaign(
     check_campaign(spec, seed, n, stop)
     if stop is not None and stop():
         return CampaignResult(0, 0, True, time.perf_counter() - started)
-    user = any(is_user_controller(name) for _, name in controller_names(spec))
+    user = runs_in_python(spec)
     with Store(db, create=True) as store:
         store.lock_for_writing()
         store.start_campaign(spec.source, seed, n, _core.__version__, started_at())

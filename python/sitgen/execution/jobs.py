@@ -37,7 +37,7 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.controllers.external import ControllerError
-from sitgen.controllers.user import check_controller_name
+from sitgen.controllers.user import check_controller_name, is_user_controller
 from sitgen.world.config import load_spec, spec_json
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
@@ -197,6 +197,19 @@ class Job:
         return self.seed if self.run_seed is None else self.run_seed
 
     @property
+    def in_python(self) -> bool:
+        """Whether the Python layer drives some robot of this job's run: a user controller
+        for its agent or a peer (so the job runs in a process pool, not the core's threads)."""
+        robots = self.situation.get("robots")
+        if isinstance(robots, list):
+            peers = [r.get("controller", {}) for r in robots if r.get("role") == "peer"]
+        else:
+            mission = self.situation.get("mission", {})
+            peers = [mission.get("peer_controller", {}), *mission.get("peer_controllers", [])]
+        names = [self.controller, *(c.get("name") for c in peers if isinstance(c, dict))]
+        return any(isinstance(n, str) and is_user_controller(n) for n in names)
+
+    @property
     def controller(self) -> str:
         """The agent's controller: the run spec's, else the situation's mission's; a seeded
         fault follows its name after a ``+``."""
@@ -291,6 +304,29 @@ def controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
     return found
 
 
+def peer_controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
+    """Every (field, controller name) the campaign can give its peers."""
+    mission = spec.situation.get("mission", {})
+    path = "situation.mission.peer_controller.name"
+    found: list[tuple[str, str]] = []
+    base = mission.get("peer_controller", {}).get("name")
+    if isinstance(base, str):
+        found.append((path, base))
+    for i, c in enumerate(mission.get("peer_controllers", [])):
+        if isinstance(c, dict) and isinstance(c.get("name"), str):
+            found.append((f"situation.mission.peer_controllers[{i}].name", c["name"]))
+    choices = spec.vary.get(path, {}).get("choice", [])
+    found += [(f"vary.{path!r}.choice", c) for c in choices if isinstance(c, str)]
+    return found
+
+
+def runs_in_python(spec: CampaignSpec) -> bool:
+    """Whether some run of the campaign has a controller the Python layer drives (its agent's
+    or a peer's): its runs then go to a process pool, not the core's threads."""
+    names = [*controller_names(spec), *peer_controller_names(spec)]
+    return any(is_user_controller(name) for _, name in names)
+
+
 def check_campaign(
     spec: CampaignSpec, seed: int, n: int, stop: Callable[[], bool] | None = None
 ) -> None:
@@ -301,17 +337,31 @@ def check_campaign(
         if stop is not None and i % 256 == 0 and stop():
             return
         build_job(spec, seed, i)
-    checked: set[str] = set()
-    params = spec.run.get("controller", {}).get("params")
-    for path, name in controller_names(spec):
-        if name in checked:
+    checked: set[tuple[str, str]] = set()
+    mission = spec.situation.get("mission", {})
+    for path, name in [*controller_names(spec), *peer_controller_names(spec)]:
+        params = _params_at(spec, mission, path)
+        if (name, json.dumps(params, sort_keys=True)) in checked:
             continue
-        checked.add(name)
+        checked.add((name, json.dumps(params, sort_keys=True)))
         _core.check_controller(name, path)
         try:
-            check_controller_name(name, params if path.startswith(("run.", "vary.'run.")) else None)
+            check_controller_name(name, params)
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
+
+
+def _params_at(spec: CampaignSpec, mission: dict[str, Any], path: str) -> Any:
+    """The params of the controller table the field ``path`` names a controller in (those a
+    ``vary`` choice of the agent's controller gets are the run spec's)."""
+    if path.startswith(("run.", "vary.'run.")):
+        return spec.run.get("controller", {}).get("params")
+    if path.startswith(("situation.mission.peer_controller.", "vary.'situation.mission.peer_c")):
+        return mission.get("peer_controller", {}).get("params")
+    if path.startswith("situation.mission.peer_controllers["):
+        index = int(path.split("[", 1)[1].split("]", 1)[0])
+        return mission["peer_controllers"][index].get("params")
+    return None
 
 
 def check_workers(workers: int | None, backend: str) -> int:

@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from sitgen import _core
-from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor
 from sitgen.execution.jobs import Job, check_workers
 from sitgen.store import Store, StoreError
@@ -202,7 +201,7 @@ def copy_jobs(
 def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
     """Run ``jobs`` (perturbed copies, any controllers) on ``workers``: their results in job
     order, whatever the worker count."""
-    user = any(is_user_controller(j.controller) for j in jobs)
+    user = any(j.in_python for j in jobs)
     by_index: dict[int, dict[str, Any]] = {}
     for job, result in Executor(workers, user=user).results(iter(jobs)):
         by_index[job.index] = result

@@ -161,9 +161,11 @@ class Shrinker:
         self.on_progress = on_progress
         self.leg_margin = _core.shrink_leg_margin(self.original_json)
         named = (run_spec.get("controller") or original.agent.controller)["name"]
-        self.user = is_user_controller(named)
-        """Whether the agent's controller is a user's (its probes then run through
-        :func:`sitgen.run.run`, each in a process of a pool, rather than in the core)."""
+        peers = [r.controller["name"] for r in original.robots if r.role == "peer"]
+        self.user = any(is_user_controller(n) for n in [named, *peers])
+        """Whether the agent's or a peer's controller is a user's (its probes then run
+        through :func:`sitgen.run.run`, each in a process of a pool, rather than in the
+        core)."""
         self.cache: dict[str, dict[str, Any]] = {}
         self.paths: dict[str, npt.NDArray[np.float64]] = {}
         self.files: dict[str, str] = {}

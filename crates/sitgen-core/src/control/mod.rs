@@ -113,6 +113,26 @@ pub fn is_external(name: &str) -> bool {
     EXTERNAL_PREFIXES.iter().any(|p| name.starts_with(p))
 }
 
+/// The external controllers a peer may run: those called in the Python layer's own process
+/// (`python:` classes, navground behaviours). A program or a ROS 2 node drives the agent only:
+/// one process or node a robot, on one set of topics, is what their protocols have.
+pub const PEER_EXTERNAL_PREFIXES: [&str; 2] = ["python:", "navground:"];
+
+/// Check that `name`, the controller of a peer, is one a peer may run; `path` names the
+/// controller spec in errors.
+pub fn check_peer(name: &str, path: &str) -> Result<(), SpecError> {
+    if is_external(name) && !PEER_EXTERNAL_PREFIXES.iter().any(|p| name.starts_with(p)) {
+        return Err(SpecError::new(
+            join(path, "name"),
+            format!(
+                "`{name}`: a peer's controller is built in, python: or navground: (a program \
+                 or a ROS 2 node drives only the agent)"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Check a controller spec before any run: a built-in name with known parameters in range, or
 /// a well-formed external name (`python:MODULE:CLASS`, `cmd:PROGRAM …`; whether the module or
 /// program exists is for the Python layer to check). `path` names the spec in errors.

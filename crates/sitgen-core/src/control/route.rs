@@ -23,12 +23,28 @@ pub struct RouteFollower {
 impl RouteFollower {
     /// A follower at the start of `robot`'s route, switching within `switch_m` metres.
     pub fn new(robot: &Robot, switch_m: f64) -> Self {
-        let mut points = vec![(robot.start.x_m, robot.start.y_m)];
-        points.extend(robot.waypoints.iter().map(|w| (w[0], w[1])));
+        let waypoints: Vec<(f64, f64)> = robot.waypoints.iter().map(|w| (w[0], w[1])).collect();
+        Self::through(
+            (robot.start.x_m, robot.start.y_m),
+            &waypoints,
+            robot.at_end,
+            switch_m,
+        )
+    }
+
+    /// A follower at `start` of the route through `waypoints`, ending as `at_end` says.
+    pub fn through(
+        start: (f64, f64),
+        waypoints: &[(f64, f64)],
+        at_end: AtEnd,
+        switch_m: f64,
+    ) -> Self {
+        let mut points = vec![start];
+        points.extend(waypoints);
         let finished = points.len() < 2;
         Self {
             points,
-            at_end: robot.at_end,
+            at_end,
             switch_m,
             next: 1,
             forward: true,

@@ -211,7 +211,7 @@ fn note_stalls(run: &Run, first: &mut [Option<u64>]) {
 /// sitgen's own run, with each robot's pose after every step.
 fn run_sitgen(situation: &Situation, run: &RunSpec) -> Result<(Side, Vec<Vec<Pose>>), String> {
     let mut r = Run::new(situation, run, 0).map_err(|e| e.to_string())?;
-    if r.agent_is_external() {
+    if r.any_external() {
         return Err("the cross-check runs built-in controllers only".into());
     }
     let mut first = vec![None; situation.robots.len()];

@@ -158,6 +158,11 @@ pub struct MissionSpec {
     /// The peers' controller. Default `straight`.
     #[serde(default = "default_peer_controller")]
     pub peer_controller: ControllerSpec,
+    /// Controllers the peers are drawn from, each peer its own (uniformly, after every route
+    /// is planned), in place of `peer_controller`: a crowd that mixes behaviours. Default
+    /// empty: every peer runs `peer_controller`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub peer_controllers: Vec<ControllerSpec>,
 }
 
 fn default_peers_max() -> u32 {
@@ -208,6 +213,7 @@ impl Default for MissionSpec {
             peer_at_end: default_peer_at_end(),
             agent_controller: default_agent_controller(),
             peer_controller: default_peer_controller(),
+            peer_controllers: Vec::new(),
         }
     }
 }
@@ -254,13 +260,27 @@ impl MissionSpec {
         )?;
         check_count(&join(path, "goal_attempts"), self.goal_attempts, 1, 100_000)?;
         check_count(&join(path, "peer_legs"), self.peer_legs, 1, 100)?;
+        check_count(
+            &join(path, "peer_controllers"),
+            self.peer_controllers.len() as u32,
+            0,
+            100,
+        )?;
+        let listed = self
+            .peer_controllers
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (format!("peer_controllers[{i}]"), c));
         for (name, c) in [
-            ("agent_controller", &self.agent_controller),
-            ("peer_controller", &self.peer_controller),
-        ] {
+            ("agent_controller".to_string(), &self.agent_controller),
+            ("peer_controller".to_string(), &self.peer_controller),
+        ]
+        .into_iter()
+        .chain(listed)
+        {
             if c.name.trim().is_empty() {
                 return Err(SpecError::new(
-                    join(&join(path, name), "name"),
+                    join(&join(path, &name), "name"),
                     "must name a controller",
                 ));
             }

@@ -208,7 +208,21 @@ pub fn generate(
             spec.peer_at_end,
         ));
     }
+    draw_peer_controllers(spec, &mut robots, peers);
     Ok(robots)
+}
+
+/// Each peer's controller drawn from `peer_controllers`, where the spec lists several; drawn
+/// after every route, so that a spec without the list draws exactly what it did before.
+fn draw_peer_controllers(spec: &MissionSpec, robots: &mut [Robot], choices: &mut ChoiceSource) {
+    let listed = &spec.peer_controllers;
+    for r in robots.iter_mut().filter(|r| r.role == Role::Peer) {
+        r.controller = match listed.len() {
+            0 => continue,
+            1 => listed[0].clone(),
+            n => listed[choices.index(n)].clone(),
+        };
+    }
 }
 
 fn robot(

@@ -115,6 +115,13 @@ impl Episodes {
     /// Start slot `i` afresh on `situation`, sensor noise from `seed`.
     pub fn reset(&mut self, i: usize, situation: &Situation, seed: u64) -> Result<(), SpecError> {
         let run = Run::new(situation, &self.spec, seed)?;
+        if let Some(&peer) = run.external().iter().find(|&&id| id != run.agent()) {
+            return Err(SpecError::new(
+                format!("robots[{peer}].controller.name"),
+                "an episode's peers run built-in controllers (a peer's python: or navground: \
+                 controller is driven by sitgen.run, not by a step of the environment)",
+            ));
+        }
         self.slots[i] = Some(Episode {
             to_go_m: to_go_m(&run, &run.agent_route_ahead()),
             penalty: 0.0,

@@ -286,10 +286,11 @@ impl Run {
             exact.push(controller.perception == Some(Perception::Exact));
             if is_external(&controller.name) {
                 if r.id != agent {
-                    return Err(SpecError::new(
-                        join(&path, "name"),
-                        "only the agent may have a Python or external controller",
-                    ));
+                    control::check_peer(&controller.name, &path)?;
+                    // Its observation is asked for as the agent's is: with a laser.
+                    world
+                        .fit_laser(r.id)
+                        .expect("the situation's robots are the world's");
                 }
                 controllers.push(None);
                 continue;
@@ -345,6 +346,20 @@ impl Run {
         self.controllers[self.agent as usize].is_none()
     }
 
+    /// The robots whose commands come from outside (the agent's, peers' `python:` and
+    /// `navground:` controllers), in id order.
+    pub fn external(&self) -> Vec<u32> {
+        (0..self.controllers.len() as u32)
+            .filter(|&id| self.controllers[id as usize].is_none())
+            .collect()
+    }
+
+    /// Whether any robot's commands come from outside: the run is stepped from the Python
+    /// layer ([`Run::step_with`]).
+    pub fn any_external(&self) -> bool {
+        self.controllers.iter().any(Option::is_none)
+    }
+
     /// The world as it stands.
     pub fn world(&self) -> &World {
         &self.world
@@ -370,6 +385,22 @@ impl Run {
         self.perceived(self.agent, obs)
     }
 
+    /// What robot `id` senses now, as its controller is given it (for an external controller;
+    /// the agent's is [`Run::agent_observation`]).
+    pub fn observation(&mut self, id: u32) -> Observation {
+        if id == self.agent {
+            return self.agent_observation();
+        }
+        let obs = self.world.observe(id).expect("ids are the world's");
+        self.perceived(id, obs)
+    }
+
+    /// How many waypoints of its route robot `id` has reached on its first pass, as the
+    /// monitor sees it.
+    pub fn waypoints_reached(&self, id: u32) -> usize {
+        self.monitor.as_ref().map_or(0, |m| m.waypoints_reached(id))
+    }
+
     /// What robot `id`'s controller is given of its observation `obs`: with the exact
     /// perception, every other robot's true state as its tracks in place of those its laser
     /// sees (the monitor still knows which the laser saw).
@@ -383,9 +414,7 @@ impl Run {
     /// How many waypoints of its route the agent has reached, as the monitor sees it (the
     /// index of its current waypoint, for controllers that do not follow the route themselves).
     pub fn agent_waypoints_reached(&self) -> usize {
-        self.monitor
-            .as_ref()
-            .map_or(0, |m| m.waypoints_reached(self.agent))
+        self.waypoints_reached(self.agent)
     }
 
     /// The waypoints the agent has yet to reach, in order, as the monitor counts them.
@@ -459,6 +488,16 @@ impl Run {
     /// agent, and on steps where the agent does not act: its last command stays in force);
     /// returns whether the run has ended.
     pub fn step(&mut self, agent_command: Option<Command>) -> bool {
+        let given: Vec<(u32, Command)> =
+            agent_command.map(|c| (self.agent, c)).into_iter().collect();
+        self.step_with(&given)
+    }
+
+    /// One step, `external` the commands of the external robots that act now, by id (one
+    /// missing is (0, 0); those of robots that do not act now, or are built in, are ignored:
+    /// a robot's last command stays in force between its decisions). Returns whether the run
+    /// has ended.
+    pub fn step_with(&mut self, external: &[(u32, Command)]) -> bool {
         if self.ended.is_some() {
             return true;
         }
@@ -468,6 +507,21 @@ impl Run {
         for id in 0..n as u32 {
             let acts = self.acts_now(id);
             if !acts && id != self.agent {
+                continue;
+            }
+            let given = || {
+                external
+                    .iter()
+                    .find(|(who, _)| *who == id)
+                    .map_or((0.0, 0.0), |&(_, c)| c)
+            };
+            if id != self.agent && self.controllers[id as usize].is_none() {
+                // An external peer was observed by its caller; the command is all it needs.
+                let command = given();
+                if !(command.0.is_finite() && command.1.is_finite()) {
+                    return self.not_finite(id, command);
+                }
+                commands.push((id, command.0, command.1));
                 continue;
             }
             // The agent's laser scans every step whether or not its controller acts: what it
@@ -487,14 +541,10 @@ impl Run {
             let obs = self.perceived(id, obs);
             let command = match &mut self.controllers[id as usize] {
                 Some(c) => c.act(&obs),
-                None => agent_command.unwrap_or((0.0, 0.0)),
+                None => given(),
             };
             if !(command.0.is_finite() && command.1.is_finite()) {
-                let who = monitor::robot_name(id, self.agent);
-                return self.fail(format!(
-                    "{who}'s controller returned a command that is not finite: ({}, {})",
-                    command.0, command.1
-                ));
+                return self.not_finite(id, command);
             }
             commands.push((id, command.0, command.1));
         }
@@ -502,6 +552,15 @@ impl Run {
             .step(&commands)
             .expect("commands are finite and for known robots");
         self.watch_step(&seen)
+    }
+
+    /// End the run in error: robot `id`'s controller gave `command`, which is not finite.
+    fn not_finite(&mut self, id: u32, command: Command) -> bool {
+        let who = monitor::robot_name(id, self.agent);
+        self.fail(format!(
+            "{who}'s controller returned a command that is not finite: ({}, {})",
+            command.0, command.1
+        ))
     }
 
     /// One step of another simulator's run of the same situation (a replay of its log, e.g.
@@ -644,7 +703,7 @@ pub fn run(situation: &Situation, spec: &RunSpec, seed: u64) -> Result<RunRecord
 
 /// Run `r` with built-in controllers to its end.
 fn run_to_end(mut r: Run) -> Result<RunRecord, SpecError> {
-    if r.agent_is_external() {
+    if r.any_external() {
         return Err(SpecError::new(
             "run.controller.name",
             "Python and external controllers run through the Python layer (sitgen.run)",

@@ -532,7 +532,7 @@ fn a_run_spec_with_an_unknown_controller_or_too_many_steps_is_refused_before_run
 }
 
 #[test]
-fn a_situation_spec_names_known_controllers_and_only_the_agent_an_external_one() {
+fn a_situation_spec_names_known_controllers_and_only_the_agent_a_program_or_node() {
     let read =
         |toml: &str| crate::spec::from_toml_str(&format!("[terrain]\npreset = \"caves\"\n{toml}"));
     let error = |toml: &str| read(toml).unwrap_err().to_string();
@@ -543,9 +543,13 @@ fn a_situation_spec_names_known_controllers_and_only_the_agent_an_external_one()
     );
     let e = error("[mission.peer_controller]\nname = \"cmd:peer\"\n");
     assert!(
-        e.starts_with("mission.peer_controller.name: only the agent"),
+        e.starts_with("mission.peer_controller.name: `cmd:peer`: a peer's controller is built in"),
         "{e}"
     );
+    let e = error("[mission.peer_controller]\nname = \"ros2:peer_node\"\n");
+    assert!(e.contains("drives only the agent"), "{e}");
+    assert!(read("[mission.peer_controller]\nname = \"navground:ORCA\"\n").is_ok());
+    assert!(read("[mission.peer_controller]\nname = \"python:people:Walker\"\n").is_ok());
     assert!(read("[mission.agent_controller]\nname = \"cmd:my_robot --fast\"\n").is_ok());
 }
 
@@ -912,4 +916,87 @@ fn the_exact_perception_tracks_every_robot_and_leaves_the_monitor_what_the_laser
     let (exact, sensed) = (exact.finish(), run_with_still_agent(&s, 10.0));
     assert_eq!(exact.events, sensed.events);
     assert!(!of_kind(&exact, EventKind::Collision).is_empty());
+}
+
+#[test]
+fn a_peer_with_an_external_controller_moves_as_its_commands_say_and_errs_by_its_name() {
+    // The peer behind the agent runs a `navground:` controller: the run is stepped with its
+    // commands, as the agent's are; without one it stands; a command that is not finite ends
+    // the run naming the peer.
+    let mut s = rear_approach();
+    s.robots[1].controller = ControllerSpec::named("navground:ORCA");
+    let mut r = Run::new(&s, &spec(Some("cmd:still"), 20.0), 0).unwrap();
+    assert_eq!(r.external(), vec![0, 1]);
+    assert!(r.any_external());
+    let start = r.world().robots()[1].pose;
+    let seen_from_peer = r.observation(1);
+    assert!(
+        !seen_from_peer.ranges.is_empty(),
+        "an external peer carries a laser"
+    );
+    for _ in 0..10 {
+        r.step_with(&[(0, (0.0, 0.0)), (1, (0.4, 0.0))]);
+    }
+    let moved = r.world().robots()[1].pose;
+    assert!(
+        (moved.x_m - start.x_m - 0.4).abs() < 0.05,
+        "10 steps at 0.4 m/s: {start:?} → {moved:?}"
+    );
+    r.step_with(&[(0, (0.0, 0.0))]);
+    let stood = r.world().robots()[1].pose;
+    assert!((stood.x_m - moved.x_m).abs() < 0.02, "no command: it stops");
+    assert!(r.step_with(&[(1, (f64::NAN, 0.0))]));
+    let rec = r.finish();
+    assert_eq!(rec.outcome, Outcome::Error);
+    assert!(
+        rec.reason.starts_with("peer 1's controller"),
+        "{}",
+        rec.reason
+    );
+
+    // A program or a node drives only the agent.
+    s.robots[1].controller = ControllerSpec::named("cmd:peer");
+    let e = Run::new(&s, &spec(Some("cmd:still"), 20.0), 0)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("drives only the agent"), "{e}");
+}
+
+#[test]
+fn peers_draw_their_controllers_from_the_list_and_a_spec_without_one_is_unchanged() {
+    let read = |toml: &str| {
+        crate::spec::from_toml_str(&format!(
+            "[terrain]\npreset = \"open_field\"\n[mission]\npeers_min = 5\npeers_max = 5\n{toml}"
+        ))
+        .unwrap()
+    };
+    let plain = read("");
+    let listed = read(
+        "peer_controllers = [{ name = \"navground:ORCA\" }, { name = \"straight\" }, \
+         { name = \"vo\" }]\n",
+    );
+    let mut seen = std::collections::BTreeSet::new();
+    for seed in 0..6 {
+        let (a, _) = crate::situation::generate(&plain, seed).unwrap();
+        let (b, _) = crate::situation::generate(&listed, seed).unwrap();
+        // The draw comes after every route: the same robots where they were.
+        for (ra, rb) in a.robots.iter().zip(&b.robots) {
+            assert_eq!((ra.start, &ra.waypoints), (rb.start, &rb.waypoints));
+        }
+        assert!(a.robots[1..]
+            .iter()
+            .all(|r| r.controller.name == "straight"));
+        seen.extend(b.robots[1..].iter().map(|r| r.controller.name.clone()));
+        assert_eq!(b.robots[0].controller.name, "snd_follow");
+    }
+    assert_eq!(seen.len(), 3, "{seen:?}");
+    let e = crate::spec::from_toml_str(
+        "[terrain]\npreset = \"open_field\"\n[mission]\npeer_controllers = [{ name = \"ros2:x\" }]\n",
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .starts_with("mission.peer_controllers[0].name:"),
+        "{e}"
+    );
 }

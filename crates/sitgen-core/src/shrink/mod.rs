@@ -92,7 +92,7 @@ pub fn robots_at(
     t_s: f64,
 ) -> Result<Vec<Robot>, String> {
     let mut r = run::Run::new(situation, spec, seed).map_err(|e| e.to_string())?;
-    if r.agent_is_external() {
+    if r.any_external() {
         return Err("Python and external controllers cannot be restarted part-way".into());
     }
     let steps = (t_s / spec.sim.dt_s).round().max(0.0) as u64;

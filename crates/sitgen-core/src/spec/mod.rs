@@ -42,13 +42,14 @@ impl SituationSpec {
         self.mission.validate("mission")?;
         crate::control::check(&self.mission.agent_controller, "mission.agent_controller")?;
         let peer = &self.mission.peer_controller;
-        if crate::control::is_external(&peer.name) {
-            return Err(SpecError::new(
-                "mission.peer_controller.name",
-                "only the agent may have a Python or external controller",
-            ));
+        crate::control::check_peer(&peer.name, "mission.peer_controller")?;
+        crate::control::check(peer, "mission.peer_controller")?;
+        for (i, peer) in self.mission.peer_controllers.iter().enumerate() {
+            let path = format!("mission.peer_controllers[{i}]");
+            crate::control::check_peer(&peer.name, &path)?;
+            crate::control::check(peer, &path)?;
         }
-        crate::control::check(peer, "mission.peer_controller")
+        Ok(())
     }
 }
 

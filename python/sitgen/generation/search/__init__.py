@@ -29,14 +29,13 @@ from pathlib import Path
 from typing import Any
 
 from sitgen import _core
-from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor, run_row, started_at
 from sitgen.execution.jobs import (
     CampaignSpec,
     campaign_from_data,
     check_campaign,
     check_workers,
-    controller_names,
+    runs_in_python,
 )
 from sitgen.generation.genome import (
     Genome,
@@ -164,7 +163,7 @@ def run_search(
     check_campaign(spec, seed, budget, stop)
     if stop is not None and stop():
         return SearchResult(0, 0, True, time.perf_counter() - started, 0, 0.0)
-    user = any(is_user_controller(name) for _, name in controller_names(spec))
+    user = runs_in_python(spec)
     with Store(db, create=True) as store:
         store.lock_for_writing()
         store.start_campaign(
