@@ -40,6 +40,21 @@ def sitgen_command() -> list[str]:
     return [exe] if exe else [sys.executable, "-m", "sitgen.cli"]
 
 
+def campaign_on_2_and_1_workers(text: str, folder: Path) -> tuple[Path, Path]:
+    """The campaign spec ``text`` run with ``sitgen campaign`` on 2 workers, then on 1 (no
+    robustness copies): the two stores, ``2.db`` and ``1.db`` in ``folder``."""
+    spec = folder / "campaign.toml"
+    spec.write_text(text)
+    stores = (folder / "2.db", folder / "1.db")
+    for db, workers in zip(stores, ("2", "1"), strict=True):
+        done = run_cli(
+            "campaign", str(spec), "--db", str(db), "--workers", workers, "--reruns", "0",
+            cwd=ROOT,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+    return stores
+
+
 def run_cli(*args: str, cwd: Path | None = None) -> Result:
     """Run the installed ``sitgen`` command, as a user would."""
     done = subprocess.run(

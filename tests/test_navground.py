@@ -21,7 +21,7 @@ import sitgen
 from sitgen.controllers.navground import thinned
 from sitgen.run import reset_info
 from sitgen.world.terrain import wall_segments
-from tests.conftest import ROOT, run_cli, sitgen_command
+from tests.conftest import campaign_on_2_and_1_workers, run_cli, sitgen_command
 
 navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
 
@@ -63,14 +63,7 @@ def test_every_behaviour_drives_a_campaign_with_both_perceptions_the_same_on_1_a
 ) -> None:
     """One campaign that draws the behaviour and the perception of each run (one campaign,
     not eight, for CI's time), on 2 workers and again on 1: the same runs, none in error."""
-    spec = tmp_path / "c.toml"
-    spec.write_text(CAMPAIGN)
-    for workers in ("2", "1"):
-        done = run_cli(
-            "campaign", str(spec), "--db", str(tmp_path / f"{workers}.db"), "--workers", workers,
-            "--reruns", "0", cwd=ROOT,
-        )  # fmt: skip
-        assert done.returncode == 0, done.stderr
+    campaign_on_2_and_1_workers(CAMPAIGN, tmp_path)
     two = stored_runs(tmp_path / "2.db")
     assert stored_runs(tmp_path / "1.db") == two
     assert len(two) == 16 and not [r for r in two if r[2] == "error"], [r[3] for r in two]

@@ -17,7 +17,7 @@ import pytest
 import sitgen
 from sitgen import _core
 from sitgen.world.situation import Situation
-from tests.conftest import ROOT, run_cli
+from tests.conftest import campaign_on_2_and_1_workers, run_cli
 
 navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
 
@@ -153,14 +153,7 @@ def stored(db: Path) -> list[tuple[Any, ...]]:
 def test_a_crowd_of_mixed_peers_runs_the_same_on_1_and_2_workers_and_its_failure_shrinks(
     tmp_path: Path,
 ) -> None:
-    spec = tmp_path / "crowd.toml"
-    spec.write_text(CROWD)
-    for workers in ("2", "1"):
-        done = run_cli(
-            "campaign", str(spec), "--db", str(tmp_path / f"{workers}.db"), "--workers", workers,
-            "--reruns", "0", cwd=ROOT,
-        )  # fmt: skip
-        assert done.returncode == 0, done.stderr
+    campaign_on_2_and_1_workers(CROWD, tmp_path)
     two = stored(tmp_path / "2.db")
     assert stored(tmp_path / "1.db") == two
     assert len(two) == 6 and not [r for r in two if r[1] == "error"], [r[2] for r in two]
