@@ -183,6 +183,10 @@ def approach_peer(
             }
         )
     robot = robots[peer]
+    # The staged peer's departure is timed (``start_s``): it runs ``straight``, whatever it
+    # ran before, with the params it had if it ran that already.
+    if robot["controller"].get("name") != "straight":
+        robot["controller"] = {"name": "straight", "params": {}}
     params = dict(robot["controller"].get("params") or {})
     # Where the peer comes from (bearing from the place) and the course it drives.
     side = {

@@ -9,8 +9,9 @@ peer whose route passes nearest it:
 - ``retime_peer``: it starts up to :data:`RETIME_M` earlier or later along its first leg,
   facing along it (for a peer that drives at constant speed, the same as starting that much
   earlier or later);
-- ``peer_speed``: its cruising speed (``speed_m_s``) scales by U(0.6, 1.5), within
-  :data:`SPEED_RANGE`;
+- ``peer_speed``: its cruising speed (``speed_m_s`` of a built-in that has one,
+  ``optimal_speed`` of a navground behaviour: :func:`speed_param`) scales by U(0.6, 1.5),
+  within :data:`SPEED_RANGE` (a peer whose controller has no such parameter is left alone);
 - ``shift_waypoint``, ``insert_waypoint``, ``delete_waypoint``: a waypoint of the agent's
   route or the peer's moves by N(0, :data:`WAYPOINT_SD_M`), a new one goes in mid-leg (moved
   as much), or one goes (a route keeps one at least);
@@ -44,6 +45,23 @@ from scipy import ndimage
 from sitgen.generation.mutation.mirror import mirrored
 from sitgen.generation.mutation.parent import Parent
 from sitgen.generation.mutation.places import Edit, cell, focus_peer, route_of
+
+SPEED_PARAMS = {
+    "straight": "speed_m_s",
+    "follow": "speed_m_s",
+    "vo": "speed_m_s",
+    "dwa": "speed_m_s",
+}
+"""The built-in controllers' cruising-speed parameter (m/s)."""
+
+
+def speed_param(controller: str) -> str | None:
+    """The parameter that sets a peer's cruising speed under ``controller`` (m/s), or None
+    where it has none (``snd``, a user's class)."""
+    if controller.startswith("navground:"):
+        return "optimal_speed"
+    return SPEED_PARAMS.get(controller)
+
 
 PEER_OPERATORS = ("move_peer", "turn_peer", "retime_peer", "peer_speed")
 """Local operators on a peer: none applies to a situation without peers (a staged approach
@@ -111,9 +129,12 @@ def apply_local(
     elif operator == "peer_speed":
         assert peer is not None
         controller = robots[peer]["controller"]
+        name = speed_param(str(controller.get("name", "")))
+        if name is None:
+            return None
         params = dict(controller.get("params") or {})
-        speed = float(params.get("speed_m_s", 0.5)) * float(rng.uniform(0.6, 1.5))
-        params["speed_m_s"] = min(SPEED_RANGE[1], max(SPEED_RANGE[0], speed))
+        speed = float(params.get(name, 0.5)) * float(rng.uniform(0.6, 1.5))
+        params[name] = min(SPEED_RANGE[1], max(SPEED_RANGE[0], speed))
         controller["params"] = params
     elif operator in ("shift_waypoint", "insert_waypoint", "delete_waypoint"):
         who = 0 if peer is None or rng.random() < 0.5 else peer
