@@ -6,6 +6,7 @@ the yardstick counts every copy against the budget."""
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import math
@@ -31,7 +32,7 @@ from sitgen.generation.mutation.approach import (
     START_S_MAX,
     Ground,
 )
-from sitgen.generation.mutation.local import SPEED_RANGE
+from sitgen.generation.mutation.local import SPEED_RANGE, apply_local
 from sitgen.generation.mutation.mirror import as_made_by
 from sitgen.generation.mutation.parent import (
     IN_RANGE_M,
@@ -677,3 +678,37 @@ def test_a_targeted_child_keeps_the_target_it_was_aimed_at(tmp_path: Path) -> No
             assert how["aim"] in neighbours(variants[parent], how["operator"])
             aimed += 1
     assert aimed, "no targeted child was aimed"
+
+
+@pytest.mark.parametrize(
+    ("peers", "param"),
+    [("navground:ORCA", "optimal_speed"), ("vo", "speed_m_s"), ("snd", None)],
+)
+def test_a_peers_speed_is_varied_by_the_parameter_its_controller_has(
+    parent: Parent, peers: str, param: str | None
+) -> None:
+    """``peer_speed`` scales the cruising speed under the name the peer's controller gives it,
+    and leaves a controller without one alone (a child the peer's controller would refuse is
+    never made); a staged approach's peer runs ``straight``, whose departure it times."""
+    data = json.loads(parent.situation.to_json())
+    for robot in data["robots"][1:]:
+        robot["controller"] = {"name": peers, "params": {}}
+    situation = sitgen.Situation(json.dumps(data))
+    assert parent.failure_pose is not None
+    focus = parent.failure_pose[:2]
+    robots = copy.deepcopy(data["robots"])
+    occupied = situation.grid.occupied.copy()
+    edit = apply_local("peer_speed", robots, occupied, 0.1, focus, parent, np.random.default_rng(2))
+    peer = focus_peer(data["robots"], focus)
+    assert peer is not None
+    if param is None:
+        assert edit is None
+    else:
+        assert edit is not None
+        assert set(robots[peer]["controller"]["params"]) == {param}
+    staged = dataclasses.replace(parent, situation=situation)
+    child = mutate(staged, "approach_peer", np.random.default_rng(5), "head_on")
+    assert child is not None
+    robot = json.loads(child)["robots"][peer]
+    assert robot["controller"]["name"] == "straight"
+    assert set(robot["controller"]["params"]) == {"speed_m_s", "start_s"}
