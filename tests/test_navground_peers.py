@@ -212,3 +212,14 @@ def test_a_program_or_node_as_a_peer_is_refused_in_one_line(
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
     assert field in done.stderr and "drives only the agent" in done.stderr, done.stderr
     assert not (tmp_path / "c.db").exists()
+
+
+def test_check_controller_drives_a_situation_whose_peers_run_navground(tmp_path: Path) -> None:
+    situation = two_robots(
+        (4.0, 10.0, 0.0), (16.0, 10.0, np.pi), [3.0, 10.0], {"name": "navground:HL"}
+    )
+    path = tmp_path / "peers.json"
+    situation.save(path)
+    done = run_cli("check-controller", "navground:ORCA", "--situation", str(path))
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "FAIL" not in done.stdout

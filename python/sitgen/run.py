@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
+import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -395,9 +397,6 @@ def check_controller(
     check by check (in the spirit of Gymnasium's ``check_env``): it loads, it accepts the reset
     message, every reply is a pair of finite numbers in time, commands stay within the robot's
     limits (larger ones are clamped, which is usually a units mistake), and it shuts down."""
-    import math
-    import time
-
     checks: list[Check] = []
     # The run first: the core's thread pool starts with it, on every core, before a program's
     # start keeps this thread to one (ProcessController), which threads started then inherit.
@@ -414,6 +413,7 @@ def check_controller(
     checks.append(Check("loads", True, user.name))
     info = reset_info(situation, {}, 0)
     info["params"] = dict(params or {})
+    peers = contextlib.ExitStack()
     try:
         try:
             user.reset(info)
@@ -421,6 +421,11 @@ def check_controller(
             checks.append(Check("reset", False, str(e)))
             return checks
         checks.append(Check("reset", True, "accepted the route, body, laser and limits"))
+        try:  # the situation's own peers, where they run python: or navground: controllers
+            peers.enter_context(_peers(core, situation, {}, False))
+        except ControllerError as e:
+            checks.append(Check("peers", False, f"the situation's peers: {e}"))
+            return checks
         slowest, beyond, taken = 0.0, 0, 0
         for _ in range(steps):
             obs = core.observe_agent()
@@ -441,7 +446,12 @@ def check_controller(
             ):
                 beyond += 1
             taken += 1
-            if core.step((v, omega)):
+            try:
+                ended = core.step((v, omega))
+            except ControllerError as e:
+                checks.append(Check("peers", False, f"the situation's peers: {e}"))
+                return checks
+            if ended:
                 break
         checks.append(
             Check("act", True, f"{taken} finite commands, slowest reply {slowest * 1e3:.1f} ms")
@@ -457,6 +467,7 @@ def check_controller(
             )
         )
     finally:
+        peers.close()
         unclean = user.close()
     checks.append(Check("close", unclean is None, unclean or "shut down on `end`"))
     if isinstance(controller, str):
