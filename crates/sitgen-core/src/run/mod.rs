@@ -24,138 +24,25 @@ use serde::{Deserialize, Serialize};
 
 use crate::control::{self, Command, Controller};
 use crate::coverage::{CoverageRecord, Observer};
-use crate::error::{join, SpecError};
+use crate::error::SpecError;
 use crate::failure::{self, Failure, FailureClass};
-use crate::mission::{ControllerSpec, Perception};
-use crate::monitor::{self, Event, Frame, Monitor, MonitorSpec};
+use crate::mission::Perception;
+use crate::monitor::{self, Event, Frame, Monitor};
 use crate::scoring::{self, Score, ScoringSpec};
-use crate::sim::{Observation, SimSpec, World};
+use crate::sim::{Observation, World};
 use crate::situation::Situation;
 
 pub mod episodes;
+mod jobs;
 pub mod perturb;
 pub mod profile;
 pub mod protocol;
 pub mod serve;
+mod spec;
 
+pub use jobs::{pack_trajectory, par_map, run_batch, run_job, Job, JobResult, JobSituation};
 pub use perturb::Perturbation;
-
-/// How to run a situation.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct RunSpec {
-    /// A named run profile laid under this spec's own fields (docs/profiles.md): `default`
-    /// (sitgen's defaults) or `paper` (Arnold & Alexander's Player/Stage setting). Default:
-    /// none, sitgen's defaults.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub profile: Option<String>,
-    /// The agent's controller; default: the one the situation names (`snd_follow` unless its
-    /// mission said otherwise). `python:module:Class` and `cmd:program args` are run by the
-    /// Python layer.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub controller: Option<ControllerSpec>,
-    /// Simulated seconds after which an unfinished run stops with a timeout, in (0, 86400].
-    /// Default 600.
-    #[serde(default = "default_time_limit_s")]
-    pub time_limit_s: f64,
-    /// The simulator.
-    #[serde(default)]
-    pub sim: SimSpec,
-    /// The monitor's thresholds.
-    #[serde(default)]
-    pub monitor: MonitorSpec,
-    /// Penalties.
-    #[serde(default)]
-    pub scoring: ScoringSpec,
-    /// Run a perturbed copy of the situation instead of the situation itself: sensor noise
-    /// and start offsets a real robot would not notice ([`perturb`]). Default none.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub perturbation: Option<Perturbation>,
-}
-
-fn default_time_limit_s() -> f64 {
-    600.0
-}
-
-impl Default for RunSpec {
-    fn default() -> Self {
-        Self {
-            profile: None,
-            controller: None,
-            time_limit_s: default_time_limit_s(),
-            sim: SimSpec::default(),
-            monitor: MonitorSpec::default(),
-            scoring: ScoringSpec::default(),
-            perturbation: None,
-        }
-    }
-}
-
-impl RunSpec {
-    /// Check every field; `path` names the section in errors.
-    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
-        SpecError::check_positive(&join(path, "time_limit_s"), self.time_limit_s, 86_400.0)?;
-        self.sim.validate(&join(path, "sim"))?;
-        let steps = (self.time_limit_s / self.sim.dt_s).ceil();
-        if steps > MAX_STEPS {
-            return Err(SpecError::new(
-                join(path, "sim.dt_s"),
-                format!(
-                    "{} s at {} s per step is {steps:.0} steps; a run may take at most {MAX_STEPS:.0}",
-                    self.time_limit_s, self.sim.dt_s
-                ),
-            ));
-        }
-        if let Some(c) = &self.controller {
-            let path = join(path, "controller");
-            control::check(c, &path)?;
-            control::period_steps(c, self.sim.dt_s, &path)?;
-        }
-        if let Some(p) = &self.perturbation {
-            p.validate(&join(path, "perturbation"))?;
-        }
-        self.monitor.validate(&join(path, "monitor"))?;
-        self.scoring.validate(&join(path, "scoring"))
-    }
-
-    /// The simulator settings and sensor-noise seed of a run with seed `seed`: the spec's own,
-    /// or its perturbed copy's.
-    fn world_settings(&self, seed: u64) -> (SimSpec, u64) {
-        match &self.perturbation {
-            Some(p) => (p.sim(&self.sim), p.seed(seed)),
-            None => (self.sim.clone(), seed),
-        }
-    }
-
-    /// Parse and validate a run spec from JSON, its profile (if it names one) laid under its
-    /// own fields; errors name the field under `path`.
-    pub fn from_json(text: &str, path: &str) -> Result<Self, SpecError> {
-        let mut value: serde_json::Value = serde_json::from_str(text)
-            .map_err(|e| SpecError::new(path, format!("expected a JSON object: {e}")))?;
-        profile::resolve(&mut value, path)?;
-        let spec: RunSpec = serde_path_to_error::deserialize(value).map_err(|e| {
-            SpecError::new(join(path, &e.path().to_string()), e.inner().to_string())
-        })?;
-        spec.validate(path)?;
-        Ok(spec)
-    }
-}
-
-pub use crate::control::is_external;
-
-/// The controller robot `id` runs under `run` (the run spec's for the agent, if it names one,
-/// else the situation's) and the field that names it.
-pub fn controller_spec<'a>(
-    situation: &'a Situation,
-    run: &'a RunSpec,
-    id: u32,
-) -> (&'a ControllerSpec, String) {
-    let r = &situation.robots[id as usize];
-    match &run.controller {
-        Some(c) if r.role == crate::situation::Role::Agent => (c, "run.controller".to_string()),
-        _ => (&r.controller, format!("robots[{id}].controller")),
-    }
-}
+pub use spec::{controller_spec, is_external, RunSpec};
 
 /// Most steps a run may take: 10⁷ (a day at 10 ms steps is 8.6 × 10⁶), so that a tiny `dt_s`
 /// cannot ask for a run that never ends.
@@ -715,101 +602,3 @@ fn run_to_end(mut r: Run) -> Result<RunRecord, SpecError> {
 
 #[cfg(test)]
 pub(crate) mod tests;
-
-/// One run of a campaign: a situation to generate and how to run it.
-#[derive(Debug, Clone)]
-pub struct Job {
-    /// The situation: generated from a spec, or given whole.
-    pub situation: JobSituation,
-    /// Its master seed (for a spec).
-    pub situation_seed: u64,
-    /// How to run it.
-    pub run: RunSpec,
-    /// The run's sensor-noise seed.
-    pub run_seed: u64,
-}
-
-/// Where a job's situation comes from.
-#[derive(Debug, Clone)]
-pub enum JobSituation {
-    /// Generated from this spec with the job's situation seed.
-    Spec(Box<crate::spec::SituationSpec>),
-    /// Given whole (a fixed benchmark world, a situation file), already checked.
-    Given(Box<Situation>),
-}
-
-/// A finished job: the situation generated and the run's record, or why there is none.
-pub type JobResult = Result<(Situation, RunRecord), String>;
-
-/// Generate and run one job.
-pub fn run_job(job: &Job) -> JobResult {
-    // A run checks where the robots start (Run::new), as it does for every situation.
-    match &job.situation {
-        JobSituation::Spec(spec) => {
-            // Generation has the map decoded and its distances to obstacles: the run's world
-            // takes them rather than computing them again.
-            let (situation, terrain, to_occupied) =
-                crate::situation::generate_with_distances(spec, job.situation_seed)
-                    .map_err(|e| format!("generation failed: {e}"))?;
-            let record = Run::with_distances(
-                &situation,
-                &job.run,
-                job.run_seed,
-                terrain.map,
-                &to_occupied,
-            )
-            .and_then(run_to_end)
-            .map_err(|e| e.to_string())?;
-            Ok((situation, record))
-        }
-        JobSituation::Given(situation) => {
-            let record = run(situation, &job.run, job.run_seed).map_err(|e| e.to_string())?;
-            Ok(((**situation).clone(), record))
-        }
-    }
-}
-
-/// Run `jobs` on `threads` threads; results in job order, each independent of the others and
-/// of the thread count.
-pub fn run_batch(jobs: &[Job], threads: usize) -> Vec<JobResult> {
-    par_map(jobs, threads, run_job)
-}
-
-/// `f` of every item on a pool of `threads` threads; results in item order, whatever the
-/// thread count.
-pub fn par_map<T: Sync, R: Send>(
-    items: &[T],
-    threads: usize,
-    f: impl Fn(&T) -> R + Sync + Send,
-) -> Vec<R> {
-    use rayon::prelude::*;
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.max(1))
-        .build()
-        .expect("a thread pool");
-    pool.install(|| items.par_iter().map(f).collect())
-}
-
-/// A trajectory as zlib-compressed little-endian f32 (x, y, heading per robot per step): a
-/// tenth of a millimetre is far below anything a figure or a replay shows, and 600 s of six
-/// robots packs into a few hundred kilobytes.
-///
-/// Deflate's fastest level: raw f32 coordinates hardly compress past half (when the level was
-/// chosen, level 6 made blobs 2–16 % smaller than level 1 on three caves runs, at five to eight
-/// times the time; docs/scale.md), and a campaign packs every run that may reach its top K.
-/// Any level reads back the same way.
-pub fn pack_trajectory(trajectory: &[f64]) -> Vec<u8> {
-    use std::io::Write;
-    // One buffer, compressed in one call: the encoder clears its output buffer on every
-    // write, so writing value by value cost more than the compression itself.
-    let raw: Vec<u8> = trajectory
-        .iter()
-        .flat_map(|&v| (v as f32).to_le_bytes())
-        .collect();
-    let mut enc = flate2::write::ZlibEncoder::new(
-        Vec::with_capacity(raw.len() / 2),
-        flate2::Compression::fast(),
-    );
-    enc.write_all(&raw).expect("writing to memory");
-    enc.finish().expect("writing to memory")
-}

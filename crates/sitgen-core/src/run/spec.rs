@@ -1,0 +1,131 @@
+//! The run spec: how to run a situation (simulator, monitor, scoring, time limit, the agent's
+//! controller, a perturbed copy's perturbation), checked field by field.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use super::{profile, Perturbation, MAX_STEPS};
+use crate::control;
+use crate::error::{join, SpecError};
+use crate::mission::ControllerSpec;
+use crate::monitor::MonitorSpec;
+use crate::scoring::ScoringSpec;
+use crate::sim::SimSpec;
+use crate::situation::Situation;
+
+/// How to run a situation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RunSpec {
+    /// A named run profile laid under this spec's own fields (docs/profiles.md): `default`
+    /// (sitgen's defaults) or `paper` (Arnold & Alexander's Player/Stage setting). Default:
+    /// none, sitgen's defaults.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<String>,
+    /// The agent's controller; default: the one the situation names (`snd_follow` unless its
+    /// mission said otherwise). `python:module:Class` and `cmd:program args` are run by the
+    /// Python layer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller: Option<ControllerSpec>,
+    /// Simulated seconds after which an unfinished run stops with a timeout, in (0, 86400].
+    /// Default 600.
+    #[serde(default = "default_time_limit_s")]
+    pub time_limit_s: f64,
+    /// The simulator.
+    #[serde(default)]
+    pub sim: SimSpec,
+    /// The monitor's thresholds.
+    #[serde(default)]
+    pub monitor: MonitorSpec,
+    /// Penalties.
+    #[serde(default)]
+    pub scoring: ScoringSpec,
+    /// Run a perturbed copy of the situation instead of the situation itself: sensor noise
+    /// and start offsets a real robot would not notice ([`perturb`]). Default none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub perturbation: Option<Perturbation>,
+}
+
+fn default_time_limit_s() -> f64 {
+    600.0
+}
+
+impl Default for RunSpec {
+    fn default() -> Self {
+        Self {
+            profile: None,
+            controller: None,
+            time_limit_s: default_time_limit_s(),
+            sim: SimSpec::default(),
+            monitor: MonitorSpec::default(),
+            scoring: ScoringSpec::default(),
+            perturbation: None,
+        }
+    }
+}
+
+impl RunSpec {
+    /// Check every field; `path` names the section in errors.
+    pub fn validate(&self, path: &str) -> Result<(), SpecError> {
+        SpecError::check_positive(&join(path, "time_limit_s"), self.time_limit_s, 86_400.0)?;
+        self.sim.validate(&join(path, "sim"))?;
+        let steps = (self.time_limit_s / self.sim.dt_s).ceil();
+        if steps > MAX_STEPS {
+            return Err(SpecError::new(
+                join(path, "sim.dt_s"),
+                format!(
+                    "{} s at {} s per step is {steps:.0} steps; a run may take at most {MAX_STEPS:.0}",
+                    self.time_limit_s, self.sim.dt_s
+                ),
+            ));
+        }
+        if let Some(c) = &self.controller {
+            let path = join(path, "controller");
+            control::check(c, &path)?;
+            control::period_steps(c, self.sim.dt_s, &path)?;
+        }
+        if let Some(p) = &self.perturbation {
+            p.validate(&join(path, "perturbation"))?;
+        }
+        self.monitor.validate(&join(path, "monitor"))?;
+        self.scoring.validate(&join(path, "scoring"))
+    }
+
+    /// The simulator settings and sensor-noise seed of a run with seed `seed`: the spec's own,
+    /// or its perturbed copy's.
+    pub(super) fn world_settings(&self, seed: u64) -> (SimSpec, u64) {
+        match &self.perturbation {
+            Some(p) => (p.sim(&self.sim), p.seed(seed)),
+            None => (self.sim.clone(), seed),
+        }
+    }
+
+    /// Parse and validate a run spec from JSON, its profile (if it names one) laid under its
+    /// own fields; errors name the field under `path`.
+    pub fn from_json(text: &str, path: &str) -> Result<Self, SpecError> {
+        let mut value: serde_json::Value = serde_json::from_str(text)
+            .map_err(|e| SpecError::new(path, format!("expected a JSON object: {e}")))?;
+        profile::resolve(&mut value, path)?;
+        let spec: RunSpec = serde_path_to_error::deserialize(value).map_err(|e| {
+            SpecError::new(join(path, &e.path().to_string()), e.inner().to_string())
+        })?;
+        spec.validate(path)?;
+        Ok(spec)
+    }
+}
+
+pub use crate::control::is_external;
+
+/// The controller robot `id` runs under `run` (the run spec's for the agent, if it names one,
+/// else the situation's) and the field that names it.
+pub fn controller_spec<'a>(
+    situation: &'a Situation,
+    run: &'a RunSpec,
+    id: u32,
+) -> (&'a ControllerSpec, String) {
+    let r = &situation.robots[id as usize];
+    match &run.controller {
+        Some(c) if r.role == crate::situation::Role::Agent => (c, "run.controller".to_string()),
+        _ => (&r.controller, format!("robots[{id}].controller")),
+    }
+}
