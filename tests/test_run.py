@@ -172,3 +172,27 @@ def test_a_user_controller_with_a_control_period_is_asked_every_kth_step(
     # Its command stayed in force between: it drove 0.3 m/s for the whole 5 s.
     moved = np.hypot(*(record.trajectory[-1, 0, :2] - record.trajectory[0, 0, :2]))
     assert moved == pytest.approx(1.5) or any(e["kind"] == "collision" for e in record.events)
+
+
+@pytest.mark.parametrize(
+    ("at_end", "targets"),
+    [
+        ("stop", [(1.0, 0.0), (2.0, 0.0), None]),
+        ("loop", [(1.0, 0.0), (2.0, 0.0), (1.0, 0.0), (2.0, 0.0)]),
+        ("reverse", [(1.0, 0.0), (2.0, 0.0), (1.0, 0.0), (0.0, 0.0), (1.0, 0.0)]),
+    ],
+)
+def test_a_route_follower_goes_on_past_the_routes_end_as_at_end_says(
+    at_end: str, targets: list[tuple[float, float] | None]
+) -> None:
+    """The route sitgen's peers follow (and a navground peer), driven to each target in turn:
+    the start, the waypoints, then what ``at_end`` says."""
+    follower = sitgen.RouteFollower((0.0, 0.0), [(1.0, 0.0), (2.0, 0.0)], at_end, 0.1)
+    position = (0.0, 0.0)
+    for expected in targets:
+        target = follower.target(position)
+        assert target == expected
+        if target is not None:
+            position = target
+    with pytest.raises(sitgen.SpecError, match="at_end"):
+        sitgen.RouteFollower((0.0, 0.0), [(1.0, 0.0)], "bounce", 0.1)

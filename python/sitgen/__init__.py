@@ -7,13 +7,15 @@ Public API (see ARCHITECTURE.md for the pipeline):
 - :func:`load_map` — a :class:`Grid` from ROS YAML, PNG/PGM, MovingAI ``.map`` or BARN ``.npy``;
 - :func:`shortest_path` — A* with the MovingAI movement rules;
 - :class:`World` — the simulator: ``observe``, ``step``, ``state``;
+- :class:`RouteFollower` — a route followed as sitgen's peers follow one (start, waypoints,
+  then ``at_end``), for a controller of one's own;
 - :func:`run` — one situation driven to its end, watched and scored: a :class:`RunRecord`;
 - :func:`perlin` — Ken Perlin's improved noise, bit for bit the 2002 reference;
 - :class:`Grid` — an occupancy map with its resolution, size and coverage;
 - :exc:`SpecError`, :exc:`GenerationFailed` — what bad specs and failed generation raise.
 """
 
-from sitgen._core import GenerationFailed, SpecError, __version__, perlin
+from sitgen._core import GenerationFailed, RouteFollower, SpecError, __version__, perlin
 from sitgen.run import RunRecord, run
 from sitgen.world.config import load_spec, preset_names
 from sitgen.world.maps import load_map, shortest_path
@@ -27,6 +29,7 @@ __all__ = [
     "Observation",
     "Pose",
     "Robot",
+    "RouteFollower",
     "RunRecord",
     "Situation",
     "SpecError",

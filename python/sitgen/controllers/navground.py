@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from sitgen import _core as sitgen_core
+from sitgen._core import RouteFollower
 
 PREFIX = "navground:"
 """How a navground controller's name starts: ``navground:BEHAVIOR``."""
@@ -208,7 +208,7 @@ class NavgroundController:
         self.route = (
             None
             if info.get("role", "agent") == "agent"
-            else sitgen_core.RouteFollower(
+            else RouteFollower(
                 (start[0], start[1]),
                 [(w[0], w[1]) for w in self.waypoints],
                 str(info.get("at_end", "stop")),
