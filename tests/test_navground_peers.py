@@ -223,3 +223,16 @@ def test_check_controller_drives_a_situation_whose_peers_run_navground(tmp_path:
     done = run_cli("check-controller", "navground:ORCA", "--situation", str(path))
     assert done.returncode == 0, done.stdout + done.stderr
     assert "FAIL" not in done.stdout
+
+
+def test_a_run_with_an_external_peer_does_not_step_until_the_peer_has_a_controller() -> None:
+    situation = two_robots(
+        (4.0, 10.0, 0.0), (4.0, 14.0, 0.0), [15.0, 14.0], {"name": "navground:HL"}
+    )
+    core = _core.Run(situation.to_json(), "{}", 0)
+    assert core.external_peers == [1]
+    for step in (lambda: core.step(None), core.run_to_end):
+        with pytest.raises(ValueError, match="robot 1's controller is external"):
+            step()
+    core.set_peers({1: lambda *observation: (0.2, 0.0)})
+    assert not core.step(None)

@@ -329,8 +329,9 @@ def _peers(
     this process and handed to the core, which calls each whenever its peer decides; closed
     at the end. ``isolated``: this process is a disposable pool worker."""
     loaded: list[InProcessController] = []
+    ids = core.external_peers
     try:
-        for i in core.external_peers:
+        for i in ids:
             named = situation.robots[i].controller
             name = str(named["name"])
             peer = load_peer_controller(
@@ -338,7 +339,7 @@ def _peers(
             )
             loaded.append(peer)
             peer.reset(reset_info(situation, run_spec, i))
-        core.set_peers({i: p.peer_act() for i, p in zip(core.external_peers, loaded, strict=True)})
+        core.set_peers({i: p.peer_act() for i, p in zip(ids, loaded, strict=True)})
         yield
     finally:
         for peer in loaded:

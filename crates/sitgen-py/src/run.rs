@@ -33,6 +33,9 @@ pub struct PyRun {
     /// The external peers' controllers (`set_peers`): each called, as `drive`'s `act` is,
     /// whenever its peer decides, before every step this run takes.
     peers: Vec<(u32, Py<PyAny>)>,
+    /// An external peer no controller has been given for yet: the run may not step (the peer
+    /// would stand still unseen).
+    unserved: Option<u32>,
 }
 
 fn finished() -> PyErr {
@@ -43,6 +46,16 @@ impl PyRun {
     fn live(&self) -> PyResult<MutexGuard<'_, Run>> {
         let run = self.run.as_ref().ok_or_else(finished)?;
         Ok(run.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    /// Refuse to step while an external peer has no controller.
+    fn served(&self) -> PyResult<()> {
+        match self.unserved {
+            Some(id) => Err(PyValueError::new_err(format!(
+                "robot {id}'s controller is external: give it with set_peers before stepping"
+            ))),
+            None => Ok(()),
+        }
     }
 
     fn live_mut(&mut self) -> PyResult<&mut Run> {
@@ -89,27 +102,21 @@ impl PyRun {
 }
 
 /// The commands of the external peers that decide on `run`'s coming step, each asked of its
-/// controller in `peers` with its observation; a peer without one is refused (it would stand
-/// still unseen).
+/// controller in `peers` (every external peer's, `set_peers` sees to it) with its observation.
 fn peer_commands(
     py: Python<'_>,
     run: &mut Run,
     peers: &[(u32, Py<PyAny>)],
 ) -> PyResult<Vec<(u32, (f64, f64))>> {
     let mut commands = Vec::new();
-    for id in run.external() {
-        if id == run.agent() || !run.acts_now(id) {
+    for (id, act) in peers {
+        if !run.acts_now(*id) {
             continue;
         }
-        let Some((_, act)) = peers.iter().find(|(who, _)| *who == id) else {
-            return Err(PyValueError::new_err(format!(
-                "robot {id}'s controller is external: give it with set_peers before stepping"
-            )));
-        };
-        let reached = run.waypoints_reached(id);
-        let o = run.observation(id);
+        let reached = run.waypoints_reached(*id);
+        let o = run.observation(*id);
         let reply = act.bind(py).call1(observation_args(py, o, reached)?)?;
-        commands.push((id, reply.extract::<(f64, f64)>()?));
+        commands.push((*id, reply.extract::<(f64, f64)>()?));
     }
     Ok(commands)
 }
@@ -126,6 +133,15 @@ fn step_all(
     Ok(run.step_with(&commands))
 }
 
+/// The peers of `run` whose controllers are external, by id.
+fn external_peers(run: &Run) -> Vec<u32> {
+    let agent = run.agent();
+    run.external()
+        .into_iter()
+        .filter(|&id| id != agent)
+        .collect()
+}
+
 #[pymethods]
 impl PyRun {
     #[new]
@@ -134,8 +150,10 @@ impl PyRun {
         let situation = Situation::from_json(situation_json).map_err(spec_error)?;
         let spec = RunSpec::from_json(spec_json, "run").map_err(spec_error)?;
         let run = Run::new(&situation, &spec, seed).map_err(spec_error)?;
+        let unserved = external_peers(&run).first().copied();
         Ok(Self {
             run: Some(Mutex::new(run)),
+            unserved,
             peers: Vec::new(),
         })
     }
@@ -149,13 +167,7 @@ impl PyRun {
     /// The peers whose commands must come from Python (`python:`, `navground:`), by id.
     #[getter]
     fn external_peers(&self) -> PyResult<Vec<u32>> {
-        let run = self.live()?;
-        let agent = run.agent();
-        Ok(run
-            .external()
-            .into_iter()
-            .filter(|&id| id != agent)
-            .collect())
+        Ok(external_peers(&*self.live()?))
     }
 
     /// The external peers' controllers, by id: each is called as `drive`'s `act` is (the
@@ -175,6 +187,9 @@ impl PyRun {
             given.push((id, act.unbind()));
         }
         given.sort_by_key(|(id, _)| *id);
+        self.unserved = external
+            .into_iter()
+            .find(|id| given.binary_search_by_key(id, |(who, _)| *who).is_err());
         self.peers = given;
         Ok(())
     }
@@ -210,6 +225,7 @@ impl PyRun {
     /// run has ended.
     #[pyo3(signature = (command=None))]
     fn step(&mut self, py: Python<'_>, command: Option<(f64, f64)>) -> PyResult<bool> {
+        self.served()?;
         let peers = std::mem::take(&mut self.peers);
         let ended = step_all(py, self.live_mut()?, &peers, command);
         self.peers = peers;
@@ -241,6 +257,7 @@ impl PyRun {
         kill_after_s: Option<f64>,
         line: bool,
     ) -> PyResult<()> {
+        self.served()?;
         let watchdog = kill_after_s.map(Watchdog::new);
         let peers = std::mem::take(&mut self.peers);
         let driven = self.drive_with(py, act, watchdog, line, &peers);
@@ -257,6 +274,7 @@ impl PyRun {
     /// Step a run of built-in controllers to its end, without the GIL (with external peers,
     /// stepped here calling them).
     fn run_to_end(&mut self, py: Python<'_>) -> PyResult<()> {
+        self.served()?;
         let peers = std::mem::take(&mut self.peers);
         let run = self.live_mut()?;
         if run.agent_is_external() {

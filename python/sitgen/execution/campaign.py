@@ -339,8 +339,9 @@ class Executor:
         try:
             while True:
                 taken = yield from self._take(jobs, self.window - len(inflight))
-                batch = [j for j in taken if not j.in_python]
-                in_python += [j for j in taken if j.in_python]
+                batch: list[Job] = []
+                for j in taken:
+                    (in_python if j.in_python else batch).append(j)
                 if batch:
                     inflight.update((j.index, j) for j in batch)
                     rule = self.pack_rule()

@@ -202,12 +202,10 @@ class Job:
         for its agent or a peer (so the job runs in a process pool, not the core's threads)."""
         robots = self.situation.get("robots")
         if isinstance(robots, list):
-            peers = [r.get("controller", {}) for r in robots if r.get("role") == "peer"]
+            peers = [r.get("controller", {}).get("name") for r in robots if r.get("role") == "peer"]
         else:
-            mission = self.situation.get("mission", {})
-            peers = [mission.get("peer_controller", {}), *mission.get("peer_controllers", [])]
-        names = [self.controller, *(c.get("name") for c in peers if isinstance(c, dict))]
-        return any(isinstance(n, str) and is_user_controller(n) for n in names)
+            peers = [name for _, name in _mission_peer_names(self.situation.get("mission", {}))]
+        return any(isinstance(n, str) and is_user_controller(n) for n in [self.controller, *peers])
 
     @property
     def controller(self) -> str:
@@ -306,17 +304,23 @@ def controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
 
 def peer_controller_names(spec: CampaignSpec) -> list[tuple[str, str]]:
     """Every (field, controller name) the campaign can give its peers."""
-    mission = spec.situation.get("mission", {})
     path = "situation.mission.peer_controller.name"
+    found = _mission_peer_names(spec.situation.get("mission", {}))
+    choices = spec.vary.get(path, {}).get("choice", [])
+    found += [(f"vary.{path!r}.choice", c) for c in choices if isinstance(c, str)]
+    return found
+
+
+def _mission_peer_names(mission: dict[str, Any]) -> list[tuple[str, str]]:
+    """The (field, controller name) a mission spec gives its peers: ``peer_controller`` and
+    each of ``peer_controllers``."""
     found: list[tuple[str, str]] = []
     base = mission.get("peer_controller", {}).get("name")
     if isinstance(base, str):
-        found.append((path, base))
+        found.append(("situation.mission.peer_controller.name", base))
     for i, c in enumerate(mission.get("peer_controllers", [])):
         if isinstance(c, dict) and isinstance(c.get("name"), str):
             found.append((f"situation.mission.peer_controllers[{i}].name", c["name"]))
-    choices = spec.vary.get(path, {}).get("choice", [])
-    found += [(f"vary.{path!r}.choice", c) for c in choices if isinstance(c, str)]
     return found
 
 
