@@ -29,7 +29,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.stats import fisher_exact
 
 KILL_MARGIN_POINTS = 100.0
 """A faulty run that shows no new failure class passes the screen only if it scores worse than
@@ -140,6 +139,10 @@ def p_value(faulty: int, correct: int, copies: int) -> float:
     """One-sided Fisher exact test: how likely ``faulty`` or more of ``copies`` faulty copies
     show the event when both controllers show it alike, given ``faulty + correct`` shows in
     all."""
+    # scipy.stats takes 1.5 s to import: only a fault evaluation pays it, not every command
+    # that reads a store.
+    from scipy.stats import fisher_exact
+
     table = np.array([[faulty, copies - faulty], [correct, copies - correct]])
     return float(fisher_exact(table, alternative="greater").pvalue)
 

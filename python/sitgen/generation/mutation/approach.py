@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from sitgen import _core
 from sitgen.generation.mutation.local import SPEED_RANGE
@@ -288,6 +287,10 @@ class Ground:
 
     @staticmethod
     def of(occupied: npt.NDArray[np.bool_], resolution: float) -> Ground:
+        # scipy.ndimage takes 0.35 s to import: a command that only reads a search's store
+        # (report, failures) does not pay it.
+        from scipy import ndimage
+
         distance = ndimage.distance_transform_edt(~occupied)
         return Ground(np.asarray(distance, dtype=np.float64) * resolution, resolution)
 

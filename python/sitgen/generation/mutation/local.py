@@ -40,7 +40,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from sitgen.generation.mutation.mirror import mirrored
 from sitgen.generation.mutation.parent import Parent
@@ -211,6 +210,10 @@ def _nearest_blob(
     k = int(4.0 / resolution)
     rows, cols = occupied.shape
     r0, r1, c0, c1 = max(0, r - k), min(rows, r + k + 1), max(0, c - k), min(cols, c + k + 1)
+    # scipy.ndimage takes 0.35 s to import: a command that only reads a search's store (report,
+    # failures) does not pay it.
+    from scipy import ndimage
+
     labels, _ = ndimage.label(occupied, structure=np.ones((3, 3), dtype=bool))
     window = labels[r0:r1, c0:c1]
     found = np.nonzero(window)
