@@ -201,7 +201,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
       a run redone after its worker died use it);
     - ``cmd:`` programs: a trivial reply, and the route follower of examples/ros2;
     - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
-      installed;
+      installed, started for each run and kept alive across runs (``keep_alive``: its start
+      is then the reset between runs);
     - ``navground:`` HL and ORCA with the sensed perception (on the fast path, as a campaign
       runs them), where sitgen[navground] is installed: their own cost is the adapter and the
       behaviour's compute, called in a loop.
@@ -212,6 +213,7 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     from user_controllers import Busy, Trivial
 
     from sitgen.controllers.navground import NavgroundController
+    from sitgen.controllers.ros2 import stop_kept_nodes
     from sitgen.controllers.ros2_bridge import ros2_available
 
     situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
@@ -235,10 +237,13 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
             False, None,
         ),
     }  # fmt: skip
+    kinds["ros2 route follower, kept alive"] = kinds["ros2 route follower"]
+    kept_alive = {"ros2 route follower, kept alive"}
     reason = ros2_available()
     if reason is not None:
         print(f"skipped ros2: {reason}")
         kinds.pop("ros2 route follower")
+        kinds.pop("ros2 route follower, kept alive")
     try:
         for behavior in ("HL", "ORCA"):
             factory = functools.partial(NavgroundController, behavior)
@@ -252,19 +257,22 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     out: dict[str, Any] = {}
     for kind, (name, in_process, own_s) in kinds.items():
         steps: list[int] = []
+        kept = {"keep_alive": True} if kind in kept_alive else {}
+        spec = {"controller": {"name": name, **kept}}
 
         def whole(
-            _: int, name: str = name, fast: bool = in_process, steps: list[int] = steps
+            _: int, spec: Any = spec, fast: bool = in_process, steps: list[int] = steps
         ) -> None:
-            record = sitgen.run(situation, controller=name, time_limit=60.0, in_process=fast)
+            record = sitgen.run(situation, spec=spec, time_limit=60.0, in_process=fast)
             assert record.outcome != "error", record.reason
             steps.append(record.steps)
 
-        def start(_: int, name: str = name, fast: bool = in_process) -> None:
-            sitgen.run(situation, controller=name, time_limit=0.1, in_process=fast)
+        def start(_: int, spec: Any = spec, fast: bool = in_process) -> None:
+            sitgen.run(situation, spec=spec, time_limit=0.1, in_process=fast)
 
         m = measure(whole, repeats=5)
         s = measure(start, repeats=5)
+        stop_kept_nodes()
         step_s = max(1e-9, m["median_s"] - s["median_s"]) / steps[-1]
         out[kind] = {
             "steps": steps[-1], "steps_per_s": 1 / step_s, "start_s": s["median_s"],

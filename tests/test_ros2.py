@@ -11,6 +11,7 @@ import contextlib
 import json
 import math
 import os
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -22,6 +23,7 @@ import numpy as np
 import pytest
 
 import sitgen
+from sitgen.controllers.ros2 import stop_kept_nodes
 from sitgen.controllers.ros2_bridge import ros2_available
 from sitgen.store import Store
 from sitgen.triage.recall import resimulate_checked, stored_run
@@ -581,6 +583,26 @@ def test_a_node_reads_the_situations_map_on_map_as_a_map_server_serves_it(
     record = sitgen.run(situation, controller=node, time_limit=1.0)
     assert record.outcome != "error", record.reason
     got = json.loads(out.read_text())
+    assert_map_is(got["map"], situation)
+    # The start as /initialpose, and the node's reset service called, before the run.
+    assert got["initial_poses"] == [pytest.approx(start_of(situation))]
+    assert got["resets"] == 1
+
+
+def dead_by(pid: int, deadline: float) -> None:
+    """Wait until process ``pid`` has died (gone, or a zombie not yet reaped)."""
+    while True:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[-1].split()[0]
+        except FileNotFoundError:
+            return
+        if state == "Z":
+            return
+        assert time.monotonic() < deadline, f"process {pid} still alive"
+        time.sleep(0.01)
+
+
+def assert_map_is(got: dict[str, Any], situation: sitgen.Situation) -> None:
     grid = situation.grid
     rows, cols = grid.occupied.shape
     assert (got["frame"], got["width"], got["height"]) == ("map", cols, rows)
@@ -588,3 +610,42 @@ def test_a_node_reads_the_situations_map_on_map_as_a_map_server_serves_it(
     data = np.asarray(got["data"]).reshape(rows, cols)
     assert set(np.unique(data)) <= {0, 100} and (data == 100).any()
     np.testing.assert_array_equal(data[::-1] == 100, grid.occupied)
+
+
+def start_of(situation: sitgen.Situation) -> list[float]:
+    start = situation.agent.start
+    return [start.x_m, start.y_m, start.heading_rad]
+
+
+def test_a_node_kept_alive_is_reset_with_each_runs_map_start_and_reset_service(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    """keep_alive: one node process for both runs, given each run's map and start and its
+    reset service called before each; a run that fails stops it, and the next starts anew."""
+    out = tmp_path / "kept.json"
+    node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/map_reader.py'} {out}"
+    spec = {"controller": {"name": node, "keep_alive": True}}
+    other = sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=4)
+    try:
+        for s in (situation, other):
+            record = sitgen.run(s, spec=spec, time_limit=1.0)
+            assert record.outcome != "error", record.reason
+        got = json.loads(out.read_text())
+        assert_map_is(got["map"], other)
+        assert got["initial_poses"] == [
+            pytest.approx(start_of(situation)),
+            pytest.approx(start_of(other)),
+        ]
+        assert got["resets"] == 2
+        # A kept node that dies between runs is the next run's error, and the run after
+        # that has a node of its own.
+        os.kill(got["pid"], signal.SIGKILL)
+        dead_by(got["pid"], time.monotonic() + 10.0)
+        dead = sitgen.run(situation, spec=spec, time_limit=1.0)
+        assert dead.outcome == "error", dead.reason
+        assert "was killed by SIGKILL before its run" in dead.reason, dead.reason
+        assert sitgen.run(situation, spec=spec, time_limit=1.0).outcome != "error"
+        again = json.loads(out.read_text())
+        assert again["pid"] != got["pid"] and again["resets"] == 1
+    finally:
+        stop_kept_nodes()

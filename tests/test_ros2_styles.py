@@ -85,6 +85,50 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
     assert len(two) == RUNS and all(r[1] != "error" for r in two), [r[:3] for r in two]
     assert all(r[7] is not None for r in two)
     assert one == two
+    # One node a worker, reset between runs: the same runs again, or, for the node that reads
+    # its route once, a refusal before any run that names the field.
+    kept = kept_alive_campaign(spec, tmp_path / "kept.db")
+    if style == "goal_once":
+        assert kept.returncode == 2, kept.stdout
+        (line,) = kept.stderr.strip().splitlines()
+        assert line.startswith("error: run.controller.keep_alive: controller `ros2:"), line
+        assert "keeps state from run to run" in line, line
+        assert not (tmp_path / "kept.db").exists() or stored(tmp_path / "kept.db") == []
+    else:
+        assert kept.returncode == 0, kept.stderr
+        assert stored(tmp_path / "kept.db") == two
+
+
+def kept_alive_campaign(spec: Path, db: Path) -> Any:
+    """``spec``'s campaign on 2 workers with its node kept alive across runs."""
+    return run_cli(
+        "campaign", str(spec), "--db", str(db), "--workers", "2", "--reruns", "0",
+        "--seed", "3", "--keep-trajectories", "all", "--keep-alive",
+    )  # fmt: skip
+
+
+def test_a_node_with_a_reset_service_kept_alive_runs_as_fresh_nodes(
+    tmp_path: Path, busy_machine: None
+) -> None:
+    # The node reads its route once, and again when its reset service (~/reset) is called.
+    spec = tmp_path / "reset.toml"
+    spec.write_text(
+        f'n = 4\n[situation.terrain]\npreset = "open_field"\n'
+        "[situation.mission]\npeers_min = 0\npeers_max = 2\n"
+        f'[run]\ntime_limit_s = 5.0\n[run.controller]\nname = "{USUAL} goal_once_reset"\n'
+        "params = { answer_timeout_s = 10.0 }\n"
+    )
+    fresh = tmp_path / "fresh.db"
+    done = run_cli(
+        "campaign", str(spec), "--db", str(fresh), "--workers", "1", "--reruns", "0",
+        "--seed", "3", "--keep-trajectories", "all",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    kept = kept_alive_campaign(spec, tmp_path / "kept.db")
+    assert kept.returncode == 0, kept.stderr
+    runs = stored(fresh)
+    assert len(runs) == 4 and all(r[1] != "error" for r in runs), [r[:3] for r in runs]
+    assert stored(tmp_path / "kept.db") == runs
 
 
 def test_check_controller_says_when_a_nodes_runs_do_not_repeat() -> None:
@@ -95,3 +139,16 @@ def test_check_controller_says_when_a_nodes_runs_do_not_repeat() -> None:
     done = run_cli("check-controller", f"{USUAL} timer", "--steps", "100")
     assert done.returncode == 0, done.stdout + done.stderr
     assert "ok   repeats  the same" in done.stdout
+
+
+def test_check_controller_says_whether_a_node_can_be_kept_alive_across_runs() -> None:
+    done = run_cli("check-controller", f"{USUAL} goal_once", "--steps", "30", "--keep-alive")
+    assert done.returncode == 1, done.stdout + done.stderr
+    (line,) = [x for x in done.stdout.splitlines() if "resets" in x]
+    assert line.startswith("FAIL resets") and "keeps state from run to run" in line, line
+    done = run_cli("check-controller", f"{USUAL} goal_once_reset", "--steps", "30", "--keep-alive")
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "ok   resets   kept alive, a run after another equals a fresh node's" in done.stdout
+    done = run_cli("check-controller", "python:examples/controllers/braking.py:Braking",
+                   "--keep-alive")  # fmt: skip
+    assert done.returncode == 2 and "--keep-alive" in done.stderr, done.stderr

@@ -24,6 +24,7 @@ import numpy.typing as npt
 from sitgen import _core
 from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.inprocess import InProcessController
+from sitgen.controllers.ros2 import stop_kept_nodes
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
@@ -157,29 +158,32 @@ def run_spec_with(
     params: Mapping[str, float] | None = None,
     base: Mapping[str, Any] | None = None,
     perception: str | None = None,
+    keep_alive: bool = False,
 ) -> dict[str, Any]:
     """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
-    with ``params`` over its own, and its ``perception``) given on top, as the commands'
-    options give them. The controller table given on top of is the spec's, else ``base`` (the
-    situation's agent's): for the same controller its params, fault, ``control_period_s`` and
-    ``perception`` stay; another controller keeps only the last two."""
+    with ``params`` over its own, its ``perception`` and ``keep_alive``) given on top, as the
+    commands' options give them. The controller table given on top of is the spec's, else
+    ``base`` (the situation's agent's): for the same controller its params, fault,
+    ``control_period_s``, ``perception`` and ``keep_alive`` stay; another controller keeps
+    only ``control_period_s`` and ``perception``."""
     run_spec: dict[str, Any] = dict(spec or {})
     if time_limit is not None:
         run_spec["time_limit_s"] = time_limit
-    if not controller and not params and not perception:
+    if not controller and not params and not perception and not keep_alive:
         return run_spec
     given = dict(run_spec.get("controller") or base or {})
     if controller and given.get("name") not in (None, controller):
         given = {k: v for k, v in given.items() if k in ("control_period_s", "perception")}
     name = controller or given.get("name")
     if not name:
-        option = "--param" if params else "--perception"
+        option = "--param" if params else "--perception" if perception else "--keep-alive"
         raise _core.SpecError(f"{option}: no controller to give it to; name one with --controller")
     run_spec["controller"] = {
         **given,
         "name": name,
         "params": {**dict(given.get("params") or {}), **dict(params or {})},
         **({"perception": perception} if perception else {}),
+        **({"keep_alive": True} if keep_alive else {}),
     }
     return run_spec
 
@@ -308,7 +312,8 @@ def _drive_agent(
     if controller is None:
         controller = named["name"]
     assert is_user_controller(controller)
-    user = load_controller(controller, step_timeout_s, named.get("params"), in_process)
+    keep_alive = bool(named.get("keep_alive"))
+    user = load_controller(controller, step_timeout_s, named.get("params"), in_process, keep_alive)
     try:
         user.reset(reset_info(situation, run_spec, core.agent, user.wants_map))
         # Between the controller's decisions (its control period) its last command stays in
@@ -393,11 +398,14 @@ def check_controller(
     steps: int = 50,
     step_timeout_s: float = STEP_TIMEOUT_S,
     params: Mapping[str, float] | None = None,
+    kept_after: Situation | None = None,
 ) -> list[Check]:
     """Drive ``controller`` for ``steps`` steps of ``situation`` and say what is wrong with it,
     check by check (in the spirit of Gymnasium's ``check_env``): it loads, it accepts the reset
     message, every reply is a pair of finite numbers in time, commands stay within the robot's
-    limits (larger ones are clamped, which is usually a units mistake), and it shuts down."""
+    limits (larger ones are clamped, which is usually a units mistake), and it shuts down.
+    ``kept_after``: also whether a ``ros2:`` node kept alive across runs runs ``situation``
+    after a run of ``kept_after`` as a fresh node does (:func:`resets`)."""
     checks: list[Check] = []
     # The run first: the core's thread pool starts with it, on every core, before a program's
     # start keeps this thread to one (ProcessController), which threads started then inherit.
@@ -473,6 +481,8 @@ def check_controller(
     checks.append(Check("close", unclean is None, unclean or "shut down on `end`"))
     if isinstance(controller, str):
         checks.append(repeats(controller, situation, steps, params))
+    if isinstance(controller, str) and kept_after is not None:
+        checks.append(resets(controller, situation, kept_after, steps, params))
     return checks
 
 
@@ -486,26 +496,79 @@ def repeats(
     periods): a controller whose commands depend on timing (a node that acts on whatever
     message arrived last, a program that reads the clock) cannot show its user a failure
     again. Names the first step where the second run's poses differ from the first's."""
+    limit = steps * _control_period_s(situation)
+    first, second = (
+        run(situation, controller=controller, time_limit=limit, params=params) for _ in range(2)
+    )
+    if errors := _errors(first, second):
+        return Check("repeats", False, errors)
+    differ = _first_difference(situation, first, second)
+    if differ is None:
+        return Check("repeats", True, f"the same {len(first.trajectory)} poses on a second run")
+    return Check(
+        "repeats",
+        False,
+        f"a second run of the same situation differs from the first: {differ}; its commands "
+        'depend on timing, not only on what it was given (docs/ros2.md, "Determinism")',
+    )
+
+
+def resets(
+    controller: str,
+    situation: Situation,
+    before: Situation,
+    steps: int = 50,
+    params: Mapping[str, float] | None = None,
+    spec: Mapping[str, Any] | None = None,
+) -> Check:
+    """Whether the ``ros2:`` node ``controller`` with ``params``, kept alive across runs
+    (``keep_alive``), drives ``situation`` after a run of ``before`` as a freshly started node
+    does (``steps`` control periods each, under the run spec ``spec``): one that keeps state
+    from run to run (a goal read once, a filter's history) would give every run after its
+    first another result than the run's own."""
+    limit = steps * _control_period_s(situation)
+    table = {"name": controller, "params": dict(params or {})}
+    base = {k: v for k, v in (spec or {}).items() if k != "controller"}
+    fresh, kept = ({**base, "controller": {**table, "keep_alive": k}} for k in (False, True))
+    first = run(situation, spec=fresh, time_limit=limit)
+    try:
+        run(before, spec=kept, time_limit=limit)
+        again = run(situation, spec=kept, time_limit=limit)
+    finally:
+        stop_kept_nodes()
+    if errors := _errors(first, again):
+        return Check("resets", False, errors)
+    differ = _first_difference(situation, first, again)
+    if differ is None:
+        return Check("resets", True, "kept alive, a run after another equals a fresh node's")
+    return Check(
+        "resets",
+        False,
+        f"kept alive, after a run of another situation, its run differs from a fresh node's: "
+        f"{differ}; the node keeps state from run to run (give it a reset service, or drop "
+        'keep_alive: docs/ros2.md, "One node across runs")',
+    )
+
+
+def _control_period_s(situation: Situation) -> float:
+    return float(reset_info(situation, {}, 0)["control_period_s"])
+
+
+def _errors(a: RunRecord, b: RunRecord) -> str | None:
+    if "error" in (a.outcome, b.outcome):
+        return f"a run of the two ended in error: {a.reason if a.outcome == 'error' else b.reason}"
+    return None
+
+
+def _first_difference(situation: Situation, a: RunRecord, b: RunRecord) -> str | None:
+    """Where two runs of ``situation`` first differ (the control period whose command moved a
+    pose), or None if they are the same."""
     info = reset_info(situation, {}, 0)
     period, dt_s = float(info["control_period_s"]), float(info["dt_s"])
-    first, second = (
-        run(situation, controller=controller, time_limit=steps * period, params=params)
-        for _ in range(2)
-    )
-    if "error" in (first.outcome, second.outcome):
-        why = first.reason if first.outcome == "error" else second.reason
-        return Check("repeats", False, f"a run of the two ended in error: {why}")
-    a, b = first.trajectory, second.trajectory
-    rows = min(len(a), len(b))
-    differ = [i for i in range(rows) if not np.array_equal(a[i], b[i])]
-    if differ or len(a) != len(b):
-        # A pose row is a simulation step; the command that moved it came one period before.
-        at_s = (differ[0] if differ else rows) * dt_s - period
-        return Check(
-            "repeats",
-            False,
-            f"a second run of the same situation differs from the first: its command of the "
-            f"control period at {max(0.0, at_s):.1f} s was another; its commands depend on "
-            'timing, not only on what it was given (docs/ros2.md, "Determinism")',
-        )
-    return Check("repeats", True, f"the same {rows} poses on a second run")
+    rows = min(len(a.trajectory), len(b.trajectory))
+    differ = [i for i in range(rows) if not np.array_equal(a.trajectory[i], b.trajectory[i])]
+    if not differ and len(a.trajectory) == len(b.trajectory):
+        return None
+    # A pose row is a simulation step; the command that moved it came one period before.
+    at_s = (differ[0] if differ else rows) * dt_s - period
+    return f"its command of the control period at {max(0.0, at_s):.1f} s was another"

@@ -1,28 +1,37 @@
 #!/usr/bin/env python3
-"""A ROS 2 node that reads ``/map`` as a costmap's static layer would (transient local), for
-the test that sitgen serves it live: ``map_reader.py OUT.json`` writes what it received (the
-grid's size, resolution, frame and data) to OUT.json, then answers every scan with a stop.
+"""A ROS 2 node that reads what sitgen serves before a run, for the tests that it is live:
+``/map`` as a costmap's static layer would (transient local), ``/initialpose`` as Nav2's
+loopback simulator does, and calls of its reset service (``~/reset``, std_srvs/Empty).
+``map_reader.py OUT.json`` writes what it has received so far (the last grid's size,
+resolution, frame and data; every initial pose as (x, y, heading); the resets; its process id)
+to OUT.json, and answers every scan with a stop.
 """
 
 from __future__ import annotations
 
 import contextlib
 import json
+import math
+import os
 import sys
+from typing import Any
 
 import rclpy
-from geometry_msgs.msg import Twist
+from geometry_msgs.msg import PoseWithCovarianceStamped, Twist
 from nav_msgs.msg import OccupancyGrid
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Empty
 
 
 class MapReader(Node):
     def __init__(self, out: str) -> None:
         super().__init__("map_reader")
         self.out = out
+        self.got: dict[str, Any] = {"map": None, "initial_poses": [], "resets": 0}
+        self.got["pid"] = os.getpid()
         self.cmd = self.create_publisher(Twist, "/cmd_vel", 10)
         latched = QoSProfile(
             depth=1,
@@ -31,19 +40,34 @@ class MapReader(Node):
         )
         self.create_subscription(OccupancyGrid, "/map", self.on_map, latched)
         self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
+        self.create_subscription(PoseWithCovarianceStamped, "/initialpose", self.on_pose, 10)
+        self.create_service(Empty, "~/reset", self.on_reset)
 
     def on_map(self, grid: OccupancyGrid) -> None:
-        with open(self.out, "w") as f:
-            json.dump(
-                {
-                    "frame": grid.header.frame_id,
-                    "width": grid.info.width,
-                    "height": grid.info.height,
-                    "resolution": grid.info.resolution,
-                    "data": list(grid.data),
-                },
-                f,
-            )
+        self.got["map"] = {
+            "frame": grid.header.frame_id,
+            "width": grid.info.width,
+            "height": grid.info.height,
+            "resolution": grid.info.resolution,
+            "data": list(grid.data),
+        }
+        self.write()
+
+    def on_pose(self, message: PoseWithCovarianceStamped) -> None:
+        pose = message.pose.pose
+        heading = 2.0 * math.atan2(pose.orientation.z, pose.orientation.w)
+        self.got["initial_poses"].append([pose.position.x, pose.position.y, heading])
+        self.write()
+
+    def on_reset(self, _: Empty.Request, response: Empty.Response) -> Empty.Response:
+        self.got["resets"] += 1
+        self.write()
+        return response
+
+    def write(self) -> None:
+        with open(f"{self.out}.part", "w") as f:
+            json.dump(self.got, f)
+        os.replace(f"{self.out}.part", self.out)
 
     def on_scan(self, _: LaserScan) -> None:
         self.cmd.publish(Twist())

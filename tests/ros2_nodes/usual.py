@@ -13,6 +13,8 @@ from what the laser sees ahead, in one of four styles:
   ApproximateTimeSynchronizer does (message_filters has no wheel), and acts on each pair;
 - ``goal_once``: reads the route from ``/plan`` once at start (then drops the subscription) and
   acts in its scan callback with the latest odometry;
+- ``goal_once_reset``: ``goal_once`` with a reset service (``~/reset``, std_srvs/Trigger) that
+  reads the route once more, as a node kept alive across runs (``keep_alive``) must;
 - ``wall_clock``: a mistake, not a style: acts in its scan callback, but integrates its heading
   error over the wall clock's time between scans (a steady clock, not the messages' stamps),
   so what it answers depends on the machine's timing and no run repeats;
@@ -37,6 +39,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
+from std_srvs.srv import Trigger
 
 STYLE = sys.argv[1]
 
@@ -70,24 +73,35 @@ class Usual(Node):
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
         self.goal: tuple[float, float] | None = None
-        if STYLE in ("scan_callback", "goal_once", "wall_clock"):
+        if STYLE in ("scan_callback", "goal_once", "goal_once_reset", "wall_clock"):
             self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
         else:
             self.create_subscription(LaserScan, "/scan", self.keep_scan, qos_profile_sensor_data)
         self.create_subscription(Odometry, "/odom", self.on_odom, 10)
-        if STYLE == "goal_once":
-            latched = QoSProfile(
-                depth=1,
-                reliability=ReliabilityPolicy.RELIABLE,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL,
-            )
-            self.plan = self.create_subscription(Path, "/plan", self.on_plan, latched)
+        if STYLE.startswith("goal_once"):
+            self.read_plan()
         else:
             self.create_subscription(PoseStamped, "/goal_pose", self.on_goal, 10)
         if STYLE == "timer":
             self.create_timer(0.1, self.on_timer)
+        if STYLE == "goal_once_reset":
+            self.create_service(Trigger, "~/reset", self.on_reset)
         self.integral, self.last_wall = 0.0, time.monotonic()
         self.pending: dict[str, dict[float, Any]] = {"scan": {}, "odom": {}}
+
+    def read_plan(self) -> None:
+        latched = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        self.plan = self.create_subscription(Path, "/plan", self.on_plan, latched)
+
+    def on_reset(self, _: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.goal = None
+        self.read_plan()
+        response.success = True
+        return response
 
     def on_goal(self, goal: PoseStamped) -> None:
         self.goal = (goal.pose.position.x, goal.pose.position.y)

@@ -28,6 +28,7 @@ pub fn robot(id: u32, start: (f64, f64, f64), waypoints: &[[f64; 2]], controller
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         },
         at_end: AtEnd::Stop,
     }

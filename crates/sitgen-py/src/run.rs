@@ -410,6 +410,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     };
     control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
 }

@@ -115,6 +115,16 @@ PerceptionOption = Annotated[
 ]
 
 
+KeepAliveOption = Annotated[
+    bool,
+    typer.Option(
+        "--keep-alive",
+        help="A ros2: agent: start its node once per worker and reset it between runs, not "
+        "once per run (the controller table's keep_alive; checked before any run).",
+    ),
+]
+
+
 def parse_params(items: list[str] | None, option: str = "--param") -> dict[str, float]:
     """``NAME=VALUE`` items as a controller's params; SpecError names the option and item."""
     import math

@@ -29,6 +29,7 @@ from sitgen.cli.app import (
     BackendOption,
     CampaignSeedOption,
     ControllerOption,
+    KeepAliveOption,
     OnProgress,
     ParamOption,
     PerceptionOption,
@@ -55,15 +56,16 @@ def _campaign_spec(
     controller: str | None = None,
     params: list[str] | None = None,
     perception: str | None = None,
+    keep_alive: bool = False,
 ) -> CampaignSpec:
     """The campaign spec in file ``spec``, or the paper's, with the agent's controller, its
-    params and perception as ``--controller``, ``--param`` and ``--perception`` give them
-    (:func:`_with_controller`)."""
+    params, perception and keep_alive as ``--controller``, ``--param``, ``--perception`` and
+    ``--keep-alive`` give them (:func:`_with_controller`)."""
     from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
-    return _with_controller(parsed, controller, params, perception)
+    return _with_controller(parsed, controller, params, perception, keep_alive)
 
 
 def _with_controller(
@@ -71,14 +73,16 @@ def _with_controller(
     controller: str | None,
     params: list[str] | None,
     perception: str | None = None,
+    keep_alive: bool = False,
 ) -> CampaignSpec:
     """``parsed`` whose runs give the agent ``controller`` (over the spec's run controller, or
-    its mission's) with ``params`` over its own and ``perception``; unchanged without any."""
+    its mission's) with ``params`` over its own, ``perception`` and ``keep_alive``; unchanged
+    without any."""
     from sitgen.execution.jobs import campaign_from_data
     from sitgen.run import run_spec_with
 
     given = parse_params(params)
-    if not controller and not given and not perception:
+    if not controller and not given and not perception and not keep_alive:
         return parsed
     if controller:
         _core.check_controller(controller, "--controller")
@@ -88,7 +92,13 @@ def _with_controller(
     source = copy.deepcopy(parsed.source)
     mission = source.get("situation", {}).get("mission", {}).get("agent_controller")
     source["run"] = run_spec_with(
-        source.get("run"), None, controller, given, mission or {"name": "snd_follow"}, perception
+        source.get("run"),
+        None,
+        controller,
+        given,
+        mission or {"name": "snd_follow"},
+        perception,
+        keep_alive,
     )
     return campaign_from_data(source)
 
@@ -119,6 +129,7 @@ def campaign(
     controller: ControllerOption = None,
     param: ParamOption = None,
     perception: PerceptionOption = None,
+    keep_alive: KeepAliveOption = False,
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
@@ -174,7 +185,7 @@ def campaign(
     _check_reruns(reruns)
     check_output(junit, "--junit", db, spec)
     check_output(summary_json, "--summary", db, spec, junit)
-    parsed = _campaign_spec(spec, controller, param, perception)
+    parsed = _campaign_spec(spec, controller, param, perception, keep_alive)
     total_n = parsed.n if n is None else n
     result = _stored(
         "campaign",
@@ -334,6 +345,7 @@ def search(
     controller: ControllerOption = None,
     param: ParamOption = None,
     perception: PerceptionOption = None,
+    keep_alive: KeepAliveOption = False,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -415,7 +427,7 @@ def search(
         source.setdefault("run", {})["scoring"] = learned.table()
         parsed = campaign_from_data(source)
     # Last: a directed search varies the run it starts from, driven by this controller.
-    parsed = _with_controller(parsed, controller, param, perception)
+    parsed = _with_controller(parsed, controller, param, perception, keep_alive)
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
         plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)

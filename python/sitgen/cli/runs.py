@@ -191,6 +191,14 @@ def check_controller_command(
     steps: Annotated[int, typer.Option("--steps", min=1, max=100_000, help="Steps to drive.")] = 50,
     param: ParamOption = None,
     allow_edited: AllowEditedOption = False,
+    keep_alive: Annotated[
+        bool,
+        typer.Option(
+            "--keep-alive",
+            help="A ros2: node: also check that, kept alive across runs (keep_alive), it runs "
+            "the situation after another as a fresh node does.",
+        ),
+    ] = False,
 ) -> None:
     """Check that a user controller speaks the interface: loads, resets, replies with finite
     commands in time, stays within the limits, and shuts down. Exits 1 if a check fails."""
@@ -201,12 +209,18 @@ def check_controller_command(
             f"controller `{controller}`: expected python:MODULE:CLASS, cmd:PROGRAM, "
             "ros2:PROGRAM or navground:BEHAVIOR"
         )
+    if keep_alive and not controller.startswith("ros2:"):
+        raise UsageError(f"--keep-alive: `{controller}` is not a ros2: node")
     loaded = (
         Situation.load(situation, allow_edited)
         if situation is not None
         else generate_situation(preset_spec("open_field"), seed=0)
     )
-    checks = check_controller(controller, loaded, steps=steps, params=parse_params(param))
+    # Another situation for the node's run before, where it is kept alive.
+    before = generate_situation(preset_spec("open_field"), seed=1) if keep_alive else None
+    checks = check_controller(
+        controller, loaded, steps=steps, params=parse_params(param), kept_after=before
+    )
     for c in checks:
         typer.echo(f"{'ok  ' if c.ok else 'FAIL'} {c.name:8} {c.detail}")
     if not all(c.ok for c in checks):

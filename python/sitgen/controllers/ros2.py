@@ -33,6 +33,15 @@ file, so parallel workers and parallel campaigns never see each other), with dis
 confined to this machine (localhost discovery; for Fast DDS, UDP on 127.0.0.1 and no shared
 memory: dds_domain.py).
 
+One node across runs (the controller table's ``keep_alive = true``): the node is started
+once per sitgen process (a campaign's worker) and reset between runs as Nav2's loopback
+simulator resets a robot: the clock back to 0 (a node's timers on simulated time restart as
+after a simulator's reset), a new ``/initialpose`` (geometry_msgs/PoseWithCovarianceStamped,
+frame ``map``), ``/plan``, ``/goal_pose`` and ``/map``, and every ``std_srvs`` Trigger or Empty
+service named ``reset`` or ``…/reset`` that the node offers called. Every run, a fresh node's
+too, gets the same reset, so a node that resets fully runs as a fresh one would; one that does
+not is refused before any run (:func:`sitgen.run.resets`). A run that fails stops its node.
+
 Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
 ``answer_timeout_s`` (wall seconds, default the step timeout, 1 s), ``start_timeout_s`` (wall
 seconds to start and answer the first observation, default 30) and ``max_missed_answers``
@@ -44,6 +53,7 @@ REP 105 (frames); docs/ros2.md.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import math
 import os
@@ -122,8 +132,12 @@ class Ros2Controller(UserController):
         params: Mapping[str, float] | None = None,
         step_timeout_s: float = STEP_TIMEOUT_S,
         start_timeout_s: float = NODE_START_TIMEOUT_S,
+        keep_alive: bool = False,
     ) -> None:
         self.name = name
+        self.keep_alive = keep_alive
+        self._failed = False
+        """Whether a run of this node failed: it is stopped then, never kept for the next."""
         argv = command_argv(command_line, name)
         params = dict(params or {})
         own = {k: params.pop(k) for k in SITGEN_PARAMS if k in params}
@@ -170,29 +184,59 @@ class Ros2Controller(UserController):
         self._info: dict[str, Any] = {}
         self._goal_index = -1
         self._pids: set[int] = set()
+        self._kept_as: tuple[Any, ...] | None = None
 
     # --- a run: start, reset, act, close ---------------------------------------------------
 
     def load(self) -> None:
-        self._bridge = Bridge()
-        self._start()
+        if self._proc is None:  # a node kept alive is loaded once
+            self._bridge = self._bridge or Bridge()
+            self._start()
 
     def reset(self, info: dict[str, Any]) -> None:
+        try:
+            self._reset(info)
+        except ControllerError:
+            self._failed = True
+            raise
+
+    def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
+        try:
+            return self._act(obs)
+        except ControllerError:
+            self._failed = True
+            raise
+
+    def _reset(self, info: dict[str, Any]) -> None:
         self._info = info
+        self._answered_once, self._missed, self._command = False, 0, (0.0, 0.0)
+        self._goal_index = -1
         bridge = self._bridge = self._bridge or Bridge()
-        # The route and map go out before the node starts: transient-local keeps them for
-        # the node.
-        self._publish_route(bridge, info)
+        route = [(bridge.plan, self._route(bridge, info))]
         if "map" in info:
-            bridge.publish_map(info["map"])
-        if self._proc is None:
-            self._start()
-        self._discover(bridge)
+            route.append((bridge.map, bridge.map_message(info["map"])))
+        kept = self._subscription is not None  # discovered in an earlier run of this process
+        if not kept:
+            # Before the node starts: transient-local keeps them for it.
+            bridge.hand_over(route)
+            if self._proc is None:
+                self._start()
+            self._discover(bridge)
+            route = []
+        self._check_alive("before its run")
         # The domain must hold only sitgen and what this run started (or the run errs).
         self._pids = marked_pids(self._mark)
         require_free(bridge.domain, bridge.endpoint_gids(), {os.getpid(), *self._pids})
+        # The same reset for a fresh node as for one kept alive (whose simulated time starts
+        # again at 0, as after a simulator's reset): a node that resets fully then runs the
+        # same either way.
+        restart = [(bridge.clock, bridge.clock_at(0.0))] if kept else []
+        pose = [(bridge.initialpose, bridge.initial_pose(info["start"]))]
+        bridge.hand_over([*restart, *route, *pose], self._settle, taken=True)
+        bridge.call_resets(self.name, self._answer_timeout_s, self._check_alive)
+        self._answers.clear()
 
-    def act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
+    def _act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
         bridge = self._bridge
         assert bridge is not None
         t = float(obs["time"])
@@ -213,6 +257,18 @@ class Ros2Controller(UserController):
         return self._command
 
     def close(self) -> str | None:
+        """End the run: the node is stopped, unless it is kept alive for the next run and
+        this one did not fail."""
+        alive = self._proc is not None and self._proc.poll() is None
+        if self.keep_alive and alive and not self._failed:
+            return None
+        return self.stop()
+
+    def stop(self) -> str | None:
+        """Stop the node and release sitgen's participant; None if the node exited cleanly,
+        else why not."""
+        if self._kept_as is not None and _KEPT.get(self._kept_as) is self:
+            del _KEPT[self._kept_as]
         bridge, proc = self._bridge, self._proc
         if bridge is not None:
             bridge.shutdown()
@@ -401,13 +457,12 @@ class Ros2Controller(UserController):
 
     # --- messages ---------------------------------------------------------------------------
 
-    def _publish_route(self, bridge: Bridge, info: Mapping[str, Any]) -> None:
+    def _route(self, bridge: Bridge, info: Mapping[str, Any]) -> Any:
         path = bridge.msg["Path"]()
         path.header.frame_id = FRAMES.map
         path.header.stamp = stamp(bridge.msg, 0.0)
         path.poses = [self._pose(bridge, w, 0.0) for w in info["waypoints"]]
-        bridge.plan.publish(path)
-        self._goal_index = -1
+        return path
 
     def _goal(self, bridge: Bridge, index: int, t: float) -> list[tuple[Any, Any]]:
         """The goal to hand over before the period at ``t``: the waypoint ``index`` when it
@@ -426,6 +481,34 @@ class Ros2Controller(UserController):
         pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
         pose.pose.orientation.w = 1.0
         return pose
+
+
+_KEPT: dict[tuple[Any, ...], Ros2Controller] = {}
+"""The nodes kept alive in this process, by command line, parameters and step timeout."""
+
+
+def kept_node(
+    command_line: str, name: str, params: Mapping[str, float] | None, step_timeout_s: float
+) -> Ros2Controller:
+    """The node ``command_line`` with ``params`` kept alive in this process (``keep_alive``),
+    started for its first run: a run of another node, or of the same with other parameters,
+    gets a node of its own."""
+    key = (command_line, tuple(sorted((params or {}).items())), step_timeout_s)
+    node = _KEPT.get(key)
+    if node is None:
+        node = Ros2Controller(command_line, name, params, step_timeout_s, keep_alive=True)
+        node._kept_as = key
+        _KEPT[key] = node
+    return node
+
+
+@atexit.register
+def stop_kept_nodes() -> None:
+    """Stop every node kept alive in this process (at its exit, and where a check is done
+    with them)."""
+    for node in list(_KEPT.values()):
+        node.stop()
+    _KEPT.clear()
 
 
 def check_ros2_name(name: str) -> None:

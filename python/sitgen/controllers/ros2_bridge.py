@@ -26,6 +26,7 @@ import contextlib
 import math
 import os
 import sys
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -47,7 +48,11 @@ class Topics:
     plan: str = "/plan"
     goal: str = "/goal_pose"
     map: str = "/map"
+    initialpose: str = "/initialpose"
     cmd_vel: str = "/cmd_vel"
+    reset: str = "reset"
+    """A node's reset service: any std_srvs Trigger or Empty service with this name or
+    ending in ``/`` and it (``/reset``, ``/my_node/reset``)."""
 
 
 @dataclass(frozen=True)
@@ -89,13 +94,14 @@ def _messages() -> Any:
     # ros2: controller is first used, never by sitgen's other commands.
     import rclpy  # noqa: F401
     from builtin_interfaces.msg import Time
-    from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
     from nav_msgs.msg import OccupancyGrid, Odometry, Path
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import LaserScan
 
     return {
         "PoseStamped": PoseStamped,
+        "PoseWithCovarianceStamped": PoseWithCovarianceStamped,
         "Twist": Twist,
         "TwistStamped": TwistStamped,
         "Odometry": Odometry,
@@ -128,9 +134,9 @@ def quaternion(heading: float) -> tuple[float, float, float, float]:
 
 class Bridge:
     """sitgen's side of one run: a ROS 2 context on this process's domain, the simulator's
-    node with its publishers, and an executor. A fresh one per run: a participant that has
-    seen a node die keeps its locators for seconds, and a new node on the same ports would
-    wait that long to be discovered."""
+    node with its publishers, and an executor. A fresh one per node started (a node kept
+    alive keeps its bridge): a participant that has seen a node die keeps its locators for
+    seconds, and a new node on the same ports would wait that long to be discovered."""
 
     def __init__(self) -> None:
         reason = ros2_available()
@@ -171,15 +177,22 @@ class Bridge:
         self.plan = self.node.create_publisher(m["Path"], TOPICS.plan, latched)
         self.goal = self.node.create_publisher(m["PoseStamped"], TOPICS.goal, latched)
         self.map = self.node.create_publisher(m["OccupancyGrid"], TOPICS.map, latched)
+        # As RViz's "2D Pose Estimate" publishes it (and Nav2's loopback simulator reads it).
+        self.initialpose = self.node.create_publisher(
+            m["PoseWithCovarianceStamped"], TOPICS.initialpose, reliable
+        )
 
     def hand_over(
-        self, messages: list[tuple[Any, Any]], settle: Callable[[], None] | None = None
+        self,
+        messages: list[tuple[Any, Any]],
+        settle: Callable[[], None] | None = None,
+        taken: bool = False,
     ) -> None:
         """Publish each (publisher, message) in turn, each only once every reliable reader of
         the one before has acknowledged it (it is in the reader's queue) and ``settle`` has
         returned (the node has gone back to waiting, its callback for it run), so that the
         node's callbacks see a period's messages in this order however loaded the machine
-        is."""
+        is. ``taken``: the last one too is waited for so before returning."""
         from rclpy.duration import Duration
 
         for k, (publisher, message) in enumerate(messages):
@@ -191,6 +204,10 @@ class Bridge:
                 if settle is not None and publisher is not self.clock:
                     settle()
             publisher.publish(message)
+        if taken and messages:
+            messages[-1][0].wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+            if settle is not None:
+                settle()
 
     def period(
         self, info: Mapping[str, Any], obs: Mapping[str, Any], t: float
@@ -222,9 +239,65 @@ class Bridge:
             (self.clock, clock),
         ]
 
-    def publish_map(self, grid: Mapping[str, Any]) -> None:
+    def clock_at(self, t: float) -> Any:
+        """A /clock message at simulated time ``t``."""
+        clock = self.msg["Clock"]()
+        clock.clock = stamp(self.msg, t)
+        return clock
+
+    def initial_pose(self, start: Any) -> Any:
+        """The robot's start ``(x, y, heading)`` as an /initialpose message at time 0, frame
+        ``map``, with a zero covariance (the pose is known exactly)."""
+        message = self.msg["PoseWithCovarianceStamped"]()
+        message.header.frame_id, message.header.stamp = FRAMES.map, stamp(self.msg, 0.0)
+        pose = message.pose.pose
+        pose.position.x, pose.position.y = float(start[0]), float(start[1])
+        q = pose.orientation
+        q.x, q.y, q.z, q.w = quaternion(float(start[2]))
+        return message
+
+    def call_resets(self, name: str, timeout_s: float, check_alive: Callable[[str], None]) -> None:
+        """Call every reset service the node offers (:attr:`Topics.reset`), each waited on
+        for ``timeout_s`` wall seconds; ControllerError, naming the controller ``name``, where
+        one does not answer or a Trigger answers that it failed."""
+        for service, kind in self.reset_services():
+            request_type = _service_type(kind)
+            client: Any = self.node.create_client(request_type, service)
+            try:
+                future = client.call_async(request_type.Request())
+                deadline = time.monotonic() + timeout_s
+                while not future.done():
+                    check_alive(f"on its reset ({service})")
+                    if time.monotonic() > deadline:
+                        raise ControllerError(
+                            f"controller {name}: its reset service {service} did not answer "
+                            f"within {timeout_s:g} s"
+                        )
+                    self.spin(0.01)
+                response: Any = future.result()
+                if kind.endswith("Trigger") and not response.success:
+                    raise ControllerError(
+                        f"controller {name}: its reset service {service} failed: "
+                        f"{response.message!r}"
+                    )
+            finally:
+                self.node.destroy_client(client)
+
+    def reset_services(self) -> list[tuple[str, str]]:
+        """The node's reset services as (name, type), in name order."""
+        me = self.node.get_name()
+        found = []
+        for service, kinds in self.node.get_service_names_and_types():
+            if service != f"/{TOPICS.reset}" and not service.endswith(f"/{TOPICS.reset}"):
+                continue
+            if service.startswith(f"/{me}/"):
+                continue
+            found += [(service, k) for k in kinds if k in RESET_TYPES]
+        return sorted(found)
+
+    def map_message(self, grid: Mapping[str, Any]) -> Any:
         """The situation's map (reset info's ``map``) as nav_msgs/OccupancyGrid in frame
-        ``map``, transient local, as a map server serves it."""
+        ``map``, for /map (transient local, as a map server serves it)."""
         m = self.msg
         occupied = np.asarray(grid["occupied"], dtype=bool)
         message = m["OccupancyGrid"]()
@@ -233,7 +306,7 @@ class Bridge:
         message.info.height, message.info.width = (int(n) for n in occupied.shape)
         message.info.origin.orientation.w = 1.0
         message.data = occupancy_data(occupied).tolist()
-        self.map.publish(message)
+        return message
 
     def spin(self, timeout_s: float) -> None:
         self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
@@ -243,7 +316,7 @@ class Bridge:
         ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
         is matched by sitgen's publisher (so the first observation is not lost to a
         half-finished discovery)."""
-        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal)
+        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal, self.initialpose)
         listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
         return listening > 0 and (
             listening_will_do
@@ -265,7 +338,7 @@ class Bridge:
             *self.node.get_publishers_info_by_topic(TOPICS.cmd_vel),
             *(
                 i
-                for p in (self.clock, self.scan, self.odom, self.plan, self.goal)
+                for p in (self.clock, self.scan, self.odom, self.plan, self.goal, self.initialpose)
                 for i in self.node.get_subscriptions_info_by_topic(p.topic_name)
             ),
         ]
@@ -283,6 +356,17 @@ class Bridge:
             self.executor.shutdown(timeout_sec=0)
             self.node.destroy_node()
             self.context.try_shutdown()
+
+
+RESET_TYPES = ("std_srvs/srv/Trigger", "std_srvs/srv/Empty")
+"""The types a node's reset service may have."""
+
+
+def _service_type(kind: str) -> Any:
+    # std_srvs is part of sitgen[ros2]; a node can only offer such a service where it exists.
+    from std_srvs.srv import Empty, Trigger
+
+    return Trigger if kind.endswith("Trigger") else Empty
 
 
 def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: float) -> Any:

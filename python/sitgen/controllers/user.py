@@ -24,7 +24,7 @@ from sitgen.controllers.navground import PREFIX as NAVGROUND_PREFIX
 from sitgen.controllers.navground import STEP_TIMEOUT_S as NAVGROUND_STEP_TIMEOUT_S
 from sitgen.controllers.navground import NavgroundController
 from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
-from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name
+from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name, kept_node
 
 USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX, NAVGROUND_PREFIX)
 """How a user controller's name starts (the core runs every other name itself)."""
@@ -35,13 +35,16 @@ def load_controller(
     step_timeout_s: float = STEP_TIMEOUT_S,
     params: Mapping[str, float] | None = None,
     in_process: bool = False,
+    keep_alive: bool = False,
 ) -> UserController:
     """The user controller ``name`` names (``python:…``, ``cmd:…``, ``ros2:…``; ``params``
     are a class's keyword arguments, a ROS 2 node's parameters; a program reads them in its
     reset message), or wrap an object with ``reset`` and ``act`` (called in
     this process). ``in_process``: a ``python:`` class is loaded and called in this process,
     a disposable pool worker (:mod:`sitgen.controllers.inprocess`), not in a host process of
-    its own. Raises ControllerError if it cannot be started."""
+    its own. ``keep_alive``: a ``ros2:`` node is the one kept alive in this process for such
+    runs (:func:`sitgen.controllers.ros2.kept_node`). Raises ControllerError if it cannot be
+    started."""
     if not isinstance(name, str):
         return InProcessController(name, f"`{type(name).__name__}`", step_timeout_s)
     shown = f"`{name}`"
@@ -67,6 +70,8 @@ def load_controller(
         command_line = name.removeprefix("cmd:")
         argv = command_argv(command_line, f"`{name}`")
         return ProcessController(argv, f"`{name}`", step_timeout_s)
+    if name.startswith(ROS2_PREFIX) and keep_alive:
+        return kept_node(name.removeprefix(ROS2_PREFIX), f"`{name}`", params, step_timeout_s)
     if name.startswith(ROS2_PREFIX):
         return Ros2Controller(name.removeprefix(ROS2_PREFIX), f"`{name}`", params, step_timeout_s)
     raise ControllerError(f"controller `{name}` is none of python:…, cmd:…, ros2:…, navground:…")

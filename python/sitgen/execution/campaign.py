@@ -49,7 +49,6 @@ from sitgen.execution.jobs import (
 )
 from sitgen.run import run
 from sitgen.store import RunRow, Store
-from sitgen.world.situation import Situation, generate_situation
 
 PACK_ALL = (-math.inf, False)
 """The pack rule that packs every run's trajectory (see ``_core.run_jobs``)."""
@@ -164,11 +163,7 @@ def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
     ``python:`` class is called in it, else in a host process of its own)."""
 
     try:
-        situation = (
-            Situation(json.dumps(job.situation), check_start=False)
-            if "format" in job.situation
-            else generate_situation(job.situation, seed=job.seed)
-        )
+        situation = job.built()
     except (_core.GenerationFailed, _core.SpecError) as e:
         return {"ok": False, "error": f"generation failed: {e}"}
     rec = run(

@@ -38,7 +38,9 @@ import numpy as np
 from sitgen import _core
 from sitgen.controllers.external import ControllerError
 from sitgen.controllers.user import check_controller_name, is_user_controller
+from sitgen.run import resets
 from sitgen.world.config import load_spec, spec_json
+from sitgen.world.situation import Situation, generate_situation
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
 SECTIONS = ("n", "situation", "run", "vary")
@@ -207,6 +209,13 @@ class Job:
             peers = [name for _, name in _mission_peer_names(self.situation.get("mission", {}))]
         return any(isinstance(n, str) and is_user_controller(n) for n in [self.controller, *peers])
 
+    def built(self) -> Situation:
+        """The job's situation: given whole, or generated from its spec and seed. Raises the
+        core's GenerationFailed or SpecError where it cannot be made."""
+        if "format" in self.situation:
+            return Situation(json.dumps(self.situation), check_start=False)
+        return generate_situation(self.situation, seed=self.seed)
+
     @property
     def controller(self) -> str:
         """The agent's controller: the run spec's, else the situation's mission's; a seeded
@@ -353,6 +362,34 @@ def check_campaign(
             check_controller_name(name, params)
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
+    _check_resets(spec, seed)
+
+
+KEEP_ALIVE_CHECK_STEPS = 30
+"""Control periods of each run that checks a node kept alive across runs resets."""
+
+
+def _check_resets(spec: CampaignSpec, seed: int) -> None:
+    """A ``ros2:`` node kept alive across runs (``keep_alive``) runs the campaign's first
+    situation after its second as a fresh node runs it (:func:`sitgen.run.resets`: three short
+    runs, two node starts), or the campaign does not start: every run after a worker's first
+    would otherwise be another than the run it stands for. Raises SpecError naming the
+    field."""
+    first, second = build_job(spec, seed, 0), build_job(spec, seed, 1)
+    mission = first.situation.get("mission", {})
+    path = "run.controller" if "controller" in first.run else "situation.mission.agent_controller"
+    table = first.run.get("controller") or mission.get("agent_controller") or {}
+    if not table.get("keep_alive"):
+        return
+    try:
+        situation, before = first.built(), second.built()
+    except (_core.GenerationFailed, _core.SpecError):
+        return  # stored as its job's error, like any job that cannot be built
+    check = resets(
+        table["name"], situation, before, KEEP_ALIVE_CHECK_STEPS, table.get("params"), first.run
+    )
+    if not check.ok:
+        raise _core.SpecError(f"{path}.keep_alive: controller `{table['name']}`: {check.detail}")
 
 
 def _params_at(spec: CampaignSpec, mission: dict[str, Any], path: str) -> Any:

@@ -642,6 +642,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         };
         assert!(crate::control::build(&spec, "c").is_ok());
     }
@@ -797,6 +798,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         };
         let mut failures = Vec::new();
         for seed in 1..=10 {
@@ -844,6 +846,7 @@ mod tests {
                 fault: None,
                 control_period_s: None,
                 perception: None,
+                keep_alive: false,
             };
             run_situation(&s, &driver, 600, |w| {
                 if w.steps() % 10 == 0 {
@@ -858,6 +861,7 @@ mod tests {
                     fault: None,
                     control_period_s: None,
                     perception: None,
+                    keep_alive: false,
                 };
                 let mut c = crate::control::build(&spec, "c").unwrap();
                 c.reset(&s.robots[0]);

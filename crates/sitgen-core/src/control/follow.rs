@@ -245,6 +245,7 @@ mod tests {
                 fault: None,
                 control_period_s: None,
                 perception: None,
+                keep_alive: false,
             },
             at_end,
         }
@@ -265,6 +266,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         }
     }
 

@@ -151,6 +151,16 @@ pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
             ),
         ));
     }
+    if spec.keep_alive && !spec.name.starts_with("ros2:") {
+        return Err(SpecError::new(
+            join(path, "keep_alive"),
+            format!(
+                "`{}`: keep_alive is for a ros2: node (one that takes seconds to start); \
+                 expected false",
+                spec.name
+            ),
+        ));
+    }
     if let Some(target) = spec.name.strip_prefix("python:") {
         let (module, class) = target.rsplit_once(':').unwrap_or_default();
         if module.trim().is_empty() || class.trim().is_empty() {

@@ -142,6 +142,7 @@ mod tests {
                 fault: None,
                 control_period_s: None,
                 perception: None,
+                keep_alive: false,
             },
             at_end,
         };

@@ -150,6 +150,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         }
     }
 
@@ -293,6 +294,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         };
         let err = |p: &[(&str, f64)]| {
             crate::control::build(&spec(p), "mission.agent_controller")

@@ -73,6 +73,7 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     };
     run_situation(&s, &straight, steps, |_| false)
 }
@@ -108,6 +109,7 @@ pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> Str
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     };
     build(&spec, path)
         .err()
@@ -147,6 +149,7 @@ fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     };
     let start = s.robots[1].start;
     let dt = SimSpec::default().dt_s;
@@ -159,4 +162,21 @@ fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
     assert!(moved(6.0) > 0.1, "on its way after start_s");
     let e = build_error("straight", &[("start_s", -1.0)], "c");
     assert_eq!(e, "c.params.start_s: -1 is not in [0, 3600]");
+}
+
+#[test]
+fn keep_alive_is_for_a_ros2_node_only() {
+    let spec = |name: &str| ControllerSpec {
+        keep_alive: true,
+        ..ControllerSpec::named(name)
+    };
+    assert!(super::check(&spec("ros2:python3 node.py"), "run.controller").is_ok());
+    for name in ["snd_follow", "cmd:prog", "python:m:C", "navground:HL"] {
+        let e = super::check(&spec(name), "run.controller").unwrap_err();
+        assert_eq!(e.path, "run.controller.keep_alive", "{name}");
+        assert!(e.message.contains("keep_alive is for a ros2: node"), "{e}");
+    }
+    // Left out where false: a spec without it reads and writes as before.
+    let text = serde_json::to_string(&ControllerSpec::named("ros2:x")).unwrap();
+    assert!(!text.contains("keep_alive"), "{text}");
 }

@@ -379,6 +379,7 @@ mod tests {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         }
     }
 

@@ -80,6 +80,12 @@ pub struct ControllerSpec {
     /// "Perception"); default [`Perception::Sensed`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub perception: Option<Perception>,
+    /// A `ros2:` node only: start the node once per worker process and reset it between runs
+    /// (a new clock, initial pose, route and goal, and its reset service called where it offers
+    /// one) instead of starting it for every run (docs/ros2.md, "One node across runs").
+    /// Default false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub keep_alive: bool,
 }
 
 /// What a controller perceives of the world beyond its own state.
@@ -105,6 +111,7 @@ impl ControllerSpec {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         }
     }
 }

@@ -20,6 +20,7 @@ pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
             fault: None,
             control_period_s: None,
             perception: None,
+            keep_alive: false,
         }),
         time_limit_s,
         ..RunSpec::default()

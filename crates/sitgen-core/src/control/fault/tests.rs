@@ -22,6 +22,7 @@ fn spec(name: &str, fault: Option<&str>) -> ControllerSpec {
         fault: fault.map(str::to_string),
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     }
 }
 

@@ -416,6 +416,7 @@ fn parameters_are_checked_and_named() {
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     };
     let err = |p: &[(&str, f64)]| {
         crate::control::build(&spec(p), "agent")
@@ -470,6 +471,7 @@ fn named(name: &str) -> ControllerSpec {
         fault: None,
         control_period_s: None,
         perception: None,
+        keep_alive: false,
     }
 }
 
