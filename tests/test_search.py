@@ -19,6 +19,7 @@ from sitgen.execution.jobs import parse_campaign
 from sitgen.generation.genome import OPERATORS, fresh, vary
 from sitgen.generation.search import run_search
 from sitgen.generation.search.archive import Archive
+from sitgen.generation.search.elites import Elite, Elites
 from sitgen.generation.search.plan import BATCH, INITIAL, SearchPlan, generation_of
 from tests.conftest import open_page, run_cli
 from tests.test_campaign import SMALL, start_command, wait_for_runs, write_spec
@@ -295,3 +296,18 @@ def test_bad_input_fails_before_any_run_naming_the_field(tmp_path: Path) -> None
     assert done.returncode == 2 and "holds a campaign, not a search" in done.stderr
     with pytest.raises(_core.SpecError, match="--budget"):
         run_search(spec_of(), tmp_path / "x.db", budget=0, plan=ELITES)
+
+
+def test_elites_keep_a_batchs_best_run_per_cell_and_replace_only_a_worse_elite() -> None:
+    elites = Elites([2, 3])
+    assert elites.empty and elites.stats() == (0, 0.0, None)
+    # In one batch a cell takes its best run, the first of equal ones.
+    elites.add(
+        [(0, 1), (0, 1), (1, 2), (0, 1)],
+        [Elite(5.0, 1), Elite(7.0, 2), Elite(1.0, 3), Elite(7.0, 4)],
+    )
+    assert [(c, e.run_id) for c, e in elites.by_cell()] == [((0, 1), 2), ((1, 2), 3)]
+    # An elite gives way only to a strictly better run; a cell outside the grid is clipped in.
+    elites.add([(0, 1), (1, 2), (5, -1)], [Elite(7.0, 5), Elite(1.5, 6), Elite(0.0, 7)])
+    assert [(c, e.run_id) for c, e in elites.by_cell()] == [((0, 1), 2), ((1, 0), 7), ((1, 2), 6)]
+    assert elites.stats() == (3, 8.5, 7.0)

@@ -97,16 +97,6 @@ def from_unit(kind: str, args: list[Any], u: float) -> int | float:
     return float(lo + u * (hi - lo))
 
 
-def solution(spec: CampaignSpec, genome: Genome) -> np.ndarray:
-    """The genome's genes scaled to [0, 1], as the archive stores a solution (at least one
-    number: a spec that varies nothing searches seeds alone)."""
-    units = [
-        to_unit(*next(iter(dist.items())), gene)
-        for (_, dist), gene in zip(vary_order(spec), genome.genes, strict=True)
-    ]
-    return np.array(units or [0.0])
-
-
 def fresh(spec: CampaignSpec, seed: int, index: int) -> Genome:
     """Run ``index``'s fresh genome: exactly the campaign's job ``index``."""
     own = job_seed(seed, index)

@@ -2,9 +2,8 @@
 
 A search keeps an *archive*: a grid of cells by behaviour descriptors (*measures*; by default
 the run's failure class × its terrain kind, for mutation failure class × variant), each cell
-holding the highest-objective run seen there (by default the run's score). The archive is
-``ribs``' ``GridArchive`` (elitist insertion per cell, QD statistics); the variation is written
-here because ribs' emitters vary real vectors and a situation's genome is not one.
+holding the highest-objective run seen there (by default the run's score):
+:class:`sitgen.generation.search.elites.Elites`.
 
 MAP-Elites draws each child by varying elites chosen uniformly over the filled cells (so a rare
 failure is built on as often as a common one) with the genome's operators
@@ -24,7 +23,7 @@ import functools
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +37,6 @@ from sitgen.execution.jobs import (
 from sitgen.generation.genome import (
     Genome,
     fresh,
-    solution,
     vary,
 )
 from sitgen.generation.guidance import (
@@ -49,6 +47,7 @@ from sitgen.generation.mutation import OPERATORS as SITUATION_OPERATORS
 from sitgen.generation.mutation import TARGETED, mutate, neighbours
 from sitgen.generation.mutation.mirror import as_made_by
 from sitgen.generation.mutation.parent import Parent, cut_past_failure, extended
+from sitgen.generation.search.elites import Elite, Elites
 from sitgen.generation.search.plan import (
     ARM_PRIOR_RUNS,
     CROWD_SHARE,
@@ -68,9 +67,6 @@ from sitgen.store import Store
 from sitgen.triage.robustness import RERUNS
 from sitgen.triage.variants import Screen, variant
 from sitgen.world.situation import Situation, generate_situation
-
-if TYPE_CHECKING:
-    from ribs.archives import GridArchive
 
 
 @dataclass(frozen=True)
@@ -105,27 +101,19 @@ class ArchiveStats:
     cells: int
     """Cells filled."""
     qd_score: float
-    """Sum of the elites' objectives (ribs' QD score, offset 0: objectives are ≥ 0)."""
+    """Sum of the elites' objectives (the QD score, offset 0: objectives are ≥ 0)."""
     best: float
     """Best objective."""
 
 
 class Archive:
-    """The search's archive: ``ribs``' GridArchive over the plan's measures, with each elite's
-    run id and the genome of every run told to it."""
+    """The search's archive: the elites over the plan's measures, and the genome of every run
+    told to it."""
 
     def __init__(self, spec: CampaignSpec, seed: int, plan: SearchPlan) -> None:
-        from ribs.archives import GridArchive
-
         self.spec, self.seed, self.plan = spec, seed, plan
         self.measures = measures_for(spec, plan.measures)
-        dims = [len(m.labels) for m in self.measures]
-        self.grid: GridArchive = GridArchive(
-            solution_dim=max(1, len(spec.vary)),
-            dims=dims,
-            ranges=[(0.0, float(d)) for d in dims],
-            extra_fields={"run_id": ((), np.int64)},
-        )
+        self.grid = Elites([len(m.labels) for m in self.measures])
         self.genomes: dict[int, Genome] = {}
         self.covered: list[tuple[Genome, tuple[str, ...]]] = []
         """Each run's genome and the coverage cells it exercised (errors left out)."""
@@ -187,19 +175,13 @@ class Archive:
         if not placed:
             return
         self.grid.add(
-            np.stack([solution(self.spec, r["genome"]) for r in placed]),
-            np.array([self.objective(r["score"]) for r in placed]),
-            np.array([[c + 0.5 for c in self.cells(r)] for r in placed]),
-            run_id=np.array([r["id"] for r in placed], dtype=np.int64),
+            [self.cells(r) for r in placed],
+            [Elite(self.objective(r["score"]), int(r["id"])) for r in placed],
         )
 
     def elites(self) -> list[int]:
         """The elites' run ids, by cell."""
-        if self.grid.empty:
-            return []
-        data = self.grid.data(["index", "run_id"])
-        pairs = zip(data["index"].tolist(), data["run_id"].tolist(), strict=True)
-        return [int(r) for _, r in sorted(pairs)]
+        return [e.run_id for _, e in self.grid.by_cell()]
 
     def ask(self, generation: int) -> list[Child]:
         """Generation ``generation``'s runs (all of them; the budget truncates)."""
@@ -447,9 +429,8 @@ class Archive:
         )
 
     def stats(self) -> ArchiveStats:
-        s = self.grid.stats
-        best = s.obj_max if s.num_elites and s.obj_max is not None else 0.0
-        return ArchiveStats(int(s.num_elites), float(s.qd_score), float(best))
+        cells, qd_score, best = self.grid.stats()
+        return ArchiveStats(cells, qd_score, 0.0 if best is None else best)
 
 
 def _family(operator: str) -> str:
@@ -494,12 +475,7 @@ def elite_grid(archive: Archive) -> list[list[dict[str, Any] | None]]:
     rows = len(labels[0])
     cols = len(labels[1]) if len(labels) > 1 else 1
     grid: list[list[dict[str, Any] | None]] = [[None] * cols for _ in range(rows)]
-    if archive.grid.empty:
-        return grid
-    data = archive.grid.data(["index", "run_id", "objective"])
-    cells = archive.grid.int_to_grid_index(data["index"])
-    elites = zip(cells.tolist(), data["run_id"].tolist(), data["objective"].tolist(), strict=True)
-    for cell, r, o in elites:
+    for cell, elite in archive.grid.by_cell():
         row, col = cell[0], cell[1] if cols > 1 else 0
-        grid[row][col] = {"run": int(r), "objective": float(o)}
+        grid[row][col] = {"run": elite.run_id, "objective": elite.objective}
     return grid
