@@ -57,11 +57,13 @@ def runs(db: Path) -> list[tuple[Any, ...]]:
 def ros2_campaign(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("ros2")
     spec = example_campaign(folder, 12, 30.0)
-    # The campaign on 1 worker is the repeat of the one on 2 (test_ros2_styles.py repeats the
-    # usual node styles the same way).
-    for name, workers in (("two", "2"), ("one", "1")):
+    # The campaign on 1 worker is the repeat of the one on 2, there with the node kept alive
+    # across runs (test_ros2_styles.py repeats the usual node styles the same way); what is
+    # done with its runs later (robustness copies, the report's bags, shrinking) keeps it alive
+    # too, as its stored spec says.
+    for name, workers, more in (("two", "2", ()), ("one", "1", ("--keep-alive",))):
         args = ("--db", str(folder / f"{name}.db"), "--workers", workers, "--reruns", "0")
-        done = run_cli("campaign", str(spec), *args, cwd=ROOT)
+        done = run_cli("campaign", str(spec), *args, *more, cwd=ROOT)
         assert done.returncode == 0, done.stderr
     return folder
 
@@ -83,7 +85,7 @@ def test_a_ros2_node_drives_a_campaign_the_same_on_2_workers_and_on_a_repeat_on_
 def test_a_ros2_campaigns_runs_are_measured_reported_and_exported(
     ros2_campaign: Path, tmp_path: Path
 ) -> None:
-    db = ros2_campaign / "two.db"
+    db = ros2_campaign / "one.db"
     done = run_cli("robustness", str(db), "--reruns", "4", cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert "robust" in done.stdout
@@ -298,7 +300,7 @@ def test_sitgen_run_writes_a_rosbag2_of_a_ros2_nodes_run(
 def test_a_ros2_runs_failure_shrinks_and_reruns_the_same(
     ros2_campaign: Path, tmp_path: Path
 ) -> None:
-    db = ros2_campaign / "two.db"
+    db = ros2_campaign / "one.db"
     with sqlite3.connect(db) as c:
         (run_id,) = c.execute(
             "SELECT id FROM runs WHERE failure_class IS NOT NULL ORDER BY score DESC LIMIT 1"

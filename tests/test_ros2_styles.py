@@ -1,8 +1,9 @@
 """ROS 2 nodes written the usual ways (tests/ros2_nodes/usual.py: acting in the scan callback on
 the latest odometry and goal, on a timer on simulated time, through an approximate-time
 synchroniser, reading the route once) drive campaigns that store the same runs, trajectories
-included, on 2 workers and again on 1, with every core of the machine kept busy beside them;
-``sitgen check-controller`` says when a node's runs do not repeat. Skipped, with the reason,
+included, on 2 workers and again on 1 (there with the node kept alive across runs, where it
+resets), with every core of the machine kept busy beside them; ``sitgen check-controller`` says
+when a node's runs do not repeat, and when it cannot be kept alive. Skipped, with the reason,
 where the ROS 2 wheels (sitgen[ros2]) are not installed.
 
 ``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 6, to keep CI short; the
@@ -70,41 +71,37 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
         # the last command, the one way load may change a run, so it is made generous.
         "params = { answer_timeout_s = 10.0 }\n"
     )
-    campaigns = []
     # The campaign on 1 worker repeats the one on 2: the same runs on both are the same runs
-    # again, whatever the number of workers.
-    for name, workers in (("two", "2"), ("one", "1")):
-        db = tmp_path / f"{name}.db"
-        done = run_cli(
-            "campaign", str(spec), "--db", str(db), "--workers", workers, "--reruns", "0",
-            "--seed", "3", "--keep-trajectories", "all",
-        )  # fmt: skip
-        assert done.returncode == 0, done.stderr
-        campaigns.append(stored(db))
-    two, one = campaigns
+    # again, whatever the number of workers. On 1 worker the node is kept alive across runs
+    # (keep_alive: one node reset between runs), except the node that reads its route once,
+    # which cannot be and is refused before any run, naming the field.
+    two = campaign(spec, tmp_path / "two.db", "2")
     assert len(two) == RUNS and all(r[1] != "error" for r in two), [r[:3] for r in two]
     assert all(r[7] is not None for r in two)
-    assert one == two
-    # One node a worker, reset between runs: the same runs again, or, for the node that reads
-    # its route once, a refusal before any run that names the field.
-    kept = kept_alive_campaign(spec, tmp_path / "kept.db")
-    if style == "goal_once":
-        assert kept.returncode == 2, kept.stdout
-        (line,) = kept.stderr.strip().splitlines()
-        assert line.startswith("error: run.controller.keep_alive: controller `ros2:"), line
-        assert "keeps state from run to run" in line, line
-        assert not (tmp_path / "kept.db").exists() or stored(tmp_path / "kept.db") == []
-    else:
-        assert kept.returncode == 0, kept.stderr
-        assert stored(tmp_path / "kept.db") == two
+    if style != "goal_once":
+        assert campaign(spec, tmp_path / "one.db", "1", "--keep-alive") == two
+        return
+    assert campaign(spec, tmp_path / "one.db", "1") == two
+    kept = run_cli(*campaign_args(spec, tmp_path / "kept.db", "1"), "--keep-alive")
+    assert kept.returncode == 2, kept.stdout
+    (line,) = kept.stderr.strip().splitlines()
+    assert line.startswith("error: run.controller.keep_alive: controller `ros2:"), line
+    assert "keeps state from run to run" in line, line
+    assert not (tmp_path / "kept.db").exists() or stored(tmp_path / "kept.db") == []
 
 
-def kept_alive_campaign(spec: Path, db: Path) -> Any:
-    """``spec``'s campaign on 2 workers with its node kept alive across runs."""
-    return run_cli(
-        "campaign", str(spec), "--db", str(db), "--workers", "2", "--reruns", "0",
-        "--seed", "3", "--keep-trajectories", "all", "--keep-alive",
+def campaign_args(spec: Path, db: Path, workers: str) -> tuple[str, ...]:
+    return (
+        "campaign", str(spec), "--db", str(db), "--workers", workers, "--reruns", "0",
+        "--seed", "3", "--keep-trajectories", "all",
     )  # fmt: skip
+
+
+def campaign(spec: Path, db: Path, workers: str, *more: str) -> list[tuple[Any, ...]]:
+    """``spec``'s campaign on ``workers`` workers: its stored runs."""
+    done = run_cli(*campaign_args(spec, db, workers), *more)
+    assert done.returncode == 0, done.stderr
+    return stored(db)
 
 
 def test_a_node_with_a_reset_service_kept_alive_runs_as_fresh_nodes(
@@ -118,17 +115,9 @@ def test_a_node_with_a_reset_service_kept_alive_runs_as_fresh_nodes(
         f'[run]\ntime_limit_s = 5.0\n[run.controller]\nname = "{USUAL} goal_once_reset"\n'
         "params = { answer_timeout_s = 10.0 }\n"
     )
-    fresh = tmp_path / "fresh.db"
-    done = run_cli(
-        "campaign", str(spec), "--db", str(fresh), "--workers", "1", "--reruns", "0",
-        "--seed", "3", "--keep-trajectories", "all",
-    )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    kept = kept_alive_campaign(spec, tmp_path / "kept.db")
-    assert kept.returncode == 0, kept.stderr
-    runs = stored(fresh)
+    runs = campaign(spec, tmp_path / "fresh.db", "1")
     assert len(runs) == 4 and all(r[1] != "error" for r in runs), [r[:3] for r in runs]
-    assert stored(tmp_path / "kept.db") == runs
+    assert campaign(spec, tmp_path / "kept.db", "2", "--keep-alive") == runs
 
 
 def test_check_controller_says_when_a_nodes_runs_do_not_repeat() -> None:

@@ -328,6 +328,11 @@ class Ros2Controller(UserController):
 
     def _check_alive(self, when: str) -> None:
         proc = self._proc
+        if proc is not None and proc.poll() is None and _exiting(proc.pid):
+            # Killed, its threads still going down: it cannot be waited for until they are,
+            # while its participant's endpoints are still in the graph.
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=2.0)
         if proc is None or proc.poll() is None:
             return
         code = proc.returncode
@@ -481,6 +486,17 @@ class Ros2Controller(UserController):
         pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
         pose.pose.orientation.w = 1.0
         return pose
+
+
+def _exiting(pid: int) -> bool:
+    """Whether process ``pid``'s main thread has exited (a zombie: Linux's /proc state Z),
+    though its other threads may not have yet."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            stat = f.read()
+    except OSError:
+        return False
+    return stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] == b"Z"
 
 
 _KEPT: dict[tuple[Any, ...], Ros2Controller] = {}
