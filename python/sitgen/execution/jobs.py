@@ -375,13 +375,13 @@ def _check_resets(spec: CampaignSpec, seed: int) -> None:
     runs, two node starts), or the campaign does not start: every run after a worker's first
     would otherwise be another than the run it stands for. Raises SpecError naming the
     field."""
-    first, second = build_job(spec, seed, 0), build_job(spec, seed, 1)
-    mission = first.situation.get("mission", {})
-    path = "run.controller" if "controller" in first.run else "situation.mission.agent_controller"
-    table = first.run.get("controller") or mission.get("agent_controller") or {}
+    mission = spec.situation.get("mission", {})
+    path = "run.controller" if "controller" in spec.run else "situation.mission.agent_controller"
+    table = spec.run.get("controller") or mission.get("agent_controller") or {}
     if not table.get("keep_alive"):
         return
     try:
+        first, second = build_job(spec, seed, 0), build_job(spec, seed, 1)
         situation, before = first.built(), second.built()
     except (_core.GenerationFailed, _core.SpecError):
         return  # stored as its job's error, like any job that cannot be built
