@@ -11,6 +11,7 @@ issue's figure is 20)."""
 
 from __future__ import annotations
 
+import json
 import os
 import sqlite3
 import subprocess
@@ -141,3 +142,15 @@ def test_check_controller_says_whether_a_node_can_be_kept_alive_across_runs() ->
     done = run_cli("check-controller", "python:examples/controllers/braking.py:Braking",
                    "--keep-alive")  # fmt: skip
     assert done.returncode == 2 and "--keep-alive" in done.stderr, done.stderr
+
+
+def test_diff_refuses_a_side_kept_alive_that_does_not_reset(tmp_path: Path) -> None:
+    kept = json.dumps({"name": f"{USUAL} goal_once", "keep_alive": True})
+    done = run_cli(
+        "diff", "--a", f"{USUAL} scan_callback", "--b", kept, "--n", "2",
+        "--db", str(tmp_path / "d.db"),
+    )  # fmt: skip
+    assert done.returncode == 2, done.stdout
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("error: --b.keep_alive: controller `ros2:"), line
+    assert "keeps state from run to run" in line, line

@@ -378,6 +378,12 @@ def _check_resets(spec: CampaignSpec, seed: int) -> None:
     mission = spec.situation.get("mission", {})
     path = "run.controller" if "controller" in spec.run else "situation.mission.agent_controller"
     table = spec.run.get("controller") or mission.get("agent_controller") or {}
+    check_kept_alive(spec, seed, table, path)
+
+
+def check_kept_alive(spec: CampaignSpec, seed: int, table: dict[str, Any], path: str) -> None:
+    """Where the agent's controller table ``table`` (the field ``path``) keeps its node alive,
+    check it resets on the campaign's first two situations (:func:`_check_resets`)."""
     if not table.get("keep_alive"):
         return
     try:

@@ -33,7 +33,13 @@ from typing import Any, TextIO
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
 from sitgen.execution.campaign import Executor, run_chunk, started_at
-from sitgen.execution.jobs import CampaignSpec, Job, check_campaign, check_workers
+from sitgen.execution.jobs import (
+    CampaignSpec,
+    Job,
+    check_campaign,
+    check_kept_alive,
+    check_workers,
+)
 from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
 from sitgen.triage.junit import Case
@@ -267,6 +273,8 @@ def run_diff(
                 f"--n: {n} is more than the {situations.most()} runs of {situations_db}"
             )
         check_campaign(spec, seed, n if plan.strategy == "random" else 0, stop)
+        for side in SIDES:
+            check_kept_alive(spec, seed, plan.controller(side), f"--{side}")
         user = any(is_user_controller(str(plan.controller(s)["name"])) for s in SIDES)
         with Store(db, create=True) as store:
             store.lock_for_writing()
