@@ -482,7 +482,8 @@ def check_controller(
     if isinstance(controller, str):
         checks.append(repeats(controller, situation, steps, params))
     if isinstance(controller, str) and kept_after is not None:
-        checks.append(resets(controller, situation, kept_after, steps, params))
+        table = {"name": controller, "params": dict(params or {})}
+        checks.append(resets(table, situation, kept_after, steps))
     return checks
 
 
@@ -496,13 +497,14 @@ def repeats(
     periods): a controller whose commands depend on timing (a node that acts on whatever
     message arrived last, a program that reads the clock) cannot show its user a failure
     again. Names the first step where the second run's poses differ from the first's."""
-    limit = steps * _control_period_s(situation)
+    timing = _Timing.of(situation, {})
     first, second = (
-        run(situation, controller=controller, time_limit=limit, params=params) for _ in range(2)
+        run(situation, controller=controller, time_limit=steps * timing.period_s, params=params)
+        for _ in range(2)
     )
     if errors := _errors(first, second):
         return Check("repeats", False, errors)
-    differ = _first_difference(situation, first, second)
+    differ = timing.first_difference(first, second)
     if differ is None:
         return Check("repeats", True, f"the same {len(first.trajectory)} poses on a second run")
     return Check(
@@ -514,22 +516,22 @@ def repeats(
 
 
 def resets(
-    controller: str,
+    table: Mapping[str, Any],
     situation: Situation,
     before: Situation,
     steps: int = 50,
-    params: Mapping[str, float] | None = None,
     spec: Mapping[str, Any] | None = None,
 ) -> Check:
-    """Whether the ``ros2:`` node ``controller`` with ``params``, kept alive across runs
-    (``keep_alive``), drives ``situation`` after a run of ``before`` as a freshly started node
-    does (``steps`` control periods each, under the run spec ``spec``): one that keeps state
-    from run to run (a goal read once, a filter's history) would give every run after its
-    first another result than the run's own."""
-    limit = steps * _control_period_s(situation)
-    table = {"name": controller, "params": dict(params or {})}
+    """Whether the ``ros2:`` node of the controller table ``table`` (name, params, control
+    period, …), kept alive across runs (``keep_alive``), drives ``situation`` after a run of
+    ``before`` as a freshly started node does (``steps`` control periods each, under the run
+    spec ``spec``, whose controller ``table`` replaces): one that keeps state from run to run
+    (a goal read once, a filter's history) would give every run after its first another
+    result than the run's own."""
     base = {k: v for k, v in (spec or {}).items() if k != "controller"}
     fresh, kept = ({**base, "controller": {**table, "keep_alive": k}} for k in (False, True))
+    timing = _Timing.of(situation, fresh)
+    limit = steps * timing.period_s
     first = run(situation, spec=fresh, time_limit=limit)
     try:
         run(before, spec=kept, time_limit=limit)
@@ -538,7 +540,7 @@ def resets(
         stop_kept_nodes()
     if errors := _errors(first, again):
         return Check("resets", False, errors)
-    differ = _first_difference(situation, first, again)
+    differ = timing.first_difference(first, again)
     if differ is None:
         return Check("resets", True, "kept alive, a run after another equals a fresh node's")
     return Check(
@@ -550,25 +552,32 @@ def resets(
     )
 
 
-def _control_period_s(situation: Situation) -> float:
-    return float(reset_info(situation, {}, 0)["control_period_s"])
-
-
 def _errors(a: RunRecord, b: RunRecord) -> str | None:
     if "error" in (a.outcome, b.outcome):
         return f"a run of the two ended in error: {a.reason if a.outcome == 'error' else b.reason}"
     return None
 
 
-def _first_difference(situation: Situation, a: RunRecord, b: RunRecord) -> str | None:
-    """Where two runs of ``situation`` first differ (the control period whose command moved a
-    pose), or None if they are the same."""
-    info = reset_info(situation, {}, 0)
-    period, dt_s = float(info["control_period_s"]), float(info["dt_s"])
-    rows = min(len(a.trajectory), len(b.trajectory))
-    differ = [i for i in range(rows) if not np.array_equal(a.trajectory[i], b.trajectory[i])]
-    if not differ and len(a.trajectory) == len(b.trajectory):
-        return None
-    # A pose row is a simulation step; the command that moved it came one period before.
-    at_s = (differ[0] if differ else rows) * dt_s - period
-    return f"its command of the control period at {max(0.0, at_s):.1f} s was another"
+@dataclass(frozen=True)
+class _Timing:
+    """A run's control period and simulator step (seconds), as its run spec resolves them."""
+
+    period_s: float
+    dt_s: float
+
+    @staticmethod
+    def of(situation: Situation, spec: Mapping[str, Any]) -> _Timing:
+        info = reset_info(situation, spec, 0)
+        return _Timing(float(info["control_period_s"]), float(info["dt_s"]))
+
+    def first_difference(self, a: RunRecord, b: RunRecord) -> str | None:
+        """Where two runs of one situation first differ (the control period whose command
+        moved a pose), or None if they are the same."""
+        rows = min(len(a.trajectory), len(b.trajectory))
+        differ = (i for i in range(rows) if not np.array_equal(a.trajectory[i], b.trajectory[i]))
+        first = next(differ, None)
+        if first is None and len(a.trajectory) == len(b.trajectory):
+            return None
+        # A pose row is a simulation step; the command that moved it came one period before.
+        at_s = (rows if first is None else first) * self.dt_s - self.period_s
+        return f"its command of the control period at {max(0.0, at_s):.1f} s was another"

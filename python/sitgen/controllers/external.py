@@ -224,6 +224,19 @@ def marked_pids(mark: str, whole: bool = True) -> set[int]:
     return found
 
 
+def task_state(stat_path: str) -> bytes | None:
+    """The state letter in a process's or thread's /proc stat file (Linux: R running, S
+    sleeping, D waiting on a device, Z exited and not yet reaped, …), or None where it is
+    gone."""
+    try:
+        with open(stat_path, "rb") as f:
+            stat = f.read()
+    except OSError:
+        return None
+    at = stat.rindex(b")") + 2  # after the command name, which may hold anything
+    return stat[at : at + 1]
+
+
 def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:
     """Wait until every thread of the processes ``pids`` is asleep (blocked, waiting for
     input: Linux's /proc task states), within ``timeout_s`` of wall time; whether they were.
@@ -234,11 +247,9 @@ def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:
         for pid in pids:
             with contextlib.suppress(OSError):
                 for task in os.scandir(f"/proc/{pid}/task"):
-                    with contextlib.suppress(OSError), open(f"{task.path}/stat", "rb") as f:
-                        stat = f.read()
-                        if stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] in b"RD":
-                            busy = True
-                            break
+                    if task_state(f"{task.path}/stat") in (b"R", b"D"):
+                        busy = True
+                        break
             if busy:
                 break
         if not busy:

@@ -78,6 +78,7 @@ from sitgen.controllers.external import (
     program_path,
     short,
     signal_name,
+    task_state,
     wait_idle,
 )
 from sitgen.controllers.ros2_bridge import (
@@ -223,7 +224,9 @@ class Ros2Controller(UserController):
                 self._start()
             self._discover(bridge)
             route = []
-        self._check_alive("before its run")
+        if kept:  # it may have died since its last run
+            self._reap_if_exiting()
+            self._check_alive("before its run")
         # The domain must hold only sitgen and what this run started (or the run errs).
         self._pids = marked_pids(self._mark)
         require_free(bridge.domain, bridge.endpoint_gids(), {os.getpid(), *self._pids})
@@ -233,7 +236,8 @@ class Ros2Controller(UserController):
         restart = [(bridge.clock, bridge.clock_at(0.0))] if kept else []
         pose = [(bridge.initialpose, bridge.initial_pose(info["start"]))]
         bridge.hand_over([*restart, *route, *pose], self._settle, taken=True)
-        bridge.call_resets(self.name, self._answer_timeout_s, self._check_alive)
+        # Part of the node's start (a fresh node's service may still be matching): its bound.
+        bridge.call_resets(self.name, self._start_timeout_s, self._check_alive)
         self._answers.clear()
 
     def _act(self, obs: Mapping[str, Any]) -> tuple[float, float]:
@@ -326,13 +330,17 @@ class Ros2Controller(UserController):
                     self._tail += chunk
                     del self._tail[:-STDERR_TAIL_BYTES]
 
-    def _check_alive(self, when: str) -> None:
+    def _reap_if_exiting(self) -> None:
+        """Wait (at most 2 s) for a node whose main thread has exited while its other threads
+        go down: until then it cannot be waited for, and its participant's endpoints are still
+        in the graph, where it would read as a stranger on the domain."""
         proc = self._proc
-        if proc is not None and proc.poll() is None and _exiting(proc.pid):
-            # Killed, its threads still going down: it cannot be waited for until they are,
-            # while its participant's endpoints are still in the graph.
+        if proc is not None and task_state(f"/proc/{proc.pid}/stat") == b"Z":
             with contextlib.suppress(subprocess.TimeoutExpired):
                 proc.wait(timeout=2.0)
+
+    def _check_alive(self, when: str) -> None:
+        proc = self._proc
         if proc is None or proc.poll() is None:
             return
         code = proc.returncode
@@ -486,17 +494,6 @@ class Ros2Controller(UserController):
         pose.pose.position.x, pose.pose.position.y = float(point[0]), float(point[1])
         pose.pose.orientation.w = 1.0
         return pose
-
-
-def _exiting(pid: int) -> bool:
-    """Whether process ``pid``'s main thread has exited (a zombie: Linux's /proc state Z),
-    though its other threads may not have yet."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            stat = f.read()
-    except OSError:
-        return False
-    return stat[stat.rindex(b")") + 2 : stat.rindex(b")") + 3] == b"Z"
 
 
 _KEPT: dict[tuple[Any, ...], Ros2Controller] = {}

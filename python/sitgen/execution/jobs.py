@@ -40,7 +40,7 @@ from sitgen.controllers.external import ControllerError
 from sitgen.controllers.user import check_controller_name, is_user_controller
 from sitgen.run import resets
 from sitgen.world.config import load_spec, spec_json
-from sitgen.world.situation import Situation, generate_situation
+from sitgen.world.situation import Situation, situation_of
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
 SECTIONS = ("n", "situation", "run", "vary")
@@ -212,9 +212,7 @@ class Job:
     def built(self) -> Situation:
         """The job's situation: given whole, or generated from its spec and seed. Raises the
         core's GenerationFailed or SpecError where it cannot be made."""
-        if "format" in self.situation:
-            return Situation(json.dumps(self.situation), check_start=False)
-        return generate_situation(self.situation, seed=self.seed)
+        return situation_of(self.situation, self.seed)
 
     @property
     def controller(self) -> str:
@@ -362,28 +360,22 @@ def check_campaign(
             check_controller_name(name, params)
         except ControllerError as e:
             raise _core.SpecError(f"{path}: {e}") from None
-    _check_resets(spec, seed)
-
-
-KEEP_ALIVE_CHECK_STEPS = 30
-"""Control periods of each run that checks a node kept alive across runs resets."""
-
-
-def _check_resets(spec: CampaignSpec, seed: int) -> None:
-    """A ``ros2:`` node kept alive across runs (``keep_alive``) runs the campaign's first
-    situation after its second as a fresh node runs it (:func:`sitgen.run.resets`: three short
-    runs, two node starts), or the campaign does not start: every run after a worker's first
-    would otherwise be another than the run it stands for. Raises SpecError naming the
-    field."""
     mission = spec.situation.get("mission", {})
     path = "run.controller" if "controller" in spec.run else "situation.mission.agent_controller"
     table = spec.run.get("controller") or mission.get("agent_controller") or {}
     check_kept_alive(spec, seed, table, path)
 
 
+KEEP_ALIVE_CHECK_STEPS = 30
+"""Control periods of each run that checks a node kept alive across runs resets."""
+
+
 def check_kept_alive(spec: CampaignSpec, seed: int, table: dict[str, Any], path: str) -> None:
-    """Where the agent's controller table ``table`` (the field ``path``) keeps its node alive,
-    check it resets on the campaign's first two situations (:func:`_check_resets`)."""
+    """Where the agent's controller table ``table`` (the field ``path``) keeps its ``ros2:``
+    node alive across runs (``keep_alive``), check that the node runs the campaign's first
+    situation after its second as a fresh node runs it (:func:`sitgen.run.resets`: three short
+    runs, two node starts); else every run after a worker's first would be another than the
+    run it stands for. Raises SpecError naming the field."""
     if not table.get("keep_alive"):
         return
     try:
@@ -391,9 +383,7 @@ def check_kept_alive(spec: CampaignSpec, seed: int, table: dict[str, Any], path:
         situation, before = first.built(), second.built()
     except (_core.GenerationFailed, _core.SpecError):
         return  # stored as its job's error, like any job that cannot be built
-    check = resets(
-        table["name"], situation, before, KEEP_ALIVE_CHECK_STEPS, table.get("params"), first.run
-    )
+    check = resets(table, situation, before, KEEP_ALIVE_CHECK_STEPS, first.run)
     if not check.ok:
         raise _core.SpecError(f"{path}.keep_alive: controller `{table['name']}`: {check.detail}")
 

@@ -23,7 +23,7 @@ from sitgen import _core
 from sitgen.execution.jobs import build_job, campaign_from_data
 from sitgen.run import RunRecord, run
 from sitgen.store import Store, StoreError, events_digest
-from sitgen.world.situation import Situation, generate_situation
+from sitgen.world.situation import Situation, situation_of
 
 
 @dataclass(frozen=True)
@@ -57,10 +57,7 @@ def stored_run(store: Store, run_id: int) -> dict[str, Any]:
 def regenerate(row: dict[str, Any]) -> Situation:
     """The situation of stored run ``row`` (:func:`stored_run`), made again from its spec
     and seed (or read back, if it was given whole). Raises GenerationFailed."""
-    spec = row["situation_spec"]
-    if "format" in spec:  # given whole, not generated
-        return Situation(json.dumps(spec), check_start=False)
-    return generate_situation(spec, seed=row["situation_seed"])
+    return situation_of(row["situation_spec"], row["situation_seed"])
 
 
 def resimulate(row: dict[str, Any], sensed: bool = False) -> tuple[Situation, RunRecord]:

@@ -155,3 +155,12 @@ def generate_situation(spec: SpecLike, seed: int = 0) -> Situation:
     kind, text = spec_source(spec)
     # The core checked where the robots start as it generated them.
     return Situation(_core.generate_situation(kind, text, seed), check_start=False)
+
+
+def situation_of(spec: Mapping[str, Any], seed: int) -> Situation:
+    """A stored or planned situation: ``spec`` itself where it is a whole situation (a
+    situation file's JSON, which has a ``format``), else generated from the spec and ``seed``.
+    Raises SpecError or GenerationFailed."""
+    if "format" in spec:  # given whole, not generated
+        return Situation(json.dumps(spec), check_start=False)
+    return generate_situation(dict(spec), seed=seed)
