@@ -23,6 +23,7 @@ reliability protocol's acknowledgements (``Publisher.wait_for_all_acked``).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import os
 import sys
@@ -51,8 +52,8 @@ class Topics:
     initialpose: str = "/initialpose"
     cmd_vel: str = "/cmd_vel"
     reset: str = "reset"
-    """A node's reset service: any std_srvs Trigger or Empty service with this name or
-    ending in ``/`` and it (``/reset``, ``/my_node/reset``)."""
+    """A node's reset service: any std_srvs Trigger or Empty service named ``/reset`` or
+    ending in ``/reset`` (``/my_node/reset``, as a node's ``~/reset`` is)."""
 
 
 @dataclass(frozen=True)
@@ -257,23 +258,24 @@ class Bridge:
         return message
 
     def call_resets(self, name: str, timeout_s: float, check_alive: Callable[[str], None]) -> None:
-        """Call every reset service the node offers (:attr:`Topics.reset`), each waited on
-        for ``timeout_s`` wall seconds; ControllerError, naming the controller ``name``, where
-        one does not answer or a Trigger answers that it failed."""
+        """Call every reset service the node offers (:attr:`Topics.reset`), each matched and
+        answered within ``timeout_s`` wall seconds; ControllerError, naming the controller
+        ``name``, where one does not answer or a Trigger answers that it failed."""
         for service, kind in self.reset_services():
             request_type = _service_type(kind)
             client: Any = self.node.create_client(request_type, service)
             try:
-                future = client.call_async(request_type.Request())
                 deadline = time.monotonic() + timeout_s
-                while not future.done():
-                    check_alive(f"on its reset ({service})")
-                    if time.monotonic() > deadline:
-                        raise ControllerError(
-                            f"controller {name}: its reset service {service} did not answer "
-                            f"within {timeout_s:g} s"
-                        )
-                    self.spin(0.01)
+                late = ControllerError(
+                    f"controller {name}: its reset service {service} did not answer within "
+                    f"{timeout_s:g} s"
+                )
+                alive = functools.partial(check_alive, f"on its reset ({service})")
+                # The service is in the graph; a request sent before the client has matched
+                # it would be lost.
+                self._spin_until(client.service_is_ready, deadline, late, alive)
+                future = client.call_async(request_type.Request())
+                self._spin_until(future.done, deadline, late, alive)
                 response: Any = future.result()
                 if kind.endswith("Trigger") and not response.success:
                     raise ControllerError(
@@ -282,6 +284,21 @@ class Bridge:
                     )
             finally:
                 self.node.destroy_client(client)
+
+    def _spin_until(
+        self,
+        done: Callable[[], bool],
+        deadline: float,
+        late: ControllerError,
+        alive: Callable[[], None],
+    ) -> None:
+        """Spin until ``done``; ``late`` is raised past the wall-clock ``deadline``, and
+        ``alive`` (which raises if the node has died) is called between."""
+        while not done():
+            alive()
+            if time.monotonic() > deadline:
+                raise late
+            self.spin(0.01)
 
     def reset_services(self) -> list[tuple[str, str]]:
         """The node's reset services as (name, type), in name order."""
