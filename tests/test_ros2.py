@@ -23,6 +23,8 @@ import numpy as np
 import pytest
 
 import sitgen
+from sitgen.controllers import ros2_bridge, ros2_tf
+from sitgen.controllers.external import ControllerError
 from sitgen.controllers.ros2 import stop_kept_nodes
 from sitgen.controllers.ros2_bridge import ros2_available
 from sitgen.store import Store
@@ -589,6 +591,62 @@ def test_a_node_reads_the_situations_map_on_map_as_a_map_server_serves_it(
     # The start as /initialpose, and the node's reset service called, before the run.
     assert got["initial_poses"] == [pytest.approx(start_of(situation))]
     assert got["resets"] == 1
+
+
+def test_a_node_reads_the_robots_pose_on_tf_and_its_laser_mount_on_tf_static(
+    situation: sitgen.Situation, tmp_path: Path
+) -> None:
+    """/tf and /tf_static are live, read as tf2's listener reads them: odom → base_link every
+    control period at the pose the robot is in at that period's start (the run's trajectory),
+    map → odom (they coincide) and base_link → base_scan at the laser's mount."""
+    out = tmp_path / "tf.json"
+    node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/map_reader.py'} {out}"
+    spec = {
+        "controller": {"name": node, "params": {"speed_m_s": 0.4, "turn_rad_s": 0.3}},
+        "sim": {"laser": {"offset_x_m": 0.15}},
+    }
+    record = sitgen.run(situation, spec=spec, time_limit=3.0)
+    assert record.outcome != "error", record.reason
+    got = json.loads(out.read_text())
+    static = {(parent, child): place for _, parent, child, *place in got["tf_static"]}
+    assert static == {
+        ("map", "odom"): pytest.approx([0.0, 0.0, 0.0]),
+        ("base_link", "base_scan"): pytest.approx([0.15, 0.0, 0.0]),
+    }
+    assert {(parent, child) for _, parent, child, *_ in got["tf"]} == {("odom", "base_link")}
+    dt = 0.1  # the control period: the simulator's step
+    poses = {round(t / dt): place for t, _, _, *place in got["tf"]}
+    trajectory = np.asarray(record.trajectory)[:, 0, :]
+    assert sorted(poses) == list(range(len(trajectory) - 1))  # every period, once
+    sent = np.array([poses[i] for i in sorted(poses)])
+    np.testing.assert_allclose(sent[:, :2], trajectory[:-1, :2], atol=1e-9)
+    turned = np.remainder(sent[:, 2] - trajectory[:-1, 2] + np.pi, 2 * np.pi) - np.pi
+    np.testing.assert_allclose(turned, 0.0, atol=1e-9)
+    assert np.hypot(*(trajectory[-1, :2] - trajectory[0, :2])) > 0.5  # it drove
+
+
+def test_a_node_that_listens_to_tf_is_refused_where_sitgen_cannot_publish_it(
+    situation: sitgen.Situation, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where tf2_msgs cannot be had, a node that subscribes to /tf errs on start saying why
+    (it would wait for transforms that never come); the build says what it lacks."""
+    ros2_tf.built()  # the node's own tf2_msgs (sitgen's is what goes missing)
+    bare = tmp_path / "bin"
+    bare.mkdir()
+    with monkeypatch.context() as m:
+        m.setenv("PATH", str(bare))
+        m.setenv("SITGEN_CACHE_DIR", str(tmp_path / "cache"))
+        with pytest.raises(ControllerError, match="gcc and g\\+\\+ are not on PATH") as lacking:
+            ros2_tf.built()
+    monkeypatch.setattr(ros2_bridge, "tf_message_type", lambda: raise_(lacking.value))
+    node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/map_reader.py'} {tmp_path / 'o.json'}"
+    record = sitgen.run(situation, controller=node, time_limit=1.0)
+    assert record.outcome == "error"
+    assert "subscribes to /tf and /tf_static, but ros2: /tf needs tf2_msgs" in record.reason
+
+
+def raise_(error: Exception) -> Any:
+    raise error
 
 
 def dead_by(pid: int, deadline: float) -> None:

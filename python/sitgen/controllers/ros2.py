@@ -4,19 +4,21 @@ What it does: starts the node's process (``COMMAND ARGS… --ros-args -p use_sim
 the controller's ``params`` as ROS parameters) and stands in for the robot and its simulator
 on the contract of Nav2's loopback simulator, over real DDS:
 
-- publishes ``/clock`` (rosgraph_msgs/Clock: the node runs on simulated time),
-  ``/scan`` (sensor_msgs/LaserScan, frame ``base_scan``, sensor-data QoS: best effort, keep
-  last 5, as ROS 2 laser drivers publish), ``/odom`` (nav_msgs/Odometry, ``odom`` →
-  ``base_link``), the route as ``/plan`` (nav_msgs/Path, frame ``map``) and the current
-  waypoint as ``/goal_pose`` (geometry_msgs/PoseStamped); the last two are transient-local, so a
-  node that subscribes late (with transient-local durability) still gets them;
+- publishes ``/clock`` (rosgraph_msgs/Clock: the node runs on simulated time), ``/scan``
+  (sensor_msgs/LaserScan, frame ``base_scan``, reliable, keep last 1: a node's sensor-data
+  subscription matches it, and so does one with the default QoS), ``/odom``
+  (nav_msgs/Odometry, ``odom`` → ``base_link``), ``/tf`` (the same pose) and ``/tf_static``
+  (``map`` → ``odom``, ``base_link`` → ``base_scan``: ros2_tf.py), the route as ``/plan``
+  (nav_msgs/Path, frame ``map``), the current waypoint as ``/goal_pose``
+  (geometry_msgs/PoseStamped) and ``/map`` (nav_msgs/OccupancyGrid); the route, goal and map
+  are transient-local, so a node that subscribes late (with transient-local durability) still
+  gets them;
 - subscribes to ``/cmd_vel`` as whichever of geometry_msgs/Twist or TwistStamped (Nav2's
   default in Kilted) the node publishes there, read from the graph.
 
 Other topic names are the node's to remap (``--ros-args -r /cmd_vel:=/my_cmd``), as with any
 ROS 2 simulator. ``map`` and ``odom`` coincide (no localisation error is modelled), so a node
-that needs only ``/odom`` has the robot's pose; no ``/tf`` is published while a run is live (no
-tf2_msgs wheel exists for pip; the rosbag2 export carries it).
+that needs only ``/odom`` has the robot's pose.
 
 Why lockstep: a run's result must not depend on the machine's load. Every control period
 sitgen hands the node the odometry and the scan for simulated time *t*, each once the node has
@@ -90,6 +92,7 @@ from sitgen.controllers.ros2_bridge import (
     seconds,
     stamp,
 )
+from sitgen.controllers.ros2_tf import node_python_path
 
 PREFIX = "ros2:"
 
@@ -216,6 +219,7 @@ class Ros2Controller(UserController):
         route = [(bridge.plan, self._route(bridge, info))]
         if "map" in info:
             route.append((bridge.map, bridge.map_message(info["map"])))
+        route += bridge.static_transforms(info)
         kept = self._subscription is not None  # discovered in an earlier run of this process
         if not kept:
             # Before the node starts: transient-local keeps them for it.
@@ -308,6 +312,11 @@ class Ros2Controller(UserController):
         env["LD_LIBRARY_PATH"] = os.pathsep.join(
             p for p in (LIB, env.get("LD_LIBRARY_PATH", "")) if p
         )
+        # After the node's own path: a ROS install's tf2_msgs comes first where there is one.
+        if (tf2_msgs := node_python_path()) is not None:
+            env["PYTHONPATH"] = os.pathsep.join(
+                p for p in (env.get("PYTHONPATH", ""), tf2_msgs) if p
+            )
         try:
             self._proc = subprocess.Popen(
                 [*die_with_parent_prefix(), *self._argv],
@@ -390,6 +399,8 @@ class Ros2Controller(UserController):
                     f"{self._start_timeout_s:g} s of starting"
                 )
             bridge.spin(0.02)
+        if (unserved := bridge.tf_unserved()) is not None:
+            raise ControllerError(f"controller {self.name}: {unserved}")
         if kind not in CMD_VEL_TYPES:
             raise ControllerError(
                 f"controller {self.name} publishes {TOPICS.cmd_vel} as {kind}; expected one of "

@@ -2,9 +2,10 @@
 this process's domain, the simulator's node, its publishers of the loopback simulator's topics
 and the messages it sends, and the ordered hand-over of one control period's inputs.
 
-What it does: :class:`Bridge` publishes the route and goal (transient local), the odometry,
-the scan (both reliable, so a node's default-QoS subscription matches as a sensor-data one
-does) and the clock. :meth:`Bridge.hand_over` gives the node each of a period's inputs only
+What it does: :class:`Bridge` publishes the route, goal and map (transient local), the
+odometry, the scan (both reliable, so a node's default-QoS subscription matches as a sensor-data
+one does), the transforms (``/tf`` each period, ``/tf_static`` once a run: ros2_tf.py) and the
+clock. :meth:`Bridge.hand_over` gives the node each of a period's inputs only
 once every reliable reader of the one before has acknowledged it, and the clock last: so a
 node's callbacks see a period's messages in one order, whatever the machine's load, and a node
 that acts on a timer on simulated time finds the period's scan and odometry in when the clock
@@ -37,6 +38,7 @@ import numpy.typing as npt
 
 from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import ControllerError
+from sitgen.controllers.ros2_tf import tf_message_type
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,8 @@ class Topics:
     goal: str = "/goal_pose"
     map: str = "/map"
     initialpose: str = "/initialpose"
+    tf: str = "/tf"
+    tf_static: str = "/tf_static"
     cmd_vel: str = "/cmd_vel"
     reset: str = "reset"
     """A node's reset service: any std_srvs Trigger or Empty service named ``/reset`` or
@@ -95,7 +99,13 @@ def _messages() -> Any:
     # ros2: controller is first used, never by sitgen's other commands.
     import rclpy  # noqa: F401
     from builtin_interfaces.msg import Time
-    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, Twist, TwistStamped
+    from geometry_msgs.msg import (
+        PoseStamped,
+        PoseWithCovarianceStamped,
+        TransformStamped,
+        Twist,
+        TwistStamped,
+    )
     from nav_msgs.msg import OccupancyGrid, Odometry, Path
     from rosgraph_msgs.msg import Clock
     from sensor_msgs.msg import LaserScan
@@ -105,6 +115,7 @@ def _messages() -> Any:
         "PoseWithCovarianceStamped": PoseWithCovarianceStamped,
         "Twist": Twist,
         "TwistStamped": TwistStamped,
+        "TransformStamped": TransformStamped,
         "Odometry": Odometry,
         "Path": Path,
         "OccupancyGrid": OccupancyGrid,
@@ -182,6 +193,23 @@ class Bridge:
         self.initialpose = self.node.create_publisher(
             m["PoseWithCovarianceStamped"], TOPICS.initialpose, reliable
         )
+        # As a robot's driver and robot_state_publisher publish them (tf2's listener reads
+        # /tf_static transient local); None, with the reason kept, where tf2_msgs cannot be had.
+        self.tf: Any = None
+        self.tf_static: Any = None
+        self.tf_problem: str | None = None
+        try:
+            self.msg["TFMessage"] = tf_message_type()
+        except ControllerError as e:
+            self.tf_problem = str(e)
+        else:
+            self.tf = self.node.create_publisher(m["TFMessage"], TOPICS.tf, reliable)
+            self.tf_static = self.node.create_publisher(m["TFMessage"], TOPICS.tf_static, latched)
+
+    def published(self) -> list[Any]:
+        """sitgen's publishers of a run's inputs."""
+        publishers = [self.clock, self.scan, self.odom, self.plan, self.goal, self.initialpose]
+        return publishers + [p for p in (self.tf, self.tf_static) if p is not None]
 
     def hand_over(
         self,
@@ -214,10 +242,10 @@ class Bridge:
         self, info: Mapping[str, Any], obs: Mapping[str, Any], t: float
     ) -> list[tuple[Any, Any]]:
         """The messages of the control period that starts at simulated time ``t``, in the
-        order a node gets them: the odometry and the scan stamped ``t``, then the clock at the
-        period's end, ``t`` plus the control period (so a timer on simulated time at the
-        control rate fires once a period, the first included, with the period's scan and
-        odometry in)."""
+        order a node gets them: the odometry, odom → base_link on /tf (where anyone listens)
+        and the scan stamped ``t``, then the clock at the period's end, ``t`` plus the control
+        period (so a timer on simulated time at the control rate fires once a period, the
+        first included, with the period's scan, odometry and transform in)."""
         m = self.msg
         now = stamp(m, t)
         odom = m["Odometry"]()
@@ -234,11 +262,43 @@ class Bridge:
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
         clock = m["Clock"]()
         clock.clock = stamp(m, t, control_period_s(info))
+        # No one listening: nothing to hand over (each message handed over is waited on).
+        moved = []
+        if self.tf is not None and self.tf.get_subscription_count() > 0:
+            base = self.transform(t, FRAMES.odom, FRAMES.base, x, y, heading)
+            moved = [(self.tf, m["TFMessage"](transforms=[base]))]
         return [
             (self.odom, odom),
+            *moved,
             (self.scan, laser_scan(m, info, obs["ranges"], t)),
             (self.clock, clock),
         ]
+
+    def transform(
+        self, t: float, parent: str, child: str, x: float, y: float, heading: float
+    ) -> Any:
+        """A geometry_msgs/TransformStamped at simulated time ``t``: ``child``'s frame in
+        ``parent``'s, at (``x``, ``y``) turned by ``heading``."""
+        message = self.msg["TransformStamped"]()
+        message.header.stamp, message.header.frame_id = stamp(self.msg, t), parent
+        message.child_frame_id = child
+        message.transform.translation.x, message.transform.translation.y = x, y
+        q = message.transform.rotation
+        q.x, q.y, q.z, q.w = quaternion(heading)
+        return message
+
+    def static_transforms(self, info: Mapping[str, Any]) -> list[tuple[Any, Any]]:
+        """/tf_static for a run: ``map`` → ``odom`` (they coincide: no localisation error
+        is modelled) and ``base_link`` → ``base_scan`` (the laser's mount, ``offset_x_m``
+        ahead); nothing where tf2_msgs cannot be had."""
+        if self.tf_static is None:
+            return []
+        offset = float(info["laser"].get("offset_x_m", 0.0))
+        transforms = [
+            self.transform(0.0, FRAMES.map, FRAMES.odom, 0.0, 0.0, 0.0),
+            self.transform(0.0, FRAMES.base, FRAMES.scan, offset, 0.0, 0.0),
+        ]
+        return [(self.tf_static, self.msg["TFMessage"](transforms=transforms))]
 
     def clock_at(self, t: float) -> Any:
         """A /clock message at simulated time ``t``."""
@@ -333,7 +393,7 @@ class Bridge:
         ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
         is matched by sitgen's publisher (so the first observation is not lost to a
         half-finished discovery)."""
-        publishers = (self.clock, self.scan, self.odom, self.plan, self.goal, self.initialpose)
+        publishers = self.published()
         listening = self.scan.get_subscription_count() + self.odom.get_subscription_count()
         return listening > 0 and (
             listening_will_do
@@ -342,6 +402,17 @@ class Bridge:
                 for p in publishers
             )
         )
+
+    def tf_unserved(self) -> str | None:
+        """Why the node's subscription to /tf or /tf_static goes unserved (sitgen has no
+        tf2_msgs here); None where it has none or sitgen publishes them."""
+        if self.tf_problem is None:
+            return None
+        topics = (TOPICS.tf, TOPICS.tf_static)
+        listened = [t for t in topics if self._subscriptions_seen(t) > 0]
+        if not listened:
+            return None
+        return f"it subscribes to {' and '.join(listened)}, but {self.tf_problem}"
 
     def _subscriptions_seen(self, topic: str) -> int:
         me = self.node.get_name()
@@ -355,7 +426,7 @@ class Bridge:
             *self.node.get_publishers_info_by_topic(TOPICS.cmd_vel),
             *(
                 i
-                for p in (self.clock, self.scan, self.odom, self.plan, self.goal, self.initialpose)
+                for p in self.published()
                 for i in self.node.get_subscriptions_info_by_topic(p.topic_name)
             ),
         ]
