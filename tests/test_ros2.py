@@ -11,6 +11,7 @@ import contextlib
 import json
 import math
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
@@ -593,6 +594,13 @@ def test_a_node_reads_the_situations_map_on_map_as_a_map_server_serves_it(
     assert got["resets"] == 1
 
 
+COMPILERS = pytest.mark.skipif(
+    shutil.which("gcc") is None or shutil.which("g++") is None,
+    reason="sitgen builds tf2_msgs for /tf with gcc and g++, and they are not on PATH",
+)
+
+
+@COMPILERS
 def test_a_node_reads_the_robots_pose_on_tf_and_its_laser_mount_on_tf_static(
     situation: sitgen.Situation, tmp_path: Path
 ) -> None:
@@ -625,6 +633,7 @@ def test_a_node_reads_the_robots_pose_on_tf_and_its_laser_mount_on_tf_static(
     assert np.hypot(*(trajectory[-1, :2] - trajectory[0, :2])) > 0.5  # it drove
 
 
+@COMPILERS
 def test_a_node_that_listens_to_tf_is_refused_where_sitgen_cannot_publish_it(
     situation: sitgen.Situation, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -26,7 +26,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
-from tf2_msgs.msg import TFMessage
+
+try:
+    from tf2_msgs.msg import TFMessage
+except ImportError:  # no compiler for sitgen to build it with: the node reads the rest
+    TFMessage = None
 
 
 class MapReader(Node):
@@ -53,10 +57,11 @@ class MapReader(Node):
             reliability=ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL,
         )
-        self.create_subscription(TFMessage, "/tf", lambda m: self.on_tf("tf", m), dynamic)
-        self.create_subscription(
-            TFMessage, "/tf_static", lambda m: self.on_tf("tf_static", m), static
-        )
+        if TFMessage is not None:
+            self.create_subscription(TFMessage, "/tf", lambda m: self.on_tf("tf", m), dynamic)
+            self.create_subscription(
+                TFMessage, "/tf_static", lambda m: self.on_tf("tf_static", m), static
+            )
         self.create_subscription(OccupancyGrid, "/map", self.on_map, latched)
         self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
         self.create_subscription(PoseWithCovarianceStamped, "/initialpose", self.on_pose, 10)
@@ -78,7 +83,7 @@ class MapReader(Node):
         self.got["initial_poses"].append([pose.position.x, pose.position.y, heading])
         self.write()
 
-    def on_tf(self, topic: str, message: TFMessage) -> None:
+    def on_tf(self, topic: str, message: Any) -> None:
         for t in message.transforms:
             stamp = t.header.stamp.sec + t.header.stamp.nanosec * 1e-9
             place, turn = t.transform.translation, t.transform.rotation
