@@ -202,7 +202,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     - ``cmd:`` programs: a trivial reply, and the route follower of examples/ros2;
     - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
       installed, started for each run and kept alive across runs (``keep_alive``: its start
-      is then the reset between runs);
+      is then the reset between runs), and a trivial node kept alive (benches/trivial_node.py:
+      sitgen's lockstep and an rclpy node's turn);
     - ``navground:`` HL and ORCA with the sensed perception (on the fast path, as a campaign
       runs them), where sitgen[navground] is installed: their own cost is the adapter and the
       behaviour's compute, called in a loop.
@@ -238,12 +239,17 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
         ),
     }  # fmt: skip
     kinds["ros2 route follower, kept alive"] = kinds["ros2 route follower"]
-    kept_alive = {"ros2 route follower, kept alive"}
+    kinds["ros2 trivial node, kept alive"] = (
+        f"ros2:{sys.executable} {folder / 'trivial_node.py'}",
+        False,
+        None,
+    )
+    kept_alive = {"ros2 route follower, kept alive", "ros2 trivial node, kept alive"}
     reason = ros2_available()
     if reason is not None:
         print(f"skipped ros2: {reason}")
-        kinds.pop("ros2 route follower")
-        kinds.pop("ros2 route follower, kept alive")
+        for kind in ("ros2 route follower", *kept_alive):
+            kinds.pop(kind)
     try:
         for behavior in ("HL", "ORCA"):
             factory = functools.partial(NavgroundController, behavior)

@@ -610,7 +610,12 @@ def test_a_node_reads_the_robots_pose_on_tf_and_its_laser_mount_on_tf_static(
     out = tmp_path / "tf.json"
     node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/map_reader.py'} {out}"
     spec = {
-        "controller": {"name": node, "params": {"speed_m_s": 0.4, "turn_rad_s": 0.3}},
+        "controller": {
+            "name": node,
+            # Every period answered, however loaded the machine (a held command would shift
+            # the node's answers by a period, and its last transform would go unread).
+            "params": {"speed_m_s": 0.4, "turn_rad_s": 0.3, "answer_timeout_s": 10.0},
+        },
         "sim": {"laser": {"offset_x_m": 0.15}},
     }
     record = sitgen.run(situation, spec=spec, time_limit=3.0)

@@ -113,12 +113,19 @@ MOST_MISSED_ANSWERS = 100_000
 """Largest ``max_missed_answers``."""
 MATCH_GRACE_S = 1.0
 """Wall seconds a node that listens is given for all of its subscriptions to match."""
-SETTLE_S = 0.02
-"""Wall seconds a node's processes are given to go back to waiting after each message."""
+SETTLE_S = 0.25
+"""Wall seconds a node's processes are given to go back to waiting after each message: an
+idle machine needs well under a millisecond, but on a loaded one a node may wait tens of
+milliseconds for a core (20 ms was missed hundreds of times in one run of the ROS 2 tests on 2
+workers), and a message handed over before it has taken the last may be taken out of order.
+Only a node that never sleeps waits this long, each time."""
 DISCOVERY_QUIET_S = 0.15
 """Wall seconds the graph of a starting node must hold still before its first observation."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
+REPEATS_SETTLE_S = 2.0
+"""Wall seconds a node is given, after its first answer, to go back to waiting (to have
+answered every repeat of the first observation it took)."""
 SITGEN_PARAMS = ("answer_timeout_s", "max_missed_answers", "start_timeout_s")
 """Controller parameters that are sitgen's, not the node's (the rest become ROS parameters)."""
 CMD_VEL_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
@@ -401,6 +408,7 @@ class Ros2Controller(UserController):
             bridge.spin(0.02)
         if (unserved := bridge.tf_unserved()) is not None:
             raise ControllerError(f"controller {self.name}: {unserved}")
+        bridge.tf_read = bridge.tf is not None and bridge.node.count_subscribers(TOPICS.tf) > 0
         if kind not in CMD_VEL_TYPES:
             raise ControllerError(
                 f"controller {self.name} publishes {TOPICS.cmd_vel} as {kind}; expected one of "
@@ -448,6 +456,10 @@ class Ros2Controller(UserController):
             self._goal_index = -1
             goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
             bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
+        # A loaded node may still be answering repeats: once it has gone back to waiting,
+        # every answer it will give them is on its way (one let into a later period would
+        # shift every answer after it by a period).
+        wait_idle(self._pids, REPEATS_SETTLE_S)
         settle = time.monotonic() + REPEAT_S
         while (left := settle - time.monotonic()) > 0:
             bridge.spin(left)
@@ -477,7 +489,8 @@ class Ros2Controller(UserController):
             left = deadline - time.monotonic()
             if left <= 0:
                 return False
-            bridge.spin(min(left, 0.1))
+            if (answer := bridge.take(self._subscription, min(left, 0.1))) is not None:
+                self._answers.append(answer)
 
     # --- messages ---------------------------------------------------------------------------
 

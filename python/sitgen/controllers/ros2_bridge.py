@@ -23,6 +23,7 @@ reliability protocol's acknowledgements (``Publisher.wait_for_all_acked``).
 
 from __future__ import annotations
 
+import array
 import contextlib
 import functools
 import math
@@ -169,8 +170,17 @@ class Bridge:
         self.domain = process_domain()
         self.context = rclpy.Context()
         rclpy.init(context=self.context, domain_id=self.domain)
-        self.node = rclpy.create_node("sitgen_sim", context=self.context)
+        # A simulator's node has no parameters to serve, and nothing to log to /rosout: fewer
+        # services for every turn of the executor to look at.
+        self.node = rclpy.create_node(
+            "sitgen_sim",
+            context=self.context,
+            start_parameter_services=False,
+            enable_rosout=False,
+        )
         self.executor = SingleThreadedExecutor(context=self.context)
+        self._waits: Any = None
+        self._scan: tuple[Mapping[str, Any], Any] | None = None
         self.executor.add_node(self.node)
         latched = QoSProfile(
             depth=1,
@@ -198,6 +208,9 @@ class Bridge:
         self.tf: Any = None
         self.tf_static: Any = None
         self.tf_problem: str | None = None
+        self.tf_read = False
+        """Whether the node reads /tf (from the graph once it is discovered): each message
+        handed over is waited on, so /tf is sent only where it is read."""
         try:
             self.msg["TFMessage"] = tf_message_type()
         except ControllerError as e:
@@ -221,7 +234,8 @@ class Bridge:
         the one before has acknowledged it (it is in the reader's queue) and ``settle`` has
         returned (the node has gone back to waiting, its callback for it run), so that the
         node's callbacks see a period's messages in this order however loaded the machine
-        is. ``taken``: the last one too is waited for so before returning."""
+        is. The first waits on ``settle`` too: the node may still be at the previous period's
+        clock. ``taken``: the last one too is waited for so before returning."""
         from rclpy.duration import Duration
 
         for k, (publisher, message) in enumerate(messages):
@@ -242,37 +256,42 @@ class Bridge:
         self, info: Mapping[str, Any], obs: Mapping[str, Any], t: float
     ) -> list[tuple[Any, Any]]:
         """The messages of the control period that starts at simulated time ``t``, in the
-        order a node gets them: the odometry, odom → base_link on /tf (where anyone listens)
-        and the scan stamped ``t``, then the clock at the period's end, ``t`` plus the control
-        period (so a timer on simulated time at the control rate fires once a period, the
-        first included, with the period's scan, odometry and transform in)."""
+        order a node gets them: the odometry, odom → base_link on /tf (where the node reads
+        it) and the scan stamped ``t``, then the clock at the period's end, ``t`` plus the
+        control period (so a timer on simulated time at the control rate fires once a period,
+        the first included, with the period's scan, odometry and transform in)."""
         m = self.msg
-        now = stamp(m, t)
-        odom = m["Odometry"]()
-        odom.header.stamp, odom.header.frame_id, odom.child_frame_id = (
-            now,
-            FRAMES.odom,
-            FRAMES.base,
-        )
         x, y, heading = (float(c) for c in obs["pose"])
+        clock = m["Clock"]()
+        clock.clock = stamp(m, t, control_period_s(info))
+        messages = [(self.odom, self._odometry(t, x, y, heading, obs["velocity"]))]
+        if self.tf is not None and self.tf_read:
+            base = self.transform(t, FRAMES.odom, FRAMES.base, x, y, heading)
+            messages.append((self.tf, m["TFMessage"](transforms=[base])))
+        messages.append((self.scan, self._scan_at(info, obs["ranges"], t)))
+        return [*messages, (self.clock, clock)]
+
+    def _odometry(self, t: float, x: float, y: float, heading: float, velocity: Any) -> Any:
+        odom = self.msg["Odometry"]()
+        odom.header.stamp, odom.header.frame_id = stamp(self.msg, t), FRAMES.odom
+        odom.child_frame_id = FRAMES.base
         odom.pose.pose.position.x, odom.pose.pose.position.y = x, y
         q = odom.pose.pose.orientation
         q.x, q.y, q.z, q.w = quaternion(heading)
-        v, omega = (float(c) for c in obs["velocity"])
+        v, omega = (float(c) for c in velocity)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, omega
-        clock = m["Clock"]()
-        clock.clock = stamp(m, t, control_period_s(info))
-        # No one listening: nothing to hand over (each message handed over is waited on).
-        moved = []
-        if self.tf is not None and self.tf.get_subscription_count() > 0:
-            base = self.transform(t, FRAMES.odom, FRAMES.base, x, y, heading)
-            moved = [(self.tf, m["TFMessage"](transforms=[base]))]
-        return [
-            (self.odom, odom),
-            *moved,
-            (self.scan, laser_scan(m, info, obs["ranges"], t)),
-            (self.clock, clock),
-        ]
+        return odom
+
+    def _scan_at(self, info: Mapping[str, Any], ranges: Any, t: float) -> Any:
+        """The period's scan: the run's first made whole, later ones its ranges and stamp
+        changed (rclpy checks every field a message is built with, each period)."""
+        if self._scan is None or self._scan[0] is not info:
+            self._scan = (info, laser_scan(self.msg, info, ranges, t))
+            return self._scan[1]
+        scan = self._scan[1]
+        scan.header.stamp = stamp(self.msg, t)
+        scan.ranges = float32s(ranges)
+        return scan
 
     def transform(
         self, t: float, parent: str, child: str, x: float, y: float, heading: float
@@ -388,6 +407,32 @@ class Bridge:
     def spin(self, timeout_s: float) -> None:
         self.executor.spin_once(timeout_sec=max(0.0, timeout_s))
 
+    def take(self, subscription: Any, timeout_s: float) -> Any | None:
+        """The next message of ``subscription``, waiting at most ``timeout_s`` wall seconds
+        for one; None if none came. It waits on that subscription alone (as rclpy's
+        ``wait_for_message`` does), not on everything the executor watches: a period's answer
+        is read in a few microseconds rather than an executor's turn."""
+        from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+
+        deadline = time.monotonic() + timeout_s
+        while True:
+            with subscription.handle:
+                taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            if taken is not None:
+                return taken[0]
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return None
+            if self._waits is None:
+                context = self.context.handle
+                assert context is not None  # the bridge's context is live until shutdown
+                with context:
+                    self._waits = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, context)
+            with subscription.handle:
+                self._waits.clear_entities()
+                self._waits.add_subscription(subscription.handle)
+                self._waits.wait(int(left * 1e9))
+
     def all_matched(self, listening_will_do: bool = False) -> bool:
         """Whether the node listens to the scan or the odometry, and (unless
         ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
@@ -471,8 +516,14 @@ def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: flo
     scan.scan_time = control_period_s(info)
     scan.range_min = float(laser.get("min_range_m", 0.0))
     scan.range_max = float(laser["range_m"])
-    scan.ranges = [float(r) for r in ranges]
+    scan.ranges = float32s(ranges)
     return scan
+
+
+def float32s(values: Any) -> array.array[float]:
+    """``values`` as a message's float32 sequence: an array.array, which rclpy takes as it is
+    (a list it checks value by value), rounded to float32 as rclpy would round a list."""
+    return array.array("f", np.asarray(values, dtype=np.float32).tobytes())
 
 
 def occupancy_data(occupied: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
