@@ -155,19 +155,35 @@ const rosidl_message_type_support_t * HANDLE_OF(rosidl_typesupport_c)(void)
 """
 
 
-@functools.cache
 def tf_message_type() -> Any:
     """The tf2_msgs/msg/TFMessage class (a ROS install's, else sitgen's build, made on first
-    use); ControllerError saying why where neither is to be had."""
+    use); ControllerError saying why where neither is to be had (tried once a process: a build
+    that failed is not tried again for every run)."""
+    found, problem = _tf_message()
+    if problem is not None:
+        raise ControllerError(problem)
+    return found
+
+
+@functools.cache
+def _tf_message() -> tuple[Any, str | None]:
     with contextlib.suppress(ImportError):
-        return importlib.import_module(f"{PACKAGE}.msg").TFMessage
-    folder = built()
+        return importlib.import_module(f"{PACKAGE}.msg").TFMessage, None
+    try:
+        folder = built()
+    except ControllerError as e:
+        return None, str(e)
+    except OSError as e:  # the cache folder cannot be written
+        return (
+            None,
+            f"ros2: /tf needs tf2_msgs, and sitgen could not build it in {cache_dir()}: {e}",
+        )
     sys.path.append(str(folder))
     importlib.invalidate_caches()
     try:
-        return importlib.import_module(f"{PACKAGE}.msg").TFMessage
+        return importlib.import_module(f"{PACKAGE}.msg").TFMessage, None
     except ImportError as e:
-        raise ControllerError(f"ros2: tf2_msgs built in {folder} does not import ({e})") from e
+        return None, f"ros2: tf2_msgs built in {folder} does not import ({e})"
 
 
 def node_python_path() -> str | None:
