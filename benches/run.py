@@ -12,9 +12,11 @@ import functools
 import json
 import os
 import platform
+import shutil
 import statistics
 import subprocess
 import sys
+import sysconfig
 import tempfile
 import time
 from collections.abc import Callable
@@ -190,6 +192,41 @@ def own_cost_program(argv: list[str], situation: sitgen.Situation) -> float:
     return max(0.0, (feed(lines) - feed(0)) / lines)
 
 
+def compile_trivial_c_node(folder: Path) -> Path | None:
+    """benches/trivial_node.c compiled with gcc against the ROS 2 wheels' headers and rcl;
+    None (said why) where it cannot be."""
+    if shutil.which("gcc") is None:
+        print("skipped the C node: no gcc")
+        return None
+    include = Path(sys.prefix) / "include"
+    lib = Path(sys.prefix) / "lib"
+    out = Path(tempfile.mkdtemp(prefix="sitgen-bench-")) / "trivial_node_c"
+    libraries = [
+        "rcl", "rcutils", "rmw", "rosidl_runtime_c",
+        "geometry_msgs__rosidl_generator_c", "geometry_msgs__rosidl_typesupport_c",
+        "sensor_msgs__rosidl_generator_c", "sensor_msgs__rosidl_typesupport_c",
+    ]  # fmt: skip
+    # The wheels' libraries find what they bundle (in site-packages' ros_*.libs) through the
+    # program's run path, and some of them (type descriptions' Python support, which rcl
+    # links) need libpython: the interpreter's is linked in.
+    bundled = sorted(Path(sysconfig.get_paths()["purelib"]).glob("ros_*.libs"))
+    python_lib = str(sysconfig.get_config_var("LIBDIR"))
+    paths = [lib, *bundled, python_lib]
+    command = [
+        "gcc", "-O2", str(folder / "trivial_node.c"), "-o", str(out),
+        *(f"-I{d}" for d in sorted(include.iterdir()) if d.is_dir()),
+        f"-L{lib}", f"-L{python_lib}", "-Wl,--disable-new-dtags",
+        *(f"-Wl,-rpath,{p}" for p in paths), "-Wl,--allow-shlib-undefined",
+        *(f"-l{name}" for name in libraries),
+        "-Wl,--no-as-needed", f"-lpython{sys.version_info.major}.{sys.version_info.minor}",
+    ]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        print(f"skipped the C node: gcc failed: {done.stderr.strip().splitlines()[-1:]}")
+        return None
+    return out
+
+
 def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
     """A user's controller on each path, driving the reference scene's agent: control steps per
     second over a run (less the start-up each run pays, timed on a 0.1 s run), and the ratio of
@@ -245,6 +282,10 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
         None,
     )
     kept_alive = {"ros2 route follower, kept alive", "ros2 trivial node, kept alive"}
+    c_node = compile_trivial_c_node(folder)
+    if c_node is not None:
+        kinds["ros2 trivial C node, kept alive"] = (f"ros2:{c_node}", False, None)
+        kept_alive.add("ros2 trivial C node, kept alive")
     reason = ros2_available()
     if reason is not None:
         print(f"skipped ros2: {reason}")

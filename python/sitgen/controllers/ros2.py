@@ -121,6 +121,10 @@ workers), and a message handed over before it has taken the last may be taken ou
 Only a node that never sleeps waits this long, each time."""
 DISCOVERY_QUIET_S = 0.15
 """Wall seconds the graph of a starting node must hold still before its first observation."""
+STOP_TIMEOUT_S = 5.0
+"""Wall seconds a node has to exit after SIGINT before its group is killed: ros2 launch's
+(``sigterm_timeout``); a Python node tearing its participant down on a loaded machine has
+taken over 2 s."""
 REPEAT_S = 0.1
 """Wall seconds between repeats of the first observation until the node first answers."""
 REPEATS_SETTLE_S = 2.0
@@ -295,9 +299,9 @@ class Ros2Controller(UserController):
                 with contextlib.suppress(ProcessLookupError, PermissionError):
                     os.killpg(proc.pid, signal.SIGINT)
                 try:
-                    proc.wait(timeout=2.0)
+                    proc.wait(timeout=STOP_TIMEOUT_S)
                 except subprocess.TimeoutExpired:
-                    unclean = "did not exit within 2 s of SIGINT and was killed"
+                    unclean = f"did not exit within {STOP_TIMEOUT_S:g} s of SIGINT and was killed"
             with contextlib.suppress(ProcessLookupError, PermissionError):
                 os.killpg(proc.pid, signal.SIGKILL)
             # Anything the node started that left its group (a daemon, a helper it setsid'd).
