@@ -80,9 +80,8 @@ from sitgen.controllers.external import (
     program_path,
     short,
     signal_name,
-    task_state,
-    wait_idle,
 )
+from sitgen.controllers.proc_tasks import task_state, wait_idle
 from sitgen.controllers.ros2_bridge import (
     FRAMES,
     LIB,

@@ -1,0 +1,106 @@
+"""The states of a node's threads, as Linux's /proc shows them: whether a ``ros2:`` node has
+gone back to waiting after a message, and whether its process has exited.
+
+What it does: :func:`wait_idle` waits until every thread of some processes is asleep (none
+running, runnable or waiting on a device), within a bound; :func:`task_state` reads one
+process's or thread's state letter.
+
+Why: a node's executor takes messages that arrived together in the order it made its
+subscriptions, not the order they were sent; handing it a message only once it has gone back to
+waiting keeps the order sitgen sends in (ros2_bridge.py, docs/ros2.md "Timing and
+determinism"). The threads' stat files are kept open and read again from the start: a wait
+looks at every thread of a node (a ROS 2 node has about twenty) many times a control period,
+and opening each file anew cost about 25 µs a thread.
+
+Parameters: none (the bound is the caller's).
+
+Source: proc(5) (``/proc/PID/task/TID/stat``, its third field).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable, Iterator
+
+
+def task_state(stat_path: str) -> bytes | None:
+    """The state letter in a process's or thread's /proc stat file (Linux: R running, S
+    sleeping, D waiting on a device, Z exited and not yet reaped, …), or None where it is
+    gone."""
+    try:
+        with open(stat_path, "rb") as f:
+            stat = f.read()
+    except OSError:
+        return None
+    return state_letter(stat)
+
+
+def state_letter(stat: bytes) -> bytes:
+    """The state letter of a /proc stat file's text."""
+    at = stat.rindex(b")") + 2  # after the command name, which may hold anything
+    return stat[at : at + 1]
+
+
+def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:
+    """Wait until every thread of the processes ``pids`` is asleep (blocked, waiting for
+    input: Linux's /proc task states), within ``timeout_s`` of wall time; whether they were.
+    A thread that is running or runnable has work in hand: a message it was woken for."""
+    deadline = time.monotonic() + timeout_s
+    watched = _TASK_STATS.watch(pids)
+    while True:
+        if not any(state in (b"R", b"D") for state in _TASK_STATS.states(watched)):
+            return True
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0)
+
+
+class _TaskStats:
+    """The /proc stat files of the threads of the processes a run waits on, kept open and
+    read again from the start (``pread``)."""
+
+    def __init__(self) -> None:
+        self._files: dict[tuple[int, str], int] = {}
+
+    def watch(self, pids: Iterable[int]) -> list[int]:
+        """``pids`` as a list; the files of any other process are closed (a run waits on
+        one node's processes at a time)."""
+        pids = list(pids)
+        for key in [k for k in self._files if k[0] not in pids]:
+            os.close(self._files.pop(key))
+        return pids
+
+    def states(self, pids: list[int]) -> Iterator[bytes]:
+        """The state letter of every thread of ``pids`` (threads started since are found,
+        and those gone dropped, on each call)."""
+        for pid in pids:
+            try:
+                tids = os.listdir(f"/proc/{pid}/task")
+            except OSError:
+                continue
+            for tid in tids:
+                state = self._state(pid, tid)
+                if state is not None:
+                    yield state
+
+    def _state(self, pid: int, tid: str) -> bytes | None:
+        key = (pid, tid)
+        fd = self._files.get(key)
+        if fd is None:
+            try:
+                fd = os.open(f"/proc/{pid}/task/{tid}/stat", os.O_RDONLY | os.O_CLOEXEC)
+            except OSError:
+                return None
+            self._files[key] = fd
+        try:
+            stat = os.pread(fd, 4096, 0)
+        except OSError:
+            stat = b""
+        if not stat:  # the thread has exited
+            os.close(self._files.pop(key))
+            return None
+        return state_letter(stat)
+
+
+_TASK_STATS = _TaskStats()
