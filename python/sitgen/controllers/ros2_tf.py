@@ -203,8 +203,15 @@ def cache_dir() -> Path:
 
 
 def _folder() -> Path:
-    """This environment's build folder: keyed by the interpreter, its prefix and the wheels'
-    versions, so another venv or an upgrade never loads a module built for something else."""
+    """This environment's build folder in the cache folder (:func:`_build_key`)."""
+    return cache_dir() / f"ros2-tf2-msgs-{_build_key()}"
+
+
+@functools.cache
+def _build_key() -> str:
+    """The build's key: the interpreter, its prefix and the wheels' versions, so another venv
+    or an upgrade never loads a module built for something else (read once a process: every
+    node started asks where the build is)."""
     versions = []
     for wheel in WHEELS:
         try:
@@ -212,7 +219,7 @@ def _folder() -> Path:
         except importlib.metadata.PackageNotFoundError:
             versions.append(f"{wheel} missing")
     key = json.dumps([sys.prefix, sys.version, sysconfig.get_platform(), versions])
-    return cache_dir() / f"ros2-tf2-msgs-{hashlib.sha256(key.encode()).hexdigest()[:16]}"
+    return hashlib.sha256(key.encode()).hexdigest()[:16]
 
 
 def built() -> Path:
