@@ -30,9 +30,15 @@ harder seeded faults on the first 250 situations of the ``mutation`` and ``rando
 the killing situation (a fresh job or an operator), and how many trials spared a fault whose
 copies showed the failure because the correct controller's copies showed it too. Writes
 ``benches/results/search.json``.
+Where random generation is among the strategies, each seed's random store is also searched to
+``SITGEN_BENCH_SEARCH_REFERENCE`` evaluations (default 5000; 0 skips it), and the bench prints,
+per strategy, the share of the robust variants random generation confirms within those that the
+strategy confirms within 500 (:func:`share_of_reference`): how close a strategy at 500 comes to
+what a ten times larger random campaign finds.
 ``SITGEN_BENCH_SEARCH_SEEDS`` (default 5), ``SITGEN_BENCH_SEARCH_BUDGET`` (default 1000) and
 ``SITGEN_BENCH_SEARCH_STRATEGIES`` shrink it for a quick look; ``SITGEN_BENCH_SEARCH_FIRST_SEED``
-(default 1) measures other seeds.
+(default 1) measures other seeds, and ``SITGEN_BENCH_SEARCH_SEED_LIST`` (``8193,60736,…``)
+names them one by one (the held-out seeds in ``benches/search-notes.md``).
 """
 
 from __future__ import annotations
@@ -61,6 +67,8 @@ RESULTS = Path(__file__).resolve().parent / "results"
 BUDGETS = (250, 500, 1000)
 STRATEGIES = ("mutation", "map-elites", "coverage", "random")
 FAULT_SITUATIONS = 250
+REFERENCE_AT = 500
+"""The budget at which a strategy's robust variants are compared with the reference's."""
 
 
 def deep_enough(
@@ -189,6 +197,16 @@ def trials_by_class(tally: Tally) -> dict[str, list[int]]:
     return out
 
 
+def robust_within(tally: Tally, budget: int) -> set[str]:
+    """The robust variants ``tally`` confirmed within ``budget`` evaluations."""
+    return {key for key, spent in tally.first_at.items() if spent <= budget}
+
+
+def share_of_reference(found: set[str], reference: set[str]) -> float | None:
+    """The share of ``reference``'s variants among ``found`` (None: the reference is empty)."""
+    return len(found & reference) / len(reference) if reference else None
+
+
 def _add(into: dict[str, list[int]], figures: dict[str, list[int]]) -> None:
     for name, counts in figures.items():
         total = into.setdefault(name, [0] * len(counts))
@@ -232,13 +250,19 @@ def harder_kills(spec: Any, db: Path, folder: Path, seed: int) -> dict[str, Any]
 
 def main() -> None:
     first = int(os.environ.get("SITGEN_BENCH_SEARCH_FIRST_SEED", "1"))
-    seeds = range(first, first + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5")))
+    named = os.environ.get("SITGEN_BENCH_SEARCH_SEED_LIST")
+    seeds: list[int] = (
+        [int(s) for s in named.split(",")]
+        if named
+        else list(range(first, first + int(os.environ.get("SITGEN_BENCH_SEARCH_SEEDS", "5"))))
+    )
+    reference = int(os.environ.get("SITGEN_BENCH_SEARCH_REFERENCE", "5000"))
     largest = int(os.environ.get("SITGEN_BENCH_SEARCH_BUDGET", str(BUDGETS[-1])))
     budgets = [b for b in BUDGETS if b <= largest] or [largest]
     strategies = os.environ.get("SITGEN_BENCH_SEARCH_STRATEGIES", ",".join(STRATEGIES)).split(",")
     with_faults = os.environ.get("SITGEN_BENCH_SEARCH_FAULTS") == "1"
     spec = parse_campaign(None)
-    out: dict[str, Any] = {"budgets": budgets, "seeds": list(seeds), "strategies": {}}
+    out: dict[str, Any] = {"budgets": budgets, "seeds": seeds, "strategies": {}}
     kept: dict[str, list[int]] = {}
     aims: dict[str, list[int]] = {}
     trials: dict[str, list[int]] = {}
@@ -263,6 +287,7 @@ def main() -> None:
                     "searched": searched,
                     "search_s": search_s,
                     "yardstick_s": yardstick_s,
+                    "robust_keys": sorted(robust_within(tally, REFERENCE_AT)),
                 }
                 if strategy == "mutation":
                     runs = walked(db, tally)
@@ -274,6 +299,17 @@ def main() -> None:
                 rows.append(row)
                 print(f"{strategy} seed {seed}: {row}", file=sys.stderr)
             out["strategies"][strategy] = {"per_seed": rows}
+        if reference and "random" in strategies:
+            out["reference"] = {"evaluations": reference, "per_seed": []}
+            for seed in seeds:
+                # A random store's runs do not depend on its budget: the one measured above,
+                # searched deeper.
+                db = Path(tmp) / f"random-{seed}.db"
+                tally, searched, _, _ = deep_enough(spec, db, seed, "random", [reference], 0)
+                keys = sorted(robust_within(tally, reference))
+                row = {"seed": seed, "robust": len(keys), "runs": tally.runs, "keys": keys}
+                out["reference"]["per_seed"].append(row)
+                print(f"random to {reference}, seed {seed}: {len(keys)} robust", file=sys.stderr)
     out["locality"], out["aims"], out["trials_by_class"] = kept, aims, trials
     report(out, strategies, budgets, seeds)
     RESULTS.mkdir(exist_ok=True)
@@ -290,9 +326,11 @@ def _first_by_class(first_at: dict[str, int]) -> dict[str, int]:
     return out
 
 
-def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds: range) -> None:
+def report(
+    out: dict[str, Any], strategies: list[str], budgets: list[int], seeds: list[int]
+) -> None:
     per = {s: out["strategies"][s]["per_seed"] for s in strategies}
-    print(f"\nrobust distinct failures (median over seeds {seeds[0]}-{seeds[-1]}, runs + copies)")
+    print(f"\nrobust distinct failures (median over seeds {_seeds(seeds)}, runs + copies)")
     print(f"{'budget':>6}" + "".join(f"{s:>12}" for s in strategies))
     medians: dict[str, dict[int, float]] = {}
     for b in budgets:
@@ -341,6 +379,8 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
                     enough = len(hits) * 2 >= len(per[s])
                     line += f"{statistics.median(hits):>12g}" if enough else f"{'-':>12}"
                 print(line)
+    if "reference" in out:
+        _report_reference(out["reference"], per, strategies)
     if any("harder_killed" in r for s in strategies for r in per[s]):
         print(f"\nharder faults killed robustly, first {FAULT_SITUATIONS} situations (median)")
         for s in strategies:
@@ -405,6 +445,31 @@ def report(out: dict[str, Any], strategies: list[str], budgets: list[int], seeds
         rows = sorted(out["trials_by_class"].items(), key=lambda kv: -kv[1][0])
         for cls, (n, robust, wasted) in rows:
             print(f"  {cls:34} {n:>5} {robust:>5} ({robust / n:.0%}) {wasted:>6}")
+
+
+def _seeds(seeds: list[int]) -> str:
+    consecutive = len(seeds) > 1 and seeds == list(range(seeds[0], seeds[0] + len(seeds)))
+    return f"{seeds[0]}-{seeds[-1]}" if consecutive else ", ".join(map(str, seeds))
+
+
+def _report_reference(
+    reference: dict[str, Any], per: dict[str, list[dict[str, Any]]], strategies: list[str]
+) -> None:
+    rows = reference["per_seed"]
+    print(
+        f"\nshare of the robust variants random generation confirms within"
+        f" {reference['evaluations']} evaluations ({', '.join(str(r['robust']) for r in rows)}"
+        f" per seed) that each strategy confirms within {REFERENCE_AT}: median (per seed)"
+    )
+    for s in strategies:
+        shares = [
+            share_of_reference(set(mine["robust_keys"]), set(ref["keys"]))
+            for mine, ref in zip(per[s], rows, strict=True)
+        ]
+        known = [x for x in shares if x is not None]
+        if known:
+            listed = ", ".join(f"{x:.0%}" if x is not None else "-" for x in shares)
+            print(f"  {s:12} {statistics.median(known):.0%} ({listed})")
 
 
 if __name__ == "__main__":
