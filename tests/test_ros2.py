@@ -753,3 +753,23 @@ def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
     assert in_c.outcome == in_python.outcome != "error", in_c.reason
     np.testing.assert_array_equal(np.asarray(in_c.trajectory), np.asarray(in_python.trajectory))
     assert in_c.events_jsonl == in_python.events_jsonl
+
+
+def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the C hand-over cannot be built (no gcc, a fresh cache), periods go through
+    Python and :func:`native_problem` says why; ``SITGEN_ROS2_NATIVE=0`` asks for Python."""
+    bare = tmp_path / "bin"
+    bare.mkdir()
+    monkeypatch.setenv("PATH", str(bare))
+    monkeypatch.setenv("SITGEN_CACHE_DIR", str(tmp_path / "cache"))
+    ros2_native._native.cache_clear()
+    try:
+        assert ros2_native.native_period() is None
+        assert "built with gcc, which is not on PATH" in str(ros2_native.native_problem())
+        monkeypatch.setenv("SITGEN_ROS2_NATIVE", "0")
+        ros2_native._native.cache_clear()
+        assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE=0"
+    finally:
+        ros2_native._native.cache_clear()
