@@ -8,6 +8,7 @@ on the same machine only. Nothing here is asserted: speed is measured, not teste
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -19,7 +20,7 @@ import sys
 import sysconfig
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -227,6 +228,24 @@ def compile_trivial_c_node(folder: Path) -> Path | None:
     return out
 
 
+@contextlib.contextmanager
+def python_side(wanted: bool) -> Iterator[None]:
+    """Where ``wanted``, ``ros2:`` periods are handed over in Python, not C
+    (``SITGEN_ROS2_NATIVE=0``)."""
+    from sitgen.controllers import ros2_native
+
+    if not wanted:
+        yield
+        return
+    os.environ["SITGEN_ROS2_NATIVE"] = "0"
+    ros2_native._native.cache_clear()
+    try:
+        yield
+    finally:
+        del os.environ["SITGEN_ROS2_NATIVE"]
+        ros2_native._native.cache_clear()
+
+
 def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str, Any]:
     """A user's controller on each path, driving the reference scene's agent: control steps per
     second over a run (less the start-up each run pays, timed on a 0.1 s run), and the ratio of
@@ -240,7 +259,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
       installed, started for each run and kept alive across runs (``keep_alive``: its start
       is then the reset between runs), and a trivial node kept alive (benches/trivial_node.py:
-      sitgen's lockstep and an rclpy node's turn);
+      sitgen's lockstep and an rclpy node's turn; benches/trivial_node.c: the lockstep alone),
+      each also with sitgen's side of a period in Python rather than C;
     - ``navground:`` HL and ORCA with the sensed perception (on the fast path, as a campaign
       runs them), where sitgen[navground] is installed: their own cost is the adapter and the
       behaviour's compute, called in a loop.
@@ -286,6 +306,13 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     if c_node is not None:
         kinds["ros2 trivial C node, kept alive"] = (f"ros2:{c_node}", False, None)
         kept_alive.add("ros2 trivial C node, kept alive")
+    # The trivial nodes again with sitgen's side of each period in Python (ros2_native.py):
+    # what the hand-over in C saves.
+    in_python = set()
+    for kind in [k for k in kinds if k.startswith("ros2 trivial")]:
+        kinds[f"{kind}, Python side"] = kinds[kind]
+        kept_alive.add(f"{kind}, Python side")
+        in_python.add(f"{kind}, Python side")
     reason = ros2_available()
     if reason is not None:
         print(f"skipped ros2: {reason}")
@@ -317,9 +344,10 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
         def start(_: int, spec: Any = spec, fast: bool = in_process) -> None:
             sitgen.run(situation, spec=spec, time_limit=0.1, in_process=fast)
 
-        m = measure(whole, repeats=5)
-        s = measure(start, repeats=5)
-        stop_kept_nodes()
+        with python_side(kind in in_python):
+            m = measure(whole, repeats=5)
+            s = measure(start, repeats=5)
+            stop_kept_nodes()
         step_s = max(1e-9, m["median_s"] - s["median_s"]) / steps[-1]
         out[kind] = {
             "steps": steps[-1], "steps_per_s": 1 / step_s, "start_s": s["median_s"],
