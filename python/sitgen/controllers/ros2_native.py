@@ -25,6 +25,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
+import threading
 from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -63,6 +64,9 @@ LIBRARIES = (
     "sensor_msgs__rosidl_generator_c",
     "rosgraph_msgs__rosidl_generator_c",
 )
+_LOCK = threading.Lock()
+"""The library keeps one set of messages and one wait set: one caller at a time (ctypes lets
+go of the GIL during a call)."""
 _c_float = ctypes.c_float
 _c_double = ctypes.c_double
 
@@ -107,8 +111,9 @@ class NativePeriod:
         """The messages' frame ids (odometry, base, scan) and the scan's constant fields
         (angle_min, angle_max, angle_increment, time_increment, scan_time, range_min,
         range_max), as the Python path sets them."""
-        if self._lib.sitgen_period_setup(*(f.encode() for f in frames), *scan) != 0:
-            raise ControllerError(f"ros2: {self._problem()}")
+        with _LOCK:
+            if self._lib.sitgen_period_setup(*(f.encode() for f in frames), *scan) != 0:
+                raise ControllerError(f"ros2: {self._problem()}")
 
     def hand_over(
         self,
@@ -126,24 +131,25 @@ class NativePeriod:
         ``publishers``, each after the one before is acknowledged (within ``ack_timeout_s``)
         and the scan once the processes ``pids`` have gone back to waiting (within
         ``settle_s``)."""
-        if len(pids) != len(self._pids) or any(pid not in pids for pid in self._pids):
-            self._pids = tuple(sorted(pids))
-            self._pid_array = (ctypes.c_int * len(self._pids))(*self._pids)
         values = np.ascontiguousarray(ranges, dtype=np.float32)
-        done = self._lib.sitgen_period_hand_over(
-            *publishers,
-            *stamp,
-            *clock,
-            *odometry,
-            values.ctypes.data,
-            values.size,
-            ctypes.addressof(self._pid_array),
-            len(self._pids),
-            settle_s,
-            ack_timeout_s,
-        )
-        if done != 0:
-            raise ControllerError(f"ros2: {self._problem()}")
+        with _LOCK:
+            if len(pids) != len(self._pids) or any(pid not in pids for pid in self._pids):
+                self._pids = tuple(sorted(pids))
+                self._pid_array = (ctypes.c_int * len(self._pids))(*self._pids)
+            done = self._lib.sitgen_period_hand_over(
+                *publishers,
+                *stamp,
+                *clock,
+                *odometry,
+                values.ctypes.data,
+                values.size,
+                ctypes.addressof(self._pid_array),
+                len(self._pids),
+                settle_s,
+                ack_timeout_s,
+            )
+            if done != 0:
+                raise ControllerError(f"ros2: {self._problem()}")
 
     def take_answer(
         self, subscription: int, context: int, stamped: bool, timeout_s: float
@@ -152,16 +158,19 @@ class NativePeriod:
         TwistStamped where ``stamped``) as (v, ω, its stamp in seconds; 0 unstamped), waiting
         at most ``timeout_s`` wall seconds on it alone (a wait set of the rcl context at
         ``context``); None if none came."""
-        got = self._lib.sitgen_answer_take(
-            subscription, context, int(stamped), max(0, int(timeout_s * 1e9)), self._answer
-        )
-        if got < 0:
-            raise ControllerError(f"ros2: {self._problem()}")
-        return (self._answer[0], self._answer[1], self._answer[2]) if got else None
+        timeout_ns = max(0, int(timeout_s * 1e9))
+        with _LOCK:
+            got = self._lib.sitgen_answer_take(
+                subscription, context, int(stamped), timeout_ns, self._answer
+            )
+            if got < 0:
+                raise ControllerError(f"ros2: {self._problem()}")
+            return (self._answer[0], self._answer[1], self._answer[2]) if got else None
 
     def release(self) -> None:
         """Give back the answer's wait set (before its context is shut down)."""
-        self._lib.sitgen_answer_release()
+        with _LOCK:
+            self._lib.sitgen_answer_release()
 
     def _problem(self) -> str:
         problem: bytes = self._lib.sitgen_period_problem()
