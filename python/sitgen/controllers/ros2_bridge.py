@@ -221,7 +221,6 @@ class Bridge:
             self.tf_static = self.node.create_publisher(m["TFMessage"], TOPICS.tf_static, latched)
         self.native = native_period()
         """The period's hand-over in C (None: in Python, ros2_native.py)."""
-        self._native_info: Mapping[str, Any] | None = None
 
     def published(self) -> list[Any]:
         """sitgen's publishers of a run's inputs."""
@@ -292,10 +291,8 @@ class Bridge:
             self.hand_over(self.period(info, obs, t), settle)
             return
         period_s = control_period_s(info)
-        if self._native_info is not info:
-            frames = (FRAMES.odom, FRAMES.base, FRAMES.scan)
-            self.native.setup(frames, scan_constants(info, period_s))
-            self._native_info = info
+        frames = (FRAMES.odom, FRAMES.base, FRAMES.scan)
+        self.native.setup(info, frames, lambda: scan_constants(info, period_s))
         x, y, heading = (float(c) for c in obs["pose"])
         v, omega = (float(c) for c in obs["velocity"])
         _, _, qz, qw = quaternion(heading)

@@ -26,7 +26,7 @@ import ctypes
 import functools
 import os
 import threading
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -104,16 +104,24 @@ class NativePeriod:
         ]
         library.sitgen_answer_release.restype = None
         self._answer = (_c_double * 3)()
+        self._set_up_for: object = None
         self._pids: tuple[int, ...] = ()
         self._pid_array: Any = (ctypes.c_int * 0)()
 
-    def setup(self, frames: Sequence[str], scan: Sequence[float]) -> None:
+    def setup(
+        self, run: object, frames: Sequence[str], scan: Callable[[], Sequence[float]]
+    ) -> None:
         """The messages' frame ids (odometry, base, scan) and the scan's constant fields
-        (angle_min, angle_max, angle_increment, time_increment, scan_time, range_min,
-        range_max), as the Python path sets them."""
+        (``scan()``: angle_min, angle_max, angle_increment, time_increment, scan_time,
+        range_min, range_max), as the Python path sets them, for ``run`` (any object that is
+        the same for all of a run's periods): set again only when ``run`` changes (whichever
+        bridge of the process asks; the library holds one set of messages)."""
         with _LOCK:
-            if self._lib.sitgen_period_setup(*(f.encode() for f in frames), *scan) != 0:
+            if run is self._set_up_for:
+                return
+            if self._lib.sitgen_period_setup(*(f.encode() for f in frames), *scan()) != 0:
                 raise ControllerError(f"ros2: {self._problem()}")
+            self._set_up_for = run
 
     def hand_over(
         self,
