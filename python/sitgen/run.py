@@ -24,7 +24,9 @@ import numpy.typing as npt
 from sitgen import _core
 from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.inprocess import InProcessController
+from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2 import stop_kept_nodes
+from sitgen.controllers.ros2_native import native_problem
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
@@ -462,8 +464,18 @@ def check_controller(
                 return checks
             if ended:
                 break
+        how = ""
+        if isinstance(controller, str) and controller.startswith(ROS2_PREFIX):
+            problem = native_problem()
+            how = (
+                "; sitgen's side of each period in C"
+                if problem is None
+                else f"; sitgen's side of each period in Python, slower ({problem})"
+            )
         checks.append(
-            Check("act", True, f"{taken} finite commands, slowest reply {slowest * 1e3:.1f} ms")
+            Check(
+                "act", True, f"{taken} finite commands, slowest reply {slowest * 1e3:.1f} ms{how}"
+            )
         )
         checks.append(
             Check(
