@@ -477,7 +477,6 @@ class Ros2Controller(UserController):
     def _await_answer(self, bridge: Bridge, t: float, timeout_s: float) -> bool:
         """Spin until the node answers the period at ``t``; False if it did not in time."""
         deadline = time.monotonic() + timeout_s
-        when = f"at {t:.1f} s"
         while True:
             while self._answers:
                 v, omega, stamped_at = self._answers.pop(0)
@@ -486,17 +485,22 @@ class Ros2Controller(UserController):
                 if not (math.isfinite(v) and math.isfinite(omega)):
                     raise ControllerError(
                         f"controller {self.name} published a non-finite command ({v}, {omega}) "
-                        f"{when}"
+                        f"at {t:.1f} s"
                     )
                 self._command = (v, omega)
                 return True
-            self._check_alive(when)
             left = deadline - time.monotonic()
-            if left <= 0:
-                return False
-            taken = bridge.take_answer(self._subscription, self._stamped, min(left, 0.1))
+            taken = None
+            if left > 0:
+                taken = bridge.take_answer(self._subscription, self._stamped, min(left, 0.1))
             if taken is not None:
                 self._answers.append(taken)
+                continue
+            # Whether the node is still there is asked only once a wait for it went unanswered
+            # (a node that died answers nothing): not at every period's first look.
+            self._check_alive(f"at {t:.1f} s")
+            if left <= 0:
+                return False
 
     # --- messages ---------------------------------------------------------------------------
 

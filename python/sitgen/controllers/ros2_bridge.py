@@ -221,6 +221,8 @@ class Bridge:
             self.tf_static = self.node.create_publisher(m["TFMessage"], TOPICS.tf_static, latched)
         self.native = native_period()
         """The period's hand-over in C (None: in Python, ros2_native.py)."""
+        self._pointers: Any = None
+        """The rcl handles of the odometry's, scan's and clock's publishers, for the C side."""
 
     def published(self) -> list[Any]:
         """sitgen's publishers of a run's inputs."""
@@ -293,14 +295,15 @@ class Bridge:
         period_s = control_period_s(info)
         frames = (FRAMES.odom, FRAMES.base, FRAMES.scan)
         self.native.setup(info, frames, lambda: scan_constants(info, period_s))
-        x, y, heading = (float(c) for c in obs["pose"])
-        v, omega = (float(c) for c in obs["velocity"])
-        _, _, qz, qw = quaternion(heading)
+        pose, velocity = obs["pose"], obs["velocity"]
+        _, _, qz, qw = quaternion(float(pose[2]))
+        if self._pointers is None:
+            self._pointers = tuple(p.handle.pointer for p in (self.odom, self.scan, self.clock))
         self.native.hand_over(
-            (self.odom.handle.pointer, self.scan.handle.pointer, self.clock.handle.pointer),
+            self._pointers,
             sec_nanosec(t),
             sec_nanosec(t, period_s),
-            (x, y, qz, qw, v, omega),
+            (float(pose[0]), float(pose[1]), qz, qw, float(velocity[0]), float(velocity[1])),
             obs["ranges"],
             pids,
             settle_s,
