@@ -82,15 +82,8 @@ from sitgen.controllers.external import (
     signal_name,
 )
 from sitgen.controllers.proc_tasks import task_state, wait_idle
-from sitgen.controllers.ros2_bridge import (
-    FRAMES,
-    LIB,
-    TOPICS,
-    Bridge,
-    answer_of,
-    ros2_available,
-    stamp,
-)
+from sitgen.controllers.ros2_bridge import LIB, Bridge, ros2_available
+from sitgen.controllers.ros2_messages import FRAMES, TOPICS, answer_of, stamp
 from sitgen.controllers.ros2_tf import node_python_path
 
 PREFIX = "ros2:"

@@ -26,7 +26,7 @@ import ctypes
 import functools
 import os
 import threading
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -222,19 +222,3 @@ def _build(work: Path) -> Path:
     command += [*compile_flags(), *link_flags(LIBRARIES)]
     check_call(command, dict(os.environ), WHAT, "compile")
     return out
-
-
-def scan_constants(info: Mapping[str, Any], period_s: float) -> tuple[float, ...]:
-    """The scan's constant fields for the laser the run's reset info describes, as
-    ros2_bridge.laser_scan sets them."""
-    laser, angles = info["laser"], info["laser"]["angles"]
-    increment = float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
-    return (
-        float(angles[0]),
-        float(angles[-1]),
-        increment,
-        0.0,
-        period_s,
-        float(laser.get("min_range_m", 0.0)),
-        float(laser["range_m"]),
-    )
