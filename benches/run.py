@@ -230,19 +230,20 @@ def compile_trivial_c_node(folder: Path) -> Path | None:
 
 @contextlib.contextmanager
 def python_side(wanted: bool) -> Iterator[None]:
-    """Where ``wanted``, ``ros2:`` periods are handed over in Python, not C
-    (``SITGEN_ROS2_NATIVE=0``)."""
+    """``ros2:`` periods handed over in Python where ``wanted``, else in C
+    (``SITGEN_ROS2_NATIVE=1``)."""
     from sitgen.controllers import ros2_native
 
-    if not wanted:
-        yield
-        return
-    os.environ["SITGEN_ROS2_NATIVE"] = "0"
+    before = os.environ.get("SITGEN_ROS2_NATIVE")
+    os.environ["SITGEN_ROS2_NATIVE"] = "0" if wanted else "1"
     ros2_native._native.cache_clear()
     try:
         yield
     finally:
-        del os.environ["SITGEN_ROS2_NATIVE"]
+        if before is None:
+            del os.environ["SITGEN_ROS2_NATIVE"]
+        else:
+            os.environ["SITGEN_ROS2_NATIVE"] = before
         ros2_native._native.cache_clear()
 
 

@@ -733,6 +733,8 @@ def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
     """The hand-over in C (ros2_native.py) sends what the Python one sends, in the same order
     with the same waits: a node in either usual style drives the same trajectory and events
     both ways, and the C one did hand the periods over."""
+    monkeypatch.setenv("SITGEN_ROS2_NATIVE", "1")
+    ros2_native._native.cache_clear()
     native = ros2_native.native_period()
     assert native is not None, ros2_native.native_problem()
     calls: list[int] = []
@@ -749,6 +751,7 @@ def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
     assert handed > 70  # every period but the first and those that begin with a new goal
     monkeypatch.setattr(ros2_bridge, "native_period", lambda: None)
     in_python = sitgen.run(situation, controller=node, time_limit=8.0)
+    ros2_native._native.cache_clear()
     assert len(calls) == handed  # none in Python
     assert in_c.outcome == in_python.outcome != "error", in_c.reason
     np.testing.assert_array_equal(np.asarray(in_c.trajectory), np.asarray(in_python.trajectory))
@@ -759,17 +762,18 @@ def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Where the C hand-over cannot be built (no gcc, a fresh cache), periods go through
-    Python and :func:`native_problem` says why; ``SITGEN_ROS2_NATIVE=0`` asks for Python."""
+    Python and :func:`native_problem` says why; without ``SITGEN_ROS2_NATIVE=1`` they do too."""
     bare = tmp_path / "bin"
     bare.mkdir()
     monkeypatch.setenv("PATH", str(bare))
     monkeypatch.setenv("SITGEN_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("SITGEN_ROS2_NATIVE", "1")
     ros2_native._native.cache_clear()
     try:
         assert ros2_native.native_period() is None
         assert "built with gcc, which is not on PATH" in str(ros2_native.native_problem())
-        monkeypatch.setenv("SITGEN_ROS2_NATIVE", "0")
+        monkeypatch.delenv("SITGEN_ROS2_NATIVE")
         ros2_native._native.cache_clear()
-        assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE=0"
+        assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE is not 1"
     finally:
         ros2_native._native.cache_clear()

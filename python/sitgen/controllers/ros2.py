@@ -482,18 +482,13 @@ class Ros2Controller(UserController):
                     )
                 self._command = (v, omega)
                 return True
-            left = deadline - time.monotonic()
-            taken = None
-            if left > 0:
-                taken = bridge.take_answer(self._subscription, self._stamped, min(left, 0.1))
-            if taken is not None:
-                self._answers.append(taken)
-                continue
-            # Whether the node is still there is asked only once a wait for it went unanswered
-            # (a node that died answers nothing): not at every period's first look.
             self._check_alive(f"at {t:.1f} s")
+            left = deadline - time.monotonic()
             if left <= 0:
                 return False
+            taken = bridge.take_answer(self._subscription, self._stamped, min(left, 0.1))
+            if taken is not None:
+                self._answers.append(taken)
 
     # --- messages ---------------------------------------------------------------------------
 
