@@ -17,6 +17,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -725,16 +726,24 @@ def test_a_node_kept_alive_is_reset_with_each_runs_map_start_and_reset_service(
         stop_kept_nodes()
 
 
+@pytest.fixture
+def c_side(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """The C hand-over turned on (``SITGEN_ROS2_NATIVE=1``) for one test, and what the process
+    remembers of it forgotten after, whether the test passed or not."""
+    monkeypatch.setenv("SITGEN_ROS2_NATIVE", "1")
+    ros2_native._native.cache_clear()
+    yield
+    ros2_native._native.cache_clear()
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="the C hand-over is built with gcc")
 @pytest.mark.parametrize("style", ["scan_callback", "timer"])
 def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
-    style: str, situation: sitgen.Situation, monkeypatch: pytest.MonkeyPatch
+    style: str, situation: sitgen.Situation, monkeypatch: pytest.MonkeyPatch, c_side: None
 ) -> None:
     """The hand-over in C (ros2_native.py) sends what the Python one sends, in the same order
     with the same waits: a node in either usual style drives the same trajectory and events
     both ways, and the C one did hand the periods over."""
-    monkeypatch.setenv("SITGEN_ROS2_NATIVE", "1")
-    ros2_native._native.cache_clear()
     native = ros2_native.native_period()
     assert native is not None, ros2_native.native_problem()
     calls: list[int] = []
@@ -751,7 +760,6 @@ def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
     assert handed > 70  # every period but the first and those that begin with a new goal
     monkeypatch.setattr(ros2_bridge, "native_period", lambda: None)
     in_python = sitgen.run(situation, controller=node, time_limit=8.0)
-    ros2_native._native.cache_clear()
     assert len(calls) == handed  # none in Python
     assert in_c.outcome == in_python.outcome != "error", in_c.reason
     np.testing.assert_array_equal(np.asarray(in_c.trajectory), np.asarray(in_python.trajectory))
@@ -759,7 +767,7 @@ def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
 
 
 def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, c_side: None
 ) -> None:
     """Where the C hand-over cannot be built (no gcc, a fresh cache), periods go through
     Python and :func:`native_problem` says why; without ``SITGEN_ROS2_NATIVE=1`` they do too."""
@@ -767,13 +775,8 @@ def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
     bare.mkdir()
     monkeypatch.setenv("PATH", str(bare))
     monkeypatch.setenv("SITGEN_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv("SITGEN_ROS2_NATIVE", "1")
+    assert ros2_native.native_period() is None
+    assert "built with gcc, which is not on PATH" in str(ros2_native.native_problem())
+    monkeypatch.delenv("SITGEN_ROS2_NATIVE")
     ros2_native._native.cache_clear()
-    try:
-        assert ros2_native.native_period() is None
-        assert "built with gcc, which is not on PATH" in str(ros2_native.native_problem())
-        monkeypatch.delenv("SITGEN_ROS2_NATIVE")
-        ros2_native._native.cache_clear()
-        assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE is not 1"
-    finally:
-        ros2_native._native.cache_clear()
+    assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE is not 1"

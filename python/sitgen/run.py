@@ -468,7 +468,7 @@ def check_controller(
         if isinstance(controller, str) and controller.startswith(ROS2_PREFIX):
             problem = native_problem()
             how = (
-                "; sitgen's side of each period in C"
+                "; sitgen's side of each period in C (in Python for a node that reads /tf)"
                 if problem is None
                 else f"; sitgen's side of each period in Python, slower ({problem})"
             )

@@ -254,10 +254,7 @@ class Ros2Controller(UserController):
         t = float(obs["time"])
         goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
         self._answers.clear()
-        if goal or not self._answered_once:
-            bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
-        else:
-            bridge.hand_over_period(self._info, obs, t, self._settle, self._pids, SETTLE_S)
+        bridge.hand_over_period(goal, self._info, obs, t, self._pids, SETTLE_S)
         if not self._answered_once:
             self._first_answer(bridge, obs, t)
         elif self._await_answer(bridge, t, self._answer_timeout_s):

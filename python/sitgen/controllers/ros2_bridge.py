@@ -35,6 +35,7 @@ import numpy as np
 
 from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import ControllerError
+from sitgen.controllers.proc_tasks import wait_idle
 from sitgen.controllers.ros2_messages import (
     FRAMES,
     TOPICS,
@@ -190,7 +191,7 @@ class Bridge:
     def hand_over(
         self,
         messages: list[tuple[Any, Any]],
-        settle: Callable[[], None] | None = None,
+        settle: Callable[[], object] | None = None,
         taken: bool = False,
     ) -> None:
         """Publish each (publisher, message) in turn, each only once every reliable reader of
@@ -236,19 +237,19 @@ class Bridge:
 
     def hand_over_period(
         self,
+        goal: list[tuple[Any, Any]],
         info: Mapping[str, Any],
         obs: Mapping[str, Any],
         t: float,
-        settle: Callable[[], None],
         pids: Collection[int],
         settle_s: float,
     ) -> None:
-        """``hand_over(period(info, obs, t), settle)``: in C where it can be (the node does
-        not read /tf, and ros2_native.py built its hand-over; ``settle`` is then waiting at
-        most ``settle_s`` for the processes ``pids`` to go back to waiting), else in Python;
-        the same messages, in the same order, either way."""
-        if self.native is None or (self.tf is not None and self.tf_read):
-            self.hand_over(self.period(info, obs, t), settle)
+        """``hand_over(goal + period(info, obs, t), settle)``, where settling is waiting at
+        most ``settle_s`` for the processes ``pids`` to go back to waiting: in C where it can
+        be (no new goal this period, the node does not read /tf, and ros2_native.py has its
+        hand-over), else in Python; the same messages, in the same order, either way."""
+        if goal or self.native is None or (self.tf is not None and self.tf_read):
+            self.hand_over(goal + self.period(info, obs, t), lambda: wait_idle(pids, settle_s))
             return
         period_s = control_period_s(info)
         frames = (FRAMES.odom, FRAMES.base, FRAMES.scan)

@@ -12,7 +12,8 @@ messages in the same order (tests/test_ros2.py compares runs made both ways).
 
 Why: in Python, sitgen's side of a period (three messages built and converted by rclpy, the
 node's thread states read from /proc between them, the answer taken and converted) took about
-1 ms; in C it is a few tens of microseconds beside DDS's own round trips (docs/ros2.md,
+1 ms; in C, sitgen's own part is tens of microseconds beside DDS's round trips (timed once in an
+instrumented copy; make bench times the whole period both ways; docs/ros2.md,
 "Cost").
 
 Parameters: ``SITGEN_ROS2_NATIVE`` (environment; ``1`` turns it on; off by default while a

@@ -88,7 +88,6 @@ LIBRARIES = (
     "geometry_msgs__rosidl_generator_py",
 )
 """What the extension links to (TransformStamped's functions, its Fast DDS type support)."""
-WHAT = PACKAGE
 EXTENSION = f"{PACKAGE}_s__rosidl_typesupport_c.so"
 """The module rosidl_generator_py's ``import_type_support`` imports."""
 
@@ -240,7 +239,8 @@ def _build(work: Path) -> Path:
     (source / "msg" / "TFMessage.idl").write_text(TF_MESSAGE_IDL)
     package = work / "include" / PACKAGE
     env = {**os.environ, "AMENT_PREFIX_PATH": sys.prefix}
-    check_call([sys.executable, "-c", _GENERATE, str(source), str(package)], env, WHAT, "generate")
+    generate = [sys.executable, "-c", _GENERATE, str(source), str(package)]
+    check_call(generate, env, PACKAGE, "generate")
     described = json.loads((package / "msg" / "TFMessage.json").read_text())
     hashes = {h["type_name"]: h["hash_string"] for h in described["type_hashes"]}
     if hashes.get(f"{PACKAGE}/msg/TFMessage") != TF_MESSAGE_HASH:
@@ -257,8 +257,8 @@ def _build(work: Path) -> Path:
         compiler = ["g++", "-std=c++17"] if source_file.suffix == ".cpp" else ["gcc"]
         target = source_file.with_suffix(".o")
         compile_one = [*compiler, *flags, "-c", str(source_file), "-o", str(target)]
-        check_call(compile_one, env, WHAT, "compile")
+        check_call(compile_one, env, PACKAGE, "compile")
         objects.append(str(target))
     link = ["g++", "-shared", "-o", str(package / EXTENSION), *objects, *link_flags(LIBRARIES)]
-    check_call(link, env, WHAT, "link")
+    check_call(link, env, PACKAGE, "link")
     return package
