@@ -16,8 +16,11 @@ install: $(BIN)/python
 # the JUnit schema CI servers use (junit-10.xsd, MIT, which pytest's source release carries)
 # for the JUnit tests. The extension is built by the venv's own maturin (no build isolation),
 # so that `make wheel` after it finds everything compiled.
+# Without isolation an sdist among the extras' dependencies (empy, which the rosidl generators
+# use) is built with the venv's setuptools, and Python 3.11's venv carries one too old to make
+# a wheel: without these the ROS 2 extra fails to install wherever pip has no wheel of it cached.
 install-test: $(BIN)/python
-	$(BIN)/pip install -q 'maturin>=1.7,<2'
+	$(BIN)/pip install -q 'maturin>=1.7,<2' 'setuptools>=70.1' wheel
 	PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test,ros2,navground]' \
 		|| PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test,navground]' \
 		|| PATH="$(abspath $(BIN)):$$PATH" $(BIN)/pip install -q --no-build-isolation -e '.[test]'
