@@ -22,7 +22,11 @@ from typing import Any
 
 import pytest
 
+from sitgen.controllers import ros2
 from sitgen.controllers.ros2_bridge import ros2_available
+from sitgen.run import run
+from sitgen.world.config import preset_spec
+from sitgen.world.situation import generate_situation
 from tests.conftest import ROOT, run_cli
 
 UNAVAILABLE = ros2_available()
@@ -157,3 +161,35 @@ def test_diff_refuses_a_side_kept_alive_that_does_not_reset(tmp_path: Path) -> N
     (line,) = done.stderr.strip().splitlines()
     assert line.startswith("error: --b.keep_alive: controller `ros2:"), line
     assert "keeps state from run to run" in line, line
+
+
+@pytest.mark.parametrize("style", ["scan_callback", "timer"])
+def test_a_first_answer_lost_is_asked_for_again_and_the_run_is_the_same(
+    style: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # As when the node's /cmd_vel writer has not yet matched sitgen's reader: the node's first
+    # answer never arrives. The first observation is handed over again, with simulated time
+    # set back to the period's start, so that a node acting on a timer on simulated time acts
+    # again; the run is then the run that lost nothing.
+    situation = generate_situation(preset_spec("open_field"), seed=0)
+    node = f"{USUAL} {style}"
+    kept = run(situation, controller=node, time_limit=2.0)
+    await_answer = ros2.Ros2Controller._await_answer
+    lost: list[tuple[float, float, float]] = []
+
+    def losing_the_first(
+        self: ros2.Ros2Controller, bridge: Any, t: float, timeout_s: float
+    ) -> bool:
+        if lost or self._answered_once:
+            return await_answer(self, bridge, t, timeout_s)
+        taken = bridge.take_answer(self._subscription, self._stamped, timeout_s)
+        if taken is not None:
+            lost.append(taken)
+        self._answers.clear()
+        return False
+
+    monkeypatch.setattr(ros2.Ros2Controller, "_await_answer", losing_the_first)
+    again = run(situation, controller=node, time_limit=2.0, params={"start_timeout_s": 10.0})
+    assert lost, "the node's first answer was not seen"
+    assert again.outcome == kept.outcome != "error", (again.reason, kept.reason)
+    assert again.trajectory.tolist() == kept.trajectory.tolist()

@@ -453,7 +453,12 @@ class Ros2Controller(UserController):
             # The goal too: a subscription that matched late (volatile) missed it.
             self._goal_index = -1
             goal = self._goal(bridge, int(obs.get("waypoints_reached", 0)), t)
-            bridge.hand_over(goal + bridge.period(self._info, obs, t), self._settle)
+            # Simulated time set back to the period's start first: a node acting on a timer on
+            # simulated time acted at the first clock, and would not act again on a clock that
+            # did not move (its answer lost on a writer that had not yet matched sitgen's
+            # reader, or an input missed on a subscription matched late: it would never answer).
+            rewind = [(bridge.clock, bridge.clock_at(t))]
+            bridge.hand_over(rewind + goal + bridge.period(self._info, obs, t), self._settle)
         # A loaded node may still be answering repeats: once it has gone back to waiting,
         # every answer it will give them is on its way (one let into a later period would
         # shift every answer after it by a period).
