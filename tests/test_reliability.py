@@ -32,6 +32,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import sitgen
+from sitgen.controllers.proc_tasks import protocol_thread, wait_idle
 from sitgen.execution.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
 from tests.conftest import ROOT, Result, run_cli, sitgen_command
@@ -1162,3 +1163,29 @@ def test_a_rosbag2_is_never_written_through_a_dangling_link(
     assert done.returncode == 2, done.stdout + done.stderr
     assert done.stderr.startswith(f"error: --rosbag2: {dangling} already exists"), done.stderr
     assert not (tmp_path / "nowhere").exists()
+
+
+def test_a_wait_for_a_node_to_go_idle_reads_its_threads_but_not_fast_ddss_own() -> None:
+    """wait_idle reads each thread's state from /proc: a busy thread of a process keeps it
+    waiting to the bound, a process whose threads sleep does not; a thread named as Fast DDS
+    names its own (``dds.ev.0``) is not waited for, whatever its state."""
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    asleep = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    protocol = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import ctypes; ctypes.CDLL(None).prctl(15, b'dds.ev.0')\nwhile True: pass",
+        ]
+    )
+    try:
+        time.sleep(0.3)  # every one started and in its loop or its sleep
+        assert not wait_idle([busy.pid], 0.05)
+        assert wait_idle([asleep.pid], 5.0)
+        assert Path(f"/proc/{protocol.pid}/comm").read_text().strip() == "dds.ev.0"
+        assert wait_idle([protocol.pid, asleep.pid], 5.0)
+        assert protocol_thread(b"12 (dds.udp.7412) R 1") and not protocol_thread(b"3 (x) R 1")
+    finally:
+        for proc in (busy, asleep, protocol):
+            proc.kill()
+            proc.wait()

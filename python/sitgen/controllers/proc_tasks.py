@@ -2,8 +2,8 @@
 gone back to waiting after a message, and whether its process has exited.
 
 What it does: :func:`wait_idle` waits until every thread of some processes is asleep (none
-running, runnable or waiting on a device), within a bound; :func:`task_state` reads one
-process's or thread's state letter.
+running, runnable or waiting on a device), within a bound, Fast DDS's own threads left out
+(:func:`protocol_thread`); :func:`task_state` reads one process's or thread's state letter.
 
 Why: a node's executor takes messages that arrived together in the order it made its
 subscriptions, not the order they were sent; handing it a message only once it has gone back to
@@ -42,10 +42,25 @@ def state_letter(stat: bytes) -> bytes:
     return stat[at : at + 1]
 
 
+PROTOCOL_THREADS = b"dds."
+"""How Fast DDS names its own threads (``dds.ev.N`` its events and heartbeats, ``dds.udp.PORT``
+its receivers, …)."""
+
+
+def protocol_thread(stat: bytes) -> bool:
+    """Whether a /proc stat file's thread is one of Fast DDS's own: it runs the DDS protocol
+    (heartbeats, acknowledgements, receiving), never a node's callbacks, and by the time a
+    reader's acknowledgement of a message reaches sitgen it has already woken the thread that
+    will run the message's callback (Fast DDS notifies the reader's listener before it
+    acknowledges), which is the one a wait is for."""
+    return stat[stat.index(b"(") + 1 :].startswith(PROTOCOL_THREADS)
+
+
 def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:
     """Wait until every thread of the processes ``pids`` is asleep (blocked, waiting for
     input: Linux's /proc task states), within ``timeout_s`` of wall time; whether they were.
-    A thread that is running or runnable has work in hand: a message it was woken for."""
+    A thread that is running or runnable has work in hand: a message it was woken for. Fast
+    DDS's own threads are not waited for (:func:`protocol_thread`)."""
     deadline = time.monotonic() + timeout_s
     watched = _TASK_STATS.watch(pids)
     while True:
@@ -72,8 +87,8 @@ class _TaskStats:
         return pids
 
     def states(self, pids: list[int]) -> Iterator[bytes]:
-        """The state letter of every thread of ``pids`` (threads started since are found,
-        and those gone dropped, on each call)."""
+        """The state letter of every thread of ``pids`` but Fast DDS's own (threads started
+        since are found, and those gone dropped, on each call)."""
         for pid in pids:
             try:
                 tids = os.listdir(f"/proc/{pid}/task")
@@ -100,7 +115,7 @@ class _TaskStats:
         if not stat:  # the thread has exited
             os.close(self._files.pop(key))
             return None
-        return state_letter(stat)
+        return None if protocol_thread(stat) else state_letter(stat)
 
 
 _TASK_STATS = _TaskStats()

@@ -152,6 +152,11 @@ static int any_busy(const int * pids, size_t n_pids)
         continue;
       }
       stat[got] = '\0';
+      /* Fast DDS's own threads (dds.*) are not waited for: proc_tasks.py's protocol_thread. */
+      char * open_paren = strchr(stat, '(');
+      if (open_paren != NULL && strncmp(open_paren + 1, "dds.", 4) == 0) {
+        continue;
+      }
       char * close_paren = strrchr(stat, ')');
       if (close_paren != NULL && close_paren[1] == ' ' &&
         (close_paren[2] == 'R' || close_paren[2] == 'D'))
