@@ -230,8 +230,8 @@ def compile_trivial_c_node(folder: Path) -> Path | None:
 
 @contextlib.contextmanager
 def python_side(wanted: bool) -> Iterator[None]:
-    """``ros2:`` periods handed over in Python where ``wanted``, else in C
-    (``SITGEN_ROS2_NATIVE=1``)."""
+    """``ros2:`` periods handed over in Python (``SITGEN_ROS2_NATIVE=0``) where ``wanted``,
+    else in C (the default)."""
     from sitgen.controllers import ros2_native
 
     before = os.environ.get("SITGEN_ROS2_NATIVE")

@@ -6,8 +6,8 @@ answer taken from rclpy's own /cmd_vel subscription as :meth:`Bridge.take
 
 What it does: :func:`native_period` builds ``ros2_period.c`` once per environment with the
 machine's gcc against the ROS 2 wheels (native_build.py), loads it, and returns a
-:class:`NativePeriod` where ``SITGEN_ROS2_NATIVE=1``; None otherwise, or where it cannot be had
-(no gcc, a failed build), and the bridge then hands every period over in Python, with the same
+:class:`NativePeriod`; None where it cannot be had (no gcc, a failed build) or is turned off
+(``SITGEN_ROS2_NATIVE=0``), and the bridge then hands every period over in Python, with the same
 messages in the same order (tests/test_ros2.py compares runs made both ways).
 
 Why: in Python, sitgen's side of a period (three messages built and converted by rclpy, the
@@ -16,9 +16,8 @@ node's thread states read from /proc between them, the answer taken and converte
 instrumented copy; make bench times the whole period both ways; docs/ros2.md,
 "Cost").
 
-Parameters: ``SITGEN_ROS2_NATIVE`` (environment; ``1`` turns it on; off by default while a
-flaw is looked for: a timer-style test node twice failed to answer its first period in a full
-test run with it on, which runs with it off have not shown).
+Parameters: ``SITGEN_ROS2_NATIVE`` (environment; default ``1``; ``0`` hands every period over
+in Python, to compare the two or to rule the C side out when a run surprises).
 
 Source: rcl's C API; ctypes.
 """
@@ -201,8 +200,8 @@ def native_problem() -> str | None:
 
 @functools.cache
 def _native() -> tuple[NativePeriod | None, str | None]:
-    if os.environ.get("SITGEN_ROS2_NATIVE", "0") != "1":
-        return None, "SITGEN_ROS2_NATIVE is not 1"
+    if os.environ.get("SITGEN_ROS2_NATIVE", "1") == "0":
+        return None, "SITGEN_ROS2_NATIVE=0"
     try:
         folder = build_once(_folder(), LIBRARY, _build)
         return NativePeriod(ctypes.CDLL(str(folder / LIBRARY))), None
