@@ -102,25 +102,26 @@ typedef struct
 static task_file tasks[MAX_TASKS];
 static int n_tasks = 0;
 
-static int task_fd(int pid, int tid)
+/* The kept-open stat file of a thread, opened on first sight; NULL where it cannot be. */
+static task_file * task_of(int pid, int tid)
 {
   for (int i = 0; i < n_tasks; ++i) {
     if (tasks[i].pid == pid && tasks[i].tid == tid) {
       tasks[i].seen = 1;
-      return tasks[i].fd;
+      return &tasks[i];
     }
   }
   if (n_tasks == MAX_TASKS) {
-    return -1;
+    return NULL;
   }
   char path[64];
   snprintf(path, sizeof(path), "/proc/%d/task/%d/stat", pid, tid);
   int fd = open(path, O_RDONLY | O_CLOEXEC);
   if (fd < 0) {
-    return -1;
+    return NULL;
   }
-  tasks[n_tasks++] = (task_file){pid, tid, fd, 1};
-  return fd;
+  tasks[n_tasks] = (task_file){pid, tid, fd, 1};
+  return &tasks[n_tasks++];
 }
 
 /* Whether any thread of the processes is running, runnable or waiting on a device. */
@@ -142,13 +143,16 @@ static int any_busy(const int * pids, size_t n_pids)
       if (entry->d_name[0] < '0' || entry->d_name[0] > '9') {
         continue;
       }
-      int fd = task_fd(pids[p], atoi(entry->d_name));
-      if (fd < 0) {
+      task_file * task = task_of(pids[p], atoi(entry->d_name));
+      if (task == NULL) {
         continue;
       }
       char stat[1024];
-      ssize_t got = pread(fd, stat, sizeof(stat) - 1, 0);
+      ssize_t got = pread(task->fd, stat, sizeof(stat) - 1, 0);
       if (got <= 0) {
+        /* The thread has exited: its file is given back below, and a thread of a process
+         * that has taken its ids since is opened afresh on the next pass (as proc_tasks.py). */
+        task->seen = 0;
         continue;
       }
       stat[got] = '\0';
