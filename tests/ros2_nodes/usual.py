@@ -3,12 +3,14 @@
 kind: none synchronises its inputs by stamp the way examples/ros2/follower_node.py does.
 
 ``usual.py STYLE`` drives toward the current goal (``/goal_pose``) and slows and turns away
-from what the laser sees ahead, in one of four styles:
+from what the laser sees ahead, in one of these styles:
 
 - ``scan_callback``: acts in its scan callback with the latest odometry and goal (its scan
   subscription made first, so a scan and an odometry message ready together run in that order);
 - ``timer``: acts on a 10 Hz timer on simulated time with the latest scan, odometry and goal
   (Nav2's controller server runs on such a rate loop);
+- ``multi_threaded``: ``timer`` spun by rclpy's multi-threaded executor (4 threads) with every
+  callback in one reentrant callback group, so callbacks may run at once;
 - ``approximate_sync``: pairs scan and odometry by stamp within a slop, as message_filters'
   ApproximateTimeSynchronizer does (message_filters has no wheel), and acts on each pair;
 - ``goal_once``: reads the route from ``/plan`` once at start (then drops the subscription) and
@@ -35,13 +37,15 @@ from typing import Any
 import rclpy
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry, Path
-from rclpy.executors import ExternalShutdownException
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Trigger
 
 STYLE = sys.argv[1]
+TIMED = STYLE in ("timer", "multi_threaded")
 
 
 def stamp_s(msg: Any) -> float:
@@ -69,6 +73,7 @@ def steer(odom: Odometry, goal: tuple[float, float], scan: LaserScan) -> Twist:
 class Usual(Node):
     def __init__(self) -> None:
         super().__init__(f"usual_{STYLE}")
+        group = ReentrantCallbackGroup() if STYLE == "multi_threaded" else None
         self.cmd = self.create_publisher(Twist, "/cmd_vel", 10)
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
@@ -76,14 +81,18 @@ class Usual(Node):
         if STYLE in ("scan_callback", "goal_once", "goal_once_reset", "wall_clock"):
             self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
         else:
-            self.create_subscription(LaserScan, "/scan", self.keep_scan, qos_profile_sensor_data)
-        self.create_subscription(Odometry, "/odom", self.on_odom, 10)
+            self.create_subscription(
+                LaserScan, "/scan", self.keep_scan, qos_profile_sensor_data, callback_group=group
+            )
+        self.create_subscription(Odometry, "/odom", self.on_odom, 10, callback_group=group)
         if STYLE.startswith("goal_once"):
             self.read_plan()
         else:
-            self.create_subscription(PoseStamped, "/goal_pose", self.on_goal, 10)
-        if STYLE == "timer":
-            self.create_timer(0.1, self.on_timer)
+            self.create_subscription(
+                PoseStamped, "/goal_pose", self.on_goal, 10, callback_group=group
+            )
+        if TIMED:
+            self.create_timer(0.1, self.on_timer, callback_group=group)
         if STYLE == "goal_once_reset":
             self.create_service(Trigger, "~/reset", self.on_reset)
         self.integral, self.last_wall = 0.0, time.monotonic()
@@ -157,7 +166,12 @@ def main() -> None:
     rclpy.init()
     node = Usual()
     with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
-        rclpy.spin(node)
+        if STYLE == "multi_threaded":
+            executor = MultiThreadedExecutor(num_threads=4)
+            executor.add_node(node)
+            executor.spin()
+        else:
+            rclpy.spin(node)
 
 
 if __name__ == "__main__":

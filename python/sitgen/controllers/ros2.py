@@ -321,13 +321,18 @@ class Ros2Controller(UserController):
             env["PYTHONPATH"] = os.pathsep.join(
                 p for p in (env.get("PYTHONPATH", ""), tf2_msgs) if p
             )
+        # A process group of its own (the terminal's Ctrl-C reaches sitgen only; the group is
+        # ended whole) in sitgen's session, not a session of its own: Linux's scheduler
+        # autogroups are per session, and a node alone in a new one was left runnable but
+        # unrun for up to 20 s of its start-up beside a busy core (2 cores, 2 busy processes),
+        # long enough to miss the start timeout (docs/ros2.md, "Timing and determinism").
         try:
             self._proc = subprocess.Popen(
                 [*die_with_parent_prefix(), *self._argv],
                 stdin=subprocess.DEVNULL,
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
-                start_new_session=True,
+                process_group=0,
                 env=env,
             )
         except OSError as e:
