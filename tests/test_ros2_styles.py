@@ -7,7 +7,7 @@ resets), with every core of the machine kept busy beside them; ``sitgen check-co
 when a node's runs do not repeat, and when it cannot be kept alive. Skipped, with the reason,
 where the ROS 2 wheels (sitgen[ros2]) are not installed.
 
-``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 20: about 3 minutes for
+``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 20: about 4 minutes for
 the five styles' campaigns with both cores busy)."""
 
 from __future__ import annotations
