@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -115,6 +115,11 @@ bench-profiles: install-test
 # collisions; draws docs/vo-*.png (about 3 minutes on 2 cores).
 bench-vo: install-test
 	$(BIN)/python benches/vo_reciprocal.py
+
+# A ROS 2 node's start-up beside busy cores, in sitgen's session and in a session of its own
+# (scheduler autogroups; docs/ros2.md, "Timing and determinism"; about 10 minutes on 2 cores).
+bench-ros2-start: install-test
+	$(BIN)/python benches/ros2_start.py
 
 # Where a step's time goes: the reference scene without Python under perf (Linux perf needed).
 profile:

@@ -22,7 +22,9 @@ from what the laser sees ahead, in one of these styles:
   so what it answers depends on the machine's timing and no run repeats;
   ``sitgen check-controller`` must say so.
 
-Default QoS everywhere except the scan (sensor data, as Nav2 subscribes to it).
+Default QoS everywhere except the scan (sensor data, as Nav2 subscribes to it). Where
+``USUAL_START_LOG`` names a file, the node appends to it the seconds from its process's start to
+its node made (``benches/ros2_start.py``).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+import os
 import sys
 import time
 from typing import Any
@@ -45,7 +48,6 @@ from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Trigger
 
 STYLE = sys.argv[1]
-TIMED = STYLE in ("timer", "multi_threaded")
 
 
 def stamp_s(msg: Any) -> float:
@@ -70,6 +72,13 @@ def steer(odom: Odometry, goal: tuple[float, float], scan: LaserScan) -> Twist:
     return command
 
 
+def seconds_since_start() -> float:
+    """Seconds since this process started (Linux's /proc: its start in clock ticks since boot)."""
+    with open("/proc/self/stat") as stat, open("/proc/uptime") as uptime:
+        started = int(stat.read().rpartition(")")[2].split()[19]) / os.sysconf("SC_CLK_TCK")
+        return float(uptime.read().split()[0]) - started
+
+
 class Usual(Node):
     def __init__(self) -> None:
         super().__init__(f"usual_{STYLE}")
@@ -91,7 +100,7 @@ class Usual(Node):
             self.create_subscription(
                 PoseStamped, "/goal_pose", self.on_goal, 10, callback_group=group
             )
-        if TIMED:
+        if STYLE in ("timer", "multi_threaded"):
             self.create_timer(0.1, self.on_timer, callback_group=group)
         if STYLE == "goal_once_reset":
             self.create_service(Trigger, "~/reset", self.on_reset)
@@ -165,6 +174,9 @@ class Usual(Node):
 def main() -> None:
     rclpy.init()
     node = Usual()
+    if log := os.environ.get("USUAL_START_LOG"):
+        with open(log, "a") as out:
+            out.write(f"{seconds_since_start():.2f}\n")
     with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
         if STYLE == "multi_threaded":
             executor = MultiThreadedExecutor(num_threads=4)
