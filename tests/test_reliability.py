@@ -117,11 +117,16 @@ def campaign_spec(path: Path, controller: str, n: int = 3, time_limit_s: float =
         (f"{PY}:Segfaults", "was killed by SIGSEGV at 0.3 s"),
         (f"{MISBEHAVING} closeout", "closed its output at 0.4 s"),
         (f"{MISBEHAVING} deaf", "stopped reading its input at"),
+        (f"{MISBEHAVING} hang", "did not reply within 1 s at 0.4 s; it is waiting, not computing"),
+        (f"{MISBEHAVING} noflush", "did not reply within 1 s at 0.4 s; it is waiting, not comp"),
+        (f"{MISBEHAVING} spin", "did not reply within 1 s at 0.4 s; it is computing"),
     ],
 )
 def test_a_controller_that_hangs_exits_or_crashes_is_that_runs_error(
     situation_file: Path, controller: str, reason: str
 ) -> None:
+    """Each ends its run with an error that says how; one that did not reply says whether it
+    is computing (a loop) or waiting (a reply not flushed, most often)."""
     done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
     assert done.returncode == 1, done.stdout + done.stderr
     assert "outcome error" in done.stdout and reason in done.stdout, done.stdout
@@ -182,7 +187,7 @@ def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: 
         "Exits": "called sys.exit(0) at 0.3 s",
         "Segfaults": "was killed by SIGSEGV at 0.3 s",
         "Hangs": late,
-        "HoldsTheGil": late,
+        "HoldsTheGil": late + "; it is computing, not waiting for input: a loop that does not end?",
         "Swallows": late,
         "HardExits": "exited with code 7 at 0.3 s",
     }

@@ -115,6 +115,8 @@ def run_node(situation: sitgen.Situation, mode: str) -> sitgen.RunRecord:
         ("crash", "exited with code 3 at 0.4 s: 'misbehaving: crashing on purpose'"),
         ("hang", "did not publish /cmd_vel for 10 control periods in a row"),
         ("silent", "never published /cmd_vel within 5 s of its first observation"),
+        ("busy", "did not publish /cmd_vel for 10 control periods in a row"),
+        ("busy_at_once", "never published /cmd_vel within 5 s of its first observation"),
     ],
 )
 def test_a_node_that_crashes_hangs_or_never_publishes_ends_its_run_as_an_error(
@@ -123,6 +125,10 @@ def test_a_node_that_crashes_hangs_or_never_publishes_ends_its_run_as_an_error(
     record = run_node(situation, mode)
     assert record.outcome == "error"
     assert reason in record.reason
+    # A node that stops answering because it computes for ever is told from one that waits
+    # for input it missed.
+    busy = "; it kept the processor busy for "
+    assert (busy in record.reason) == mode.startswith("busy"), record.reason
 
 
 def test_a_node_that_crashes_ends_only_its_own_runs(tmp_path: Path) -> None:

@@ -1,14 +1,14 @@
 """ROS 2 nodes written the usual ways (tests/ros2_nodes/usual.py: acting in the scan callback on
-the latest odometry and goal, on a timer on simulated time spun by rclpy's single- or
-multi-threaded executor, through an approximate-time synchroniser, reading the route once)
-drive campaigns that store the same runs, trajectories
-included, on 2 workers and again on 1 (there with the node kept alive across runs, where it
-resets), with every core of the machine kept busy beside them; ``sitgen check-controller`` says
-when a node's runs do not repeat, and when it cannot be kept alive. Skipped, with the reason,
-where the ROS 2 wheels (sitgen[ros2]) are not installed.
+the latest odometry and goal, spun by rclpy's single-threaded executor or its EventsExecutor, on
+a timer on simulated time spun by the single- or multi-threaded executor, through an
+approximate-time synchroniser, reading the route once) drive campaigns that store the same
+runs, trajectories included, on 2 workers and again on 1 (there with the node kept alive across
+runs, where it resets), with every core of the machine kept busy beside them; ``sitgen
+check-controller`` says when a node's runs do not repeat, and when it cannot be kept alive.
+Skipped, with the reason, where the ROS 2 wheels (sitgen[ros2]) are not installed.
 
-``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 20: about 4 minutes for
-the five styles' campaigns with both cores busy)."""
+``SITGEN_TEST_STYLE_RUNS`` sets the runs of each campaign (default 20: about 5 minutes for
+the six styles' campaigns with both cores busy)."""
 
 from __future__ import annotations
 
@@ -65,7 +65,15 @@ def stored(db: Path) -> list[tuple[Any, ...]]:
 
 
 @pytest.mark.parametrize(
-    "style", ["scan_callback", "timer", "multi_threaded", "approximate_sync", "goal_once"]
+    "style",
+    [
+        "scan_callback",
+        "timer",
+        "multi_threaded",
+        "events_executor",
+        "approximate_sync",
+        "goal_once",
+    ],
 )
 def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
     style: str, tmp_path: Path, busy_machine: None

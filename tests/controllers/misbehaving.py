@@ -5,8 +5,8 @@ an even metre; `closeout` closes its output and runs on; `deaf` stops reading it
 floods its output; `spawn` starts a child that sleeps, writes its pid to the file named by the
 second argument and then hangs; `stderrflood` writes 600 MiB to stderr on reset, then a last
 line, and exits; `longline` sends a 2 MiB line with no end and hangs; `ignoreend` drives
-well but ignores `end`; `good` drives straight at
-0.3 m/s."""
+well but ignores `end`; `noflush` stops flushing its replies (they wait in its output buffer);
+`spin` computes for ever; `good` drives straight at 0.3 m/s."""
 
 import json
 import os
@@ -15,6 +15,7 @@ import sys
 import time
 
 mode = sys.argv[1]
+buffered = None
 for step, line in enumerate(sys.stdin):
     message = json.loads(line)
     if message["type"] == "end":
@@ -38,6 +39,15 @@ for step, line in enumerate(sys.stdin):
     elif step >= 5 and mode == "hang":
         time.sleep(30)
         reply = '{"v": 0, "omega": 0}'
+    elif step >= 5 and mode == "spin":
+        while True:
+            pass
+    elif step >= 5 and mode == "noflush":
+        # A buffer of its own: sys.stdout is block-buffered on a pipe, but not where the
+        # environment sets PYTHONUNBUFFERED.
+        buffered = buffered or open(1, "w", buffering=1 << 16, closefd=False)  # noqa: SIM115
+        buffered.write('{"v": 0.3, "omega": 0.0}\n')
+        continue
     elif step >= 5 and mode == "garbage":
         reply = "hello"
     elif step >= 5 and mode == "noreply":

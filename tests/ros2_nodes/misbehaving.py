@@ -3,8 +3,10 @@
 
 ``misbehaving.py MODE`` answers each scan with a slow forward command (Twist), except:
 ``crash`` exits with code 3 at its fifth scan; ``hang`` stops answering (and keeps spinning)
-after its fifth; ``silent`` never publishes; ``crash_on_even_routes`` crashes at once on a route
-with an even number of waypoints and otherwise behaves (so that a campaign has both).
+after its fifth; ``busy`` never returns from the callback of its sixth (it computes for ever);
+``silent`` never publishes; ``busy_at_once`` never returns from its first scan callback;
+``crash_on_even_routes`` crashes at once on a route with an even number of waypoints and
+otherwise behaves (so that a campaign has both).
 """
 
 from __future__ import annotations
@@ -53,6 +55,9 @@ class Misbehaving(Node):
         if MODE == "crash" and self.scans == 5:
             print("misbehaving: crashing on purpose", file=sys.stderr, flush=True)
             os._exit(3)
+        if (MODE == "busy" and self.scans > 5) or MODE == "busy_at_once":
+            while True:
+                pass
         if MODE == "silent" or (MODE == "hang" and self.scans > 5):
             return
         command = Twist()

@@ -11,6 +11,9 @@ from what the laser sees ahead, in one of these styles:
   (Nav2's controller server runs on such a rate loop);
 - ``multi_threaded``: ``timer`` spun by rclpy's multi-threaded executor (4 threads) with every
   callback in one reentrant callback group, so callbacks may run at once;
+- ``events_executor``: ``scan_callback`` spun by rclpy's experimental EventsExecutor, a turn
+  at a time with a timeout (its ``spin()``, and ``spin_once()`` with no timeout, keep a core busy
+  and run no callback in the Kilted wheels: docs/ros2.md, "A node that does not answer");
 - ``approximate_sync``: pairs scan and odometry by stamp within a slop, as message_filters'
   ApproximateTimeSynchronizer does (message_filters has no wheel), and acts on each pair;
 - ``goal_once``: reads the route from ``/plan`` once at start (then drops the subscription) and
@@ -42,6 +45,7 @@ from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry, Path
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.experimental.events_executor import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import LaserScan
@@ -87,7 +91,13 @@ class Usual(Node):
         self.scan: LaserScan | None = None
         self.odom: Odometry | None = None
         self.goal: tuple[float, float] | None = None
-        if STYLE in ("scan_callback", "goal_once", "goal_once_reset", "wall_clock"):
+        if STYLE in (
+            "scan_callback",
+            "events_executor",
+            "goal_once",
+            "goal_once_reset",
+            "wall_clock",
+        ):
             self.create_subscription(LaserScan, "/scan", self.on_scan, qos_profile_sensor_data)
         else:
             self.create_subscription(
@@ -182,6 +192,11 @@ def main() -> None:
             executor = MultiThreadedExecutor(num_threads=4)
             executor.add_node(node)
             executor.spin()
+        elif STYLE == "events_executor":
+            events = EventsExecutor()
+            events.add_node(node)
+            while rclpy.ok():
+                events.spin_once(timeout_sec=1.0)
         else:
             rclpy.spin(node)
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.controllers.host import MAX_LINE_BYTES
+from sitgen.controllers.proc_tasks import BUSY_SHARE, busy_share
 from sitgen.world.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
@@ -47,6 +48,9 @@ END_TIMEOUT_S = 1.0
 MAX_REPLY_BYTES = MAX_LINE_BYTES
 """Longest line a controller program may send (a reply is a few dozen bytes; a program that
 writes more without a newline is broken, and is stopped before it costs memory)."""
+BUSY_LOOK_S = 0.2
+"""Wall seconds a program that did not reply in time is watched for, to tell whether it is
+computing or waiting (it is killed after)."""
 STDERR_TAIL_BYTES = 4096
 """What is kept of a controller program's stderr: its tail, read as it comes, so that the
 last line can be quoted when it dies however much it writes."""
@@ -434,7 +438,8 @@ class ProcessController(UserController):
             left = deadline - time.monotonic()
             ready = self._selector.select(left) if left > 0 else []
             if not ready:
-                raise ControllerError(self._stuck(f"did not reply within {timeout_s:g} s", when))
+                late = f"did not reply within {timeout_s:g} s"
+                raise ControllerError(self._stuck(late, when) + self._busy_or_waiting())
             if any(key.fileobj is proc.stderr for key, _ in ready):
                 self._drain_stderr()
             if not any(key.fileobj is proc.stdout for key, _ in ready):
@@ -484,6 +489,20 @@ class ProcessController(UserController):
         if self._proc.poll() is not None:
             return self._died(when)
         return f"controller {self.name} {how} {when}"
+
+    def _busy_or_waiting(self) -> str:
+        """What the error for a program that has not replied adds: whether it is computing
+        (a loop that does not end) or waiting (a reply left in its output buffer, the commonest
+        way a program hangs in lockstep), from its processor time over a short look. The share
+        is not quoted: a run's stored reason is the same every time it ends so."""
+        if self._proc is None or self._proc.poll() is not None:
+            return ""
+        if busy_share({self._proc.pid, *marked_pids(self._mark)}, BUSY_LOOK_S) >= BUSY_SHARE:
+            return "; it is computing, not waiting for input: a loop that does not end?"
+        return (
+            "; it is waiting, not computing: a reply left in its output buffer? (flush after "
+            "every reply: docs/controller-protocol.md)"
+        )
 
     def _died(self, when: str) -> str:
         """Why the program stopped answering: its exit code, or that it closed its output and

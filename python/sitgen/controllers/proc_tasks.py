@@ -3,7 +3,8 @@ gone back to waiting after a message, and whether its process has exited.
 
 What it does: :func:`wait_idle` waits until every thread of some processes is asleep (none
 running, runnable or waiting on a device), within a bound, Fast DDS's own threads left out
-(:func:`protocol_thread`); :func:`task_state` reads one process's or thread's state letter.
+(:func:`protocol_thread`); :func:`task_state` reads one process's or thread's state letter;
+:func:`cpu_seconds` the processor time some processes have used.
 
 Why: a node's executor takes messages that arrived together in the order it made its
 subscriptions, not the order they were sent; handing it a message only once it has gone back to
@@ -14,7 +15,8 @@ and opening each file anew cost about 25 µs a thread.
 
 Parameters: none (the bound is the caller's).
 
-Source: proc(5) (``/proc/PID/task/TID/stat``, its third field).
+Source: proc(5) (``/proc/PID/task/TID/stat``, its third field; ``/proc/PID/stat``, its 14th and
+15th, ``utime`` and ``stime`` in clock ticks).
 """
 
 from __future__ import annotations
@@ -40,6 +42,36 @@ def state_letter(stat: bytes) -> bytes:
     """The state letter of a /proc stat file's text."""
     at = stat.rindex(b")") + 2  # after the command name, which may hold anything
     return stat[at : at + 1]
+
+
+def cpu_seconds(pids: Iterable[int]) -> float:
+    """The processor time, user and system, that the processes ``pids`` have used so far
+    (every thread's, those that exited included); a process gone counts nothing."""
+    ticks = 0
+    for pid in pids:
+        try:
+            with open(f"/proc/{pid}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(b")") + 2 :].split()  # from the third field, the state
+        ticks += int(fields[11]) + int(fields[12])
+    return ticks / os.sysconf("SC_CLK_TCK")
+
+
+BUSY_SHARE = 0.5
+"""Share of a core a controller that does not answer must use to be called busy (computing,
+not waiting for input): one waiting uses next to none, and one that loops may get only about
+half a core beside a busy machine's other work."""
+
+
+def busy_share(pids: Iterable[int], window_s: float) -> float:
+    """The share of one core the processes ``pids`` use over the next ``window_s`` seconds
+    (whose wait it costs)."""
+    pids = list(pids)
+    before, start = cpu_seconds(pids), time.monotonic()
+    time.sleep(window_s)
+    return (cpu_seconds(pids) - before) / (time.monotonic() - start)
 
 
 PROTOCOL_THREADS = b"dds."

@@ -81,7 +81,7 @@ from sitgen.controllers.external import (
     short,
     signal_name,
 )
-from sitgen.controllers.proc_tasks import task_state, wait_idle
+from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, task_state, wait_idle
 from sitgen.controllers.ros2_bridge import LIB, Bridge, ros2_available
 from sitgen.controllers.ros2_messages import FRAMES, TOPICS, answer_of, stamp
 from sitgen.controllers.ros2_tf import node_python_path
@@ -189,6 +189,8 @@ class Ros2Controller(UserController):
         self._command = (0.0, 0.0)
         self._answered_once = False
         self._missed = 0
+        self._unanswered_since = (0.0, 0.0)
+        """Wall time and the node's processor time when its answers stopped coming."""
         self._info: dict[str, Any] = {}
         self._goal_index = -1
         self._pids: set[int] = set()
@@ -261,10 +263,13 @@ class Ros2Controller(UserController):
             self._missed = 0
         else:
             self._missed += 1
+            if self._missed == 1:
+                self._unanswered_since = self._clocks()
             if self._missed >= self._max_missed:
                 raise ControllerError(
                     f"controller {self.name} did not publish {TOPICS.cmd_vel} for "
                     f"{self._missed} control periods in a row at {t:.1f} s"
+                    + self._busy_while_unanswered()
                 )
         return self._command
 
@@ -449,11 +454,13 @@ class Ros2Controller(UserController):
         matching loses the first), within the start timeout; answers to the repeats are then
         let in and dropped, so that every later answer belongs to its own period."""
         deadline = time.monotonic() + self._start_timeout_s
+        self._unanswered_since = self._clocks()
         while not self._await_answer(bridge, t, REPEAT_S):
             if time.monotonic() > deadline:
                 raise ControllerError(
                     f"controller {self.name} never published {TOPICS.cmd_vel} within "
                     f"{self._start_timeout_s:g} s of its first observation"
+                    + self._busy_while_unanswered()
                 )
             # The goal too: a subscription that matched late (volatile) missed it.
             self._goal_index = -1
@@ -473,6 +480,24 @@ class Ros2Controller(UserController):
             bridge.spin(left)
         self._answers.clear()
         self._answered_once = True
+
+    def _clocks(self) -> tuple[float, float]:
+        """Wall time and the processor time the node's processes have used."""
+        return time.monotonic(), cpu_seconds(self._pids)
+
+    def _busy_while_unanswered(self) -> str:
+        """What an error for a node that stopped answering adds when the node kept a core busy
+        all the while: it was not waiting for input (a node that misses its messages idles).
+        Measured, but not quoted: a run's stored reason is the same every time it ends so."""
+        (now, cpu_now), (then, cpu_then) = self._clocks(), self._unanswered_since
+        wall, cpu = now - then, cpu_now - cpu_then
+        if cpu < BUSY_SHARE * wall:
+            return ""
+        return (
+            "; it kept the processor busy all the while, computing, not waiting for input: a "
+            "callback that does not return, or an executor that spins without running "
+            'callbacks? (docs/ros2.md, "A node that does not answer")'
+        )
 
     def _await_answer(self, bridge: Bridge, t: float, timeout_s: float) -> bool:
         """Spin until the node answers the period at ``t``; False if it did not in time."""
