@@ -177,6 +177,16 @@ def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
     assert exited.outcome == "error" and "called sys.exit(0) at 0.3 s" in exited.reason
 
 
+def test_a_class_in_a_host_process_that_does_not_reply_is_told_computing_or_waiting(
+    situation: sitgen.Situation,
+) -> None:
+    late = "did not reply within 1 s at 0.3 s; it is "
+    hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10)
+    assert late + "computing, not waiting for input" in hangs.reason, hangs.reason
+    sleeps = sitgen.run(situation, controller=f"{PY}:Swallows", time_limit=10)
+    assert late + "waiting, not computing: on a sleep, a lock" in sleeps.reason, sleeps.reason
+
+
 def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: Path) -> None:
     db = tmp_path / "c.db"
     # In the pool workers a class is called in process (the fast path): an exception or a

@@ -492,13 +492,16 @@ class ProcessController(UserController):
 
     def _busy_or_waiting(self) -> str:
         """What the error for a program that has not replied adds: whether it is computing
-        (a loop that does not end) or waiting (a reply left in its output buffer, the commonest
-        way a program hangs in lockstep), from its processor time over a short look. The share
+        (a loop that does not end) or waiting (for a program, most often on a reply left in its
+        output buffer, the commonest way one hangs in lockstep), from its processor time over a
+        short look. The share
         is not quoted: a run's stored reason is the same every time it ends so."""
         if self._proc is None or self._proc.poll() is not None:
             return ""
         if busy_share({self._proc.pid, *marked_pids(self._mark)}, BUSY_LOOK_S) >= BUSY_SHARE:
             return "; it is computing, not waiting for input: a loop that does not end?"
+        if self._host:  # sitgen's host writes the class's replies; the class itself waits
+            return "; it is waiting, not computing: on a sleep, a lock or input of its own?"
         return (
             "; it is waiting, not computing: a reply left in its output buffer? (flush after "
             "every reply: docs/controller-protocol.md)"
