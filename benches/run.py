@@ -260,7 +260,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     - ``ros2:`` the same route follower as a node (DDS in lockstep), where sitgen[ros2] is
       installed, started for each run and kept alive across runs (``keep_alive``: its start
       is then the reset between runs), and a trivial node kept alive (benches/trivial_node.py:
-      sitgen's lockstep and an rclpy node's turn; benches/trivial_node.c: the lockstep alone),
+      sitgen's lockstep and an rclpy node's turn, on rclpy's single-threaded executor and on
+      its EventsExecutor; benches/trivial_node.c: the lockstep alone),
       each also with sitgen's side of a period in Python rather than C;
     - ``navground:`` HL and ORCA with the sensed perception (on the fast path, as a campaign
       runs them), where sitgen[navground] is installed: their own cost is the adapter and the
@@ -302,7 +303,16 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
         False,
         None,
     )
-    kept_alive = {"ros2 route follower, kept alive", "ros2 trivial node, kept alive"}
+    kinds["ros2 trivial node on EventsExecutor, kept alive"] = (
+        f"ros2:{sys.executable} {folder / 'trivial_node.py'} events_executor",
+        False,
+        None,
+    )
+    kept_alive = {
+        "ros2 route follower, kept alive",
+        "ros2 trivial node, kept alive",
+        "ros2 trivial node on EventsExecutor, kept alive",
+    }
     c_node = compile_trivial_c_node(folder)
     if c_node is not None:
         kinds["ros2 trivial C node, kept alive"] = (f"ros2:{c_node}", False, None)
