@@ -127,7 +127,7 @@ def test_a_node_that_crashes_hangs_or_never_publishes_ends_its_run_as_an_error(
     assert reason in record.reason
     # A node that stops answering because it computes for ever is told from one that waits
     # for input it missed.
-    busy = "; it kept the processor busy all the while, computing, not waiting for input"
+    busy = "; it was computing, not waiting for input: a callback that does not return"
     assert (busy in record.reason) == mode.startswith("busy"), record.reason
 
 

@@ -59,10 +59,10 @@ def cpu_seconds(pids: Iterable[int]) -> float:
     return ticks / os.sysconf("SC_CLK_TCK")
 
 
-BUSY_SHARE = 0.5
+BUSY_SHARE = 0.25
 """Share of a core a controller that does not answer must use to be called busy (computing,
-not waiting for input): one waiting uses next to none, and one that loops may get only about
-half a core beside a busy machine's other work."""
+not waiting for input): one waiting uses next to none, and one that loops gets a whole core
+on an idle machine but may get a third of one, or less, beside a busy machine's other work."""
 
 
 def busy_share(pids: Iterable[int], window_s: float) -> float:

@@ -487,16 +487,16 @@ class Ros2Controller(UserController):
 
     def _busy_while_unanswered(self) -> str:
         """What an error for a node that stopped answering adds when the node kept a core busy
-        all the while: it was not waiting for input (a node that misses its messages idles).
+        meanwhile: it was not waiting for input (a node that misses its messages idles).
         Measured, but not quoted: a run's stored reason is the same every time it ends so."""
         (now, cpu_now), (then, cpu_then) = self._clocks(), self._unanswered_since
         wall, cpu = now - then, cpu_now - cpu_then
         if cpu < BUSY_SHARE * wall:
             return ""
         return (
-            "; it kept the processor busy all the while, computing, not waiting for input: a "
-            "callback that does not return, or an executor that spins without running "
-            'callbacks? (docs/ros2.md, "A node that does not answer")'
+            "; it was computing, not waiting for input: a callback that does not return, or an "
+            'executor that spins without running callbacks? (docs/ros2.md, "A node that does '
+            'not answer")'
         )
 
     def _await_answer(self, bridge: Bridge, t: float, timeout_s: float) -> bool:
