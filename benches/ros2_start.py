@@ -1,7 +1,7 @@
 """How long a ROS 2 node takes to start beside busy cores, in sitgen's session and in a session
 of its own (``make bench-ros2-start``).
 
-sitgen starts a ``ros2:`` node in its own session, in a process group of its own. Linux's
+sitgen starts a ``ros2:`` node in sitgen's session, in a process group of its own. Linux's
 scheduler shares a core out between sessions (autogroups), and a node alone in a session of its
 own was now and then left runnable but unrun for seconds of its start-up beside busy cores —
 long enough, now and then, to miss the start timeout. This bench shows it: with every core kept

@@ -38,10 +38,15 @@ def task_state(stat_path: str) -> bytes | None:
     return state_letter(stat)
 
 
+def after_command(stat: bytes) -> bytes:
+    """A /proc stat file's text from its third field (the state) on: after the command name,
+    which may hold anything, spaces and parentheses included."""
+    return stat[stat.rindex(b")") + 2 :]
+
+
 def state_letter(stat: bytes) -> bytes:
     """The state letter of a /proc stat file's text."""
-    at = stat.rindex(b")") + 2  # after the command name, which may hold anything
-    return stat[at : at + 1]
+    return after_command(stat)[:1]
 
 
 def cpu_seconds(pids: Iterable[int]) -> float:
@@ -54,7 +59,7 @@ def cpu_seconds(pids: Iterable[int]) -> float:
                 stat = f.read()
         except OSError:
             continue
-        fields = stat[stat.rindex(b")") + 2 :].split()  # from the third field, the state
+        fields = after_command(stat).split()  # fields[0] is the third, the state
         ticks += int(fields[11]) + int(fields[12])
     return ticks / os.sysconf("SC_CLK_TCK")
 
