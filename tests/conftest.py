@@ -3,6 +3,7 @@ headless Chromium (Debian's, driven by Playwright; nothing downloads a browser).
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -12,9 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 import sitgen
+from sitgen import _core
+from sitgen.world.situation import Situation
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -130,3 +134,29 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """The longest files first (:data:`LONGEST_FIRST`), then the rest as collected."""
     rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+def two_robots(agent: tuple[float, float, float], peer: tuple[float, float, float],
+               peer_goal: list[float], peer_controller: dict[str, Any]) -> Situation:  # fmt: skip
+    """A 20 m square with nothing in it: the agent (route 12 m east) and one peer."""
+    base = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=1)
+    template = json.loads(base.to_json())["robots"][0]
+    robots = [
+        {
+            **template,
+            "id": i,
+            "role": role,
+            "at_end": "stop",
+            "start": {"x_m": x, "y_m": y, "heading_rad": h},
+            "waypoints": [goal],
+            "controller": controller,
+        }
+        for i, (role, (x, y, h), goal, controller) in enumerate(
+            [
+                ("agent", agent, [agent[0] + 12.0, agent[1]], {"name": "snd_follow"}),
+                ("peer", peer, peer_goal, peer_controller),
+            ]
+        )
+    ]
+    empty = np.zeros((200, 200), dtype=bool)
+    return Situation(_core.shrunk_situation(base.to_json(), empty, 0.1, json.dumps(robots)))

@@ -17,7 +17,7 @@ import pytest
 import sitgen
 from sitgen import _core
 from sitgen.world.situation import Situation
-from tests.conftest import campaign_on_2_and_1_workers, run_cli
+from tests.conftest import campaign_on_2_and_1_workers, run_cli, two_robots
 
 navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
 
@@ -72,32 +72,6 @@ class Stumbling:
         if obs.time > 2.0:
             raise ZeroDivisionError(f"a {self.role} divided by zero")
         return 0.3, 0.0
-
-
-def two_robots(agent: tuple[float, float, float], peer: tuple[float, float, float],
-               peer_goal: list[float], peer_controller: dict[str, Any]) -> Situation:  # fmt: skip
-    """A 20 m square with nothing in it: the agent (route 12 m east) and one peer."""
-    base = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=1)
-    template = json.loads(base.to_json())["robots"][0]
-    robots = [
-        {
-            **template,
-            "id": i,
-            "role": role,
-            "at_end": "stop",
-            "start": {"x_m": x, "y_m": y, "heading_rad": h},
-            "waypoints": [goal],
-            "controller": controller,
-        }
-        for i, (role, (x, y, h), goal, controller) in enumerate(
-            [
-                ("agent", agent, [agent[0] + 12.0, agent[1]], {"name": "snd_follow"}),
-                ("peer", peer, peer_goal, peer_controller),
-            ]
-        )
-    ]
-    empty = np.zeros((200, 200), dtype=bool)
-    return Situation(_core.shrunk_situation(base.to_json(), empty, 0.1, json.dumps(robots)))
 
 
 def test_a_peer_that_avoids_passes_a_standing_agent_that_a_blind_peer_strikes() -> None:

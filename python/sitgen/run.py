@@ -22,6 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
+from sitgen.controllers import sandbox
 from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
@@ -219,15 +220,28 @@ def run(
     run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
     core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
-    if core.agent_is_external or core.external_peers:
-        _drive(core, controller, situation, run_spec, step_timeout_s, senses, in_process)
-    elif senses is not None:
-        _step(core, None, senses)
+    forks = _forks(core, controller, situation, run_spec, in_process)
+    if forks:
+        done = sandbox.forked(
+            lambda: _finished(
+                core, controller, situation, run_spec, step_timeout_s, senses, in_process
+            )
+        )
+        if isinstance(done, sandbox.Died):
+            if forks == "agent":
+                # Made again with the class in a host process of its own, which reports what
+                # it did exactly as it always has (and keeps the run up to that step).
+                return run(situation, controller, time_limit, seed, spec, params,
+                           step_timeout_s, sensed, in_process=False)  # fmt: skip
+            core.fail(done.reason())
+            senses = None if senses is None else [core.observe_agent()]
+            out = core.finish()
+        else:
+            out, senses = done
     else:
-        core.run_to_end()
-    if senses is not None:
-        senses.append(core.observe_agent())
-    out = core.finish()
+        out, senses = _finished(
+            core, controller, situation, run_spec, step_timeout_s, senses, in_process
+        )
     record = json.loads(out["record"])
     return RunRecord(
         outcome=record["outcome"],
@@ -246,6 +260,50 @@ def run(
         coverage=record.get("coverage"),
         sensed=None if senses is None else _sensed(senses),
     )
+
+
+def _forks(
+    core: _core.Run,
+    controller: Any,
+    situation: Situation,
+    run_spec: Mapping[str, Any],
+    in_process: bool,
+) -> str | None:
+    """Whether the run is made in a child forked for it (:mod:`sitgen.controllers.sandbox`),
+    because it calls a user's class loaded in this process by name: ``"agent"`` (the agent's
+    ``python:``/``navground:`` class, in a pool worker), ``"peers"`` (a peer's), or None.
+    Not for an object handed to :func:`run` (the caller's own, whose effects are theirs to
+    keep) nor beside a ``ros2:`` node (its middleware lives in this process)."""
+    if not isinstance(controller, (str, type(None))):
+        return None
+    named = run_spec.get("controller") or situation.agent.controller
+    name = str(controller if controller is not None else named["name"])
+    if core.agent_is_external and in_process and name.startswith(("python:", "navground:")):
+        return "agent"
+    if core.external_peers and not name.startswith(ROS2_PREFIX):
+        return "peers"
+    return None
+
+
+def _finished(
+    core: _core.Run,
+    controller: Any,
+    situation: Situation,
+    run_spec: Mapping[str, Any],
+    step_timeout_s: float,
+    senses: list[Mapping[str, Any]] | None,
+    in_process: bool,
+) -> tuple[dict[str, Any], list[Mapping[str, Any]] | None]:
+    """``core`` stepped to its end and finished: its output and what the agent sensed."""
+    if core.agent_is_external or core.external_peers:
+        _drive(core, controller, situation, run_spec, step_timeout_s, senses, in_process)
+    elif senses is not None:
+        _step(core, None, senses)
+    else:
+        core.run_to_end()
+    if senses is not None:
+        senses.append(core.observe_agent())
+    return core.finish(), senses
 
 
 def _sensed(senses: list[Mapping[str, Any]]) -> Sensed:

@@ -6,7 +6,7 @@
 //! worker is then the only way out: the campaign's pool replaces it and reruns the run in a
 //! host process of its own, which reports the timeout as it always has.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU64, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -17,6 +17,9 @@ use pyo3::prelude::*;
 static DEADLINE_NS: AtomicU64 = AtomicU64::new(0);
 /// The process whose watcher thread runs: a forked child inherits the flag but not the thread.
 static WATCHER_PID: Mutex<u32> = Mutex::new(0);
+/// A file descriptor the watcher writes one byte (`W`) to before it kills this process, so
+/// that whoever waits on the process tells a missed deadline from any other SIGKILL; -1: none.
+static REPORT_FD: AtomicI32 = AtomicI32::new(-1);
 /// How often an idle watcher looks for a new call.
 const IDLE_POLL: Duration = Duration::from_millis(100);
 
@@ -34,8 +37,13 @@ fn watch() {
         let deadline = DEADLINE_NS.load(Ordering::Acquire);
         let now = now_ns();
         if deadline != 0 && now >= deadline {
-            // SAFETY: kill(2) on this process's own id; nothing is borrowed.
+            let fd = REPORT_FD.load(Ordering::Acquire);
+            // SAFETY: write(2) of one byte from a static buffer, then kill(2) on this process's
+            // own id; nothing is borrowed.
             unsafe {
+                if fd >= 0 {
+                    libc::write(fd, b"W".as_ptr().cast(), 1);
+                }
                 libc::kill(libc::getpid(), libc::SIGKILL);
             }
         }
@@ -102,7 +110,16 @@ fn kill_after(limit_s: Option<f64>) {
     }
 }
 
+/// Where the watchdog reports a kill (one byte, `W`, written to `fd` just before it kills this
+/// process), or nowhere (`None`).
+#[pyfunction]
+#[pyo3(signature = (fd=None))]
+fn watchdog_report(fd: Option<i32>) {
+    REPORT_FD.store(fd.unwrap_or(-1), Ordering::Release);
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(kill_after, m)?)?;
+    m.add_function(wrap_pyfunction!(watchdog_report, m)?)?;
     Ok(())
 }

@@ -191,14 +191,22 @@ def marked_env(env: Mapping[str, str] | None = None) -> tuple[dict[str, str], st
 
 
 def _reaper(process_mark: str) -> subprocess.Popen[bytes]:
-    """A small process that waits until this one is gone (its stdin, a pipe only this process
-    holds, reaches end of file) and then kills every process a controller of this one
-    started: what a run's own end would have killed, had it come."""
+    """A small process that waits until this one is gone (a pidfd of it; where there is none,
+    its stdin, a pipe this process holds, reaching end of file) and then kills every process a
+    controller of this one started: what a run's own end would have killed, had it come."""
     env = {k: v for k, v in os.environ.items() if k != MARK}
+    # It watches this process itself (a pidfd), not only its pipe: a fork of a controller's
+    # (a double-forked daemon) holds the pipe open and would keep the reaper waiting.
     code = (
-        "import sys; sys.stdin.buffer.read(); "
-        "from sitgen.controllers.external import kill_marked; "
-        f"kill_marked({process_mark + '.'!r}, whole=False)"
+        "import os, select, sys\n"
+        "try:\n"
+        f"    select.select([os.pidfd_open({os.getpid()})], [], [])\n"
+        "except ProcessLookupError:\n"
+        "    pass\n"
+        "except (OSError, AttributeError):\n"
+        "    sys.stdin.buffer.read()\n"
+        "from sitgen.controllers.external import kill_marked\n"
+        f"kill_marked({process_mark + '.'!r}, whole=False)\n"
     )
     return subprocess.Popen(
         [sys.executable, "-c", code],

@@ -50,12 +50,20 @@ def die_with_parent() -> None:
 
 
 def exception_line(e: BaseException) -> str:
-    text = str(e).strip().splitlines()
+    """``Type: first line of the message``; the type alone where the message cannot be had
+    (an exception whose ``__str__`` itself raises, or exits)."""
+    try:
+        text = str(e).strip().splitlines()
+    except BaseException:  # a user's exception: its text is best effort
+        text = []
     return f"{type(e).__name__}: {text[0]}" if text else type(e).__name__
 
 
 def _short(value: Any) -> str:
-    shown = repr(value)
+    try:
+        shown = repr(value)
+    except BaseException:  # a user's object: its text is best effort
+        shown = f"a {type(value).__name__}"
     return shown if len(shown) <= 80 else shown[:77] + "..."
 
 
@@ -81,7 +89,15 @@ def find_class(target: str) -> Any:
             if spec is None or spec.loader is None or not path.is_file():
                 raise ValueError(f"no file {path}")
             module = importlib.util.module_from_spec(spec)
-            spec.loader.exec_module(module)
+            # In sys.modules as an import would put it (unless the name is taken), so that
+            # pickle finds its functions and classes: a class using multiprocessing needs it.
+            sys.modules.setdefault(spec.name, module)
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                if sys.modules.get(spec.name) is module:
+                    del sys.modules[spec.name]
+                raise
         else:
             if os.getcwd() not in sys.path:
                 sys.path.insert(0, os.getcwd())
@@ -121,7 +137,10 @@ class BadReply(Exception):
 
 
 def command(value: Any, when: str) -> tuple[float, float]:
-    """A (v, omega) pair from what ``act`` returned; NaN passes (the run rejects it)."""
+    """A (v, omega) pair from what ``act`` returned; NaN passes (the run rejects it). Text is
+    not a pair of numbers, though ``"12"`` unpacks into two characters that convert."""
+    if isinstance(value, (str, bytes, bytearray)):
+        raise BadReply(f"{when} returned {_short(value)}; expected (v, omega) numbers")
     try:
         v, omega = value
         return float(v), float(omega)

@@ -37,7 +37,9 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
+from sitgen.controllers import sandbox
 from sitgen.controllers.external import (
+    END_TIMEOUT_S,
     START_TIMEOUT_S,
     STEP_TIMEOUT_S,
     ControllerError,
@@ -89,11 +91,14 @@ class InProcessController(UserController):
         if self._target is not None:
             return
         assert self._path is not None
+        sandbox.note(self.name, sandbox.IN_RESET, 0.0, START_TIMEOUT_S)
         with self._watched(START_TIMEOUT_S):
             try:
                 self._target = instantiate(find_class(self._path), self._params)
             except ValueError as e:
                 raise ControllerError(f"controller {self.name} {e}") from None
+            finally:
+                sandbox.returned_in_fork()
 
     def reset(self, info: dict[str, Any]) -> None:
         self.load()
@@ -101,6 +106,7 @@ class InProcessController(UserController):
         told = json.loads(json.dumps(info))
         self._angles = np.asarray(told["laser"]["angles"], dtype=np.float64)
         self._max_range = float(told["laser"]["range_m"])
+        sandbox.note(self.name, sandbox.IN_RESET, 0.0, START_TIMEOUT_S)
         with self._watched(START_TIMEOUT_S):
             self._call(lambda: self._target.reset(told), "in reset", START_TIMEOUT_S)
 
@@ -118,9 +124,11 @@ class InProcessController(UserController):
             ),
             obs.get("waypoints_reached", 0),
         )
+        sandbox.note(self.name, sandbox.AT_STEP, float(obs["time"]), self._step_timeout_s)
         with self._watched(self._step_timeout_s):
-            value = self._call(lambda: self._target.act(observation), when, self._step_timeout_s)
-        return self._command(value, when)
+            return self._call(  # type: ignore[no-any-return]
+                lambda: command(self._target.act(observation), when), when, self._step_timeout_s
+            )
 
     def drive(self, core: _core.Run) -> None:
         """Step ``core`` to its end, the core calling ``act`` whenever the agent decides;
@@ -130,36 +138,52 @@ class InProcessController(UserController):
         caught, reason_of = self._caught, self._reason_of
         timed = _can_time()
         at = [0.0]
+        armed, fired = _ARMED, _FIRED
+        sandbox.note(self.name, sandbox.AT_STEP, 0.0, timeout_s)
+        note_time, returned_in_fork = sandbox.note_time, sandbox.returned_in_fork
 
         def act(
             ranges: Any, pose: Any, velocity: Any, stalled: bool, time_s: float, tracks: Any, k: int
         ) -> tuple[float, float]:
             at[0] = time_s
+            note_time(time_s)
             obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
             if timed:
+                fired[0] = False
+                armed[0] = True
                 signal.setitimer(signal.ITIMER_REAL, timeout_s)
             try:
                 value = target_act(obs)
+                # The common reply, checked inline: a pair of floats is the command as it is.
+                if type(value) is tuple and len(value) == 2:
+                    v, omega = value
+                    if type(v) is float and type(omega) is float:
+                        command_ = value
+                    else:
+                        command_ = command(value, f"at {time_s:.1f} s")
+                else:
+                    command_ = command(value, f"at {time_s:.1f} s")
             except StepTimeout:
                 raise
+            except BadReply as e:
+                raise ControllerError(f"controller {self.name} {e}") from None
             except caught as e:  # a user's bug must end this run only
                 raise reason_of(e, f"at {time_s:.1f} s") from None
             finally:
                 if timed:
+                    armed[0] = False
                     signal.setitimer(signal.ITIMER_REAL, 0)
-            # The common reply, checked inline: a pair of floats is the command as it is.
-            if type(value) is tuple and len(value) == 2:
-                v, omega = value
-                if type(v) is float and type(omega) is float:
-                    return value
-            return self._command(value, f"at {time_s:.1f} s")
+                returned_in_fork()
+            if fired[0]:  # the class caught the timeout and went on: it was late all the same
+                raise StepTimeout
+            return command_
 
         kill_after_s = timeout_s + KILL_GRACE_S if self._isolated else None
-        with _alarm(timed):
-            try:
+        try:
+            with _alarm(timed):
                 core.drive(act, kill_after_s)
-            except StepTimeout:
-                raise ControllerError(self._late(timeout_s, f"at {at[0]:.1f} s")) from None
+        except StepTimeout:
+            raise ControllerError(self._late(timeout_s, f"at {at[0]:.1f} s")) from None
 
     def peer_act(self) -> Callable[..., tuple[float, float]]:
         """The call the core makes whenever the peer this controller drives decides (the
@@ -176,9 +200,12 @@ class InProcessController(UserController):
         ) -> tuple[float, float]:
             obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
             when = f"at {time_s:.1f} s"
+            sandbox.note(self.name, sandbox.AT_STEP, time_s, timeout_s)
             with self._watched(timeout_s):
-                value = self._call(lambda: target_act(obs), when, timeout_s)
-            return self._command(value, when)
+                reply: tuple[float, float] = self._call(
+                    lambda: command(target_act(obs), when), when, timeout_s
+                )
+            return reply
 
         return act
 
@@ -204,21 +231,25 @@ class InProcessController(UserController):
             waypoints_reached=waypoints_reached,
         )
 
-    def _command(self, value: Any, when: str) -> tuple[float, float]:
-        try:
-            return command(value, when)
-        except BadReply as e:
-            raise ControllerError(f"controller {self.name} {e}") from None
-
     def _late(self, timeout_s: float, when: str) -> str:
         return f"controller {self.name} did not reply within {timeout_s:g} s {when}"
 
     def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
+        """``call()`` (the class's code, and converting what it returned) under ``timeout_s``:
+        whatever it raises, however late it is, ends this run only, with the host's reason."""
         try:
-            with _alarm(_can_time()), _deadline(timeout_s):
-                return call()
+            try:
+                with _alarm(_can_time()), _deadline(timeout_s):
+                    value = call()
+            finally:
+                sandbox.returned_in_fork()
+            if _FIRED[0]:  # the class caught the timeout and went on: it was late all the same
+                raise StepTimeout
+            return value
         except StepTimeout:
             raise ControllerError(self._late(timeout_s, when)) from None
+        except BadReply as e:
+            raise ControllerError(f"controller {self.name} {e}") from None
         except self._caught as e:  # a user's bug must end this run only
             raise self._reason_of(e, when) from None
 
@@ -241,13 +272,17 @@ class InProcessController(UserController):
             _core.kill_after(None)
 
     def close(self) -> str | None:
+        """Best effort, under :data:`END_TIMEOUT_S` as a program's exit after ``end`` is: the
+        run's outcome is already set, and whatever ``close`` does ends here."""
         close = getattr(self._target, "close", None)
-        if callable(close):
-            # Closing is best effort: the run's outcome is already set.
-            try:
-                close()
-            except (Exception, SystemExit) as e:
-                return f"close() raised: {exception_line(e)}"
+        if not callable(close):
+            return None
+        sandbox.note(self.name, sandbox.IN_CLOSE, 0.0, END_TIMEOUT_S)
+        try:
+            with self._watched(END_TIMEOUT_S):
+                self._call(close, "in close()", END_TIMEOUT_S)
+        except ControllerError as e:
+            return str(e).removeprefix(f"controller {self.name} ")
         return None
 
 
@@ -263,8 +298,19 @@ def _can_time() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+_ARMED = [False]
+"""Whether a call is under its deadline now: an alarm that fires once the call has returned
+(late, or pending while the machine paused this process) is dropped, never raised in sitgen's
+own code."""
+_FIRED = [False]
+"""Whether the deadline of the call under way fired: a class that catches the StepTimeout and
+goes on was late all the same."""
+
+
 def _expire(signum: int, frame: object) -> None:
-    raise StepTimeout
+    if _ARMED[0]:
+        _FIRED[0] = True
+        raise StepTimeout
 
 
 @contextlib.contextmanager
@@ -277,6 +323,7 @@ def _alarm(timed: bool) -> Iterator[None]:
     try:
         yield
     finally:
+        _ARMED[0] = False
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
 
@@ -288,8 +335,11 @@ def _deadline(timeout_s: float) -> Iterator[None]:
     if not _can_time():
         yield
         return
+    _FIRED[0] = False
+    _ARMED[0] = True
     signal.setitimer(signal.ITIMER_REAL, timeout_s)
     try:
         yield
     finally:
+        _ARMED[0] = False
         signal.setitimer(signal.ITIMER_REAL, 0)

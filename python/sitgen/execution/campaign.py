@@ -20,6 +20,7 @@ import json
 import math
 import multiprocessing
 import multiprocessing.connection
+import multiprocessing.forkserver
 import os
 import signal
 import threading
@@ -36,7 +37,7 @@ from typing import Any
 
 from sitgen import _core
 from sitgen import _core as core
-from sitgen.controllers.external import pin_to_one_core
+from sitgen.controllers.external import MARK, marked_env, pin_to_one_core
 from sitgen.controllers.host import die_with_parent
 from sitgen.execution.jobs import (
     MAX_RUNS,
@@ -245,7 +246,7 @@ def _safe_user_job(job: Job, in_process: bool = True, cwd: str | None = None) ->
         os.chdir(cwd)
     try:
         return run_user_job(job, in_process)
-    except Exception as e:  # sitgen's own bug on one run must not end the campaign
+    except BaseException as e:  # sitgen's own bug on one run must not end the campaign
         return {"ok": False, "error": f"sitgen failed on this run: {type(e).__name__}: {e}"}
 
 
@@ -256,6 +257,20 @@ def pool_context() -> multiprocessing.context.BaseContext:
     The server imports the campaign's code once, so a worker starts in milliseconds."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload([__name__])
+    # The server starts carrying this process's controller mark, and so does every process
+    # forked from it or from its workers without exec (a user's daemon): /proc shows a forked
+    # process the environment its ancestor was executed with, so this process's reaper finds
+    # them all should it die outright (sitgen.controllers.external.marked_env).
+    mark = marked_env()[1]
+    previous = os.environ.get(MARK)
+    os.environ[MARK] = mark
+    try:
+        multiprocessing.forkserver.ensure_running()
+    finally:
+        if previous is None:
+            del os.environ[MARK]
+        else:
+            os.environ[MARK] = previous
     return context
 
 

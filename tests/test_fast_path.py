@@ -1,0 +1,241 @@
+"""The fast path as safe as the host process: a ``python:`` class called in a campaign's pool
+worker (or a ``python:`` peer stepped in sitgen's own process) that does what ordinary or
+careless Python code does — raises from a ``__float__``, starts threads and children, forks,
+kills its process group, leaves signal handlers — ends, hangs or kills nothing but its own run,
+gets the reason the host process gives, and leaves no process behind (checked from /proc)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import psutil
+import pytest
+
+from tests.conftest import ROOT, Result, sitgen_command, two_robots
+
+CARELESS = "python:tests.controllers.careless"
+PY = "python:tests.controllers.pycontrollers"
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+
+BOTH_PATHS = """
+import json, sys
+import sitgen
+from tests.conftest import two_robots
+situation = sitgen.generate_situation({"terrain": {"preset": "open_field"},
+    "mission": {"peers_min": 2, "peers_max": 2, "min_route_length_m": 15.0}}, seed=1)
+out = {}
+for fast in (False, True):
+    r = sitgen.run(situation, controller=sys.argv[1], time_limit=3.0, in_process=fast)
+    out["fast" if fast else "host"] = [r.outcome, r.reason]
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.parametrize(
+    "controller",
+    [
+        f"{CARELESS}:ExitsInFloat",
+        f"{CARELESS}:InterruptsInFloat",
+        f"{CARELESS}:RaisesUnprintable",
+        f"{CARELESS}:ReturnsDigits",
+        f"{CARELESS}:ReturnsBytes",
+        f"{CARELESS}:SwallowsTheTimeout",
+        f"{CARELESS}:KillsItsGroup",
+        f"{CARELESS}:ForksWithoutExec",
+        f"{CARELESS}:ExitsInClose",
+        f"{CARELESS}:StartsAThread",
+        f"{PY}:Raises",
+        f"{PY}:Exits",
+        f"{PY}:HardExits",
+        f"{PY}:Segfaults",
+        f"{PY}:HoldsTheGil",
+    ],
+)
+def test_the_fast_path_and_the_host_give_a_misbehaving_class_the_same_reason(
+    controller: str,
+) -> None:
+    """Field by field where it matters: the outcome and the one-line reason, from a process
+    of its own (so that what escapes would end it, not the tests)."""
+    done = subprocess.run(
+        [sys.executable, "-c", BOTH_PATHS, controller],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    both = json.loads(done.stdout.strip().splitlines()[-1])
+    assert both["fast"] == both["host"], both
+    if "Returns" in controller:
+        assert "expected (v, omega) numbers" in both["fast"][1], both
+    if "SwallowsTheTimeout" in controller or "HoldsTheGil" in controller:
+        assert "did not reply within 1 s at 0.3 s" in both["fast"][1], both
+
+
+def _campaign(tmp_path: Path, controller: str, n: int = 4, time_limit_s: float = 5.0) -> Path:
+    spec = tmp_path / "careless.toml"
+    spec.write_text(
+        f'n = {n}\n[situation.terrain]\npreset = "open_field"\n'
+        f"[situation.mission]\npeers_min = 0\npeers_max = 1\n"
+        f"[run]\ntime_limit_s = {time_limit_s}\n[run.controller]\nname = {json.dumps(controller)}\n"
+    )
+    return spec
+
+
+def _sitgen(tmp_path: Path, *args: str, timeout_s: float = 90.0) -> tuple[Result, list[int]]:
+    """The command as CI runs it, its output read through pipes to their end (a daemon that
+    kept them open would hold this call), and the processes its controllers recorded."""
+    pids = tmp_path / "pids"
+    env = {**os.environ, "SITGEN_TEST_PIDS": str(pids)}
+    proc = subprocess.Popen(
+        [*sitgen_command(), *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+        env=env,
+        start_new_session=True,
+    )
+    try:
+        out, err = proc.communicate(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        # Whatever still holds the pipes (sitgen or what a class left) is in its session.
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise
+    recorded = [int(p) for p in pids.read_text().split()] if pids.exists() else []
+    return Result(proc.returncode, out, err), recorded
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def _stored(db: Path) -> list[tuple[str, str]]:
+    with sqlite3.connect(db) as c:
+        return c.execute("SELECT outcome, reason FROM runs ORDER BY id").fetchall()
+
+
+@pytest.mark.parametrize("careless", ["StartsAChild", "DoubleForks"])
+def test_what_a_class_starts_ends_with_its_run_in_every_command(
+    tmp_path: Path, careless: str
+) -> None:
+    """A program started at reset, and a daemon forked twice that keeps the worker's files
+    open: neither outlives its run, so the campaign's output reaches its end when it exits."""
+    db = tmp_path / "c.db"
+    done, pids = _sitgen(tmp_path, "campaign", str(_campaign(tmp_path, f"{CARELESS}:{careless}")),
+                         "--db", str(db), "--workers", "2")  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
+    # Each run and each of its robustness copies started one.
+    assert len(pids) >= 4 and len(_stored(db)) == 4, (pids, _stored(db))
+    assert [p for p in pids if _alive(p)] == [], "nothing a run started outlives it"
+    again, more = _sitgen(tmp_path, "robustness", str(db), "0", "--reruns", "2")
+    assert again.returncode in (0, 1), again.stdout + again.stderr
+    assert len(more) == len(pids) + 2 and [p for p in more if _alive(p)] == []
+
+
+def test_a_campaign_killed_outright_leaves_nothing_its_classes_started(tmp_path: Path) -> None:
+    db = tmp_path / "killed.db"
+    pids = tmp_path / "pids"
+    spec = _campaign(tmp_path, f"{CARELESS}:DoubleForks", n=40, time_limit_s=60.0)
+    proc = subprocess.Popen(
+        [*sitgen_command(), "campaign", str(spec), "--db", str(db), "--workers", "2"],
+        cwd=ROOT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env={**os.environ, "SITGEN_TEST_PIDS": str(pids)},
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while (not pids.exists() or len(pids.read_text().split()) < 2) and (
+            time.monotonic() < deadline
+        ):
+            time.sleep(0.05)
+        started = [int(p) for p in pids.read_text().split()]
+        assert any(_alive(p) for p in started), "a daemon at work"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    deadline = time.monotonic() + 20
+    while any(_alive(p) for p in started) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert [p for p in started if _alive(p)] == [], "no daemon outlives a killed campaign"
+
+
+@pytest.mark.parametrize(
+    ("careless", "outcome", "reason"),
+    [
+        ("StartsAThread", "timeout", "route not completed"),
+        ("SlowClose", "timeout", "route not completed"),
+        ("SendsAlarms", "timeout", "route not completed"),
+        ("KillsItsGroup", "error", "was killed by SIGTERM at 0.3 s"),
+        ("ForksWithoutExec", "timeout", "route not completed"),
+    ],
+)
+def test_a_class_cannot_hang_or_end_the_campaign_or_reach_later_runs(
+    tmp_path: Path, careless: str, outcome: str, reason: str
+) -> None:
+    """A non-daemon thread that never ends, a ``close`` of a minute (the end of a run
+    bounds it as a program's exit), a thread that sends SIGALRM to its process, a
+    ``killpg(0, SIGTERM)``, a fork whose two halves both return: every run is stored with the
+    class's own outcome, and the command ends."""
+    db = tmp_path / "c.db"
+    done, _ = _sitgen(tmp_path, "campaign", str(_campaign(tmp_path, f"{CARELESS}:{careless}")),
+                      "--db", str(db), "--workers", "2", timeout_s=50)  # fmt: skip
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    runs = _stored(db)
+    assert len(runs) == 4, runs
+    assert all(o == outcome and reason in r for o, r in runs), runs
+
+
+@pytest.mark.parametrize(
+    ("careless", "reason"),
+    [
+        ("pycontrollers:Segfaults", "was killed by SIGSEGV at 0.3 s"),
+        ("pycontrollers:HardExits", "exited with code 7 at 0.3 s"),
+        ("careless:KillsItsGroup", "was killed by SIGTERM at 0.3 s"),
+    ],
+)
+def test_a_python_peer_that_kills_its_process_ends_sitgen_run_with_a_reason(
+    tmp_path: Path, careless: str, reason: str
+) -> None:
+    """`sitgen run` steps a run with a ``python:`` peer in a process forked for it: a peer that
+    crashes, calls ``os._exit(0)`` or kills its group is that run's error, named, and the
+    command says so with exit code 1 (never 139, nor a silent 0)."""
+    name = f"python:tests.controllers.{careless}"
+    situation = two_robots((4.0, 10.0, 0.0), (4.0, 14.0, 0.0), [15.0, 14.0], {"name": name})
+    path = tmp_path / "peer.json"
+    situation.save(path)
+    done, _ = _sitgen(tmp_path, "run", str(path), "--time-limit", "5")
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert f"controller `{name}` of peer 1 {reason}" in done.stdout, done.stdout
+
+
+def test_a_class_from_a_file_can_pickle_its_own_functions(tmp_path: Path) -> None:
+    """A ``python:FILE.py`` module is in ``sys.modules`` as an import would put it, so that
+    multiprocessing (pickle) finds what it defines."""
+    module = tmp_path / "pickling_controller.py"
+    module.write_text(
+        "import pickle\n\n"
+        "def half(x):\n    return x / 2\n\n"
+        "class Pickles:\n"
+        "    def reset(self, info):\n        self.half = pickle.loads(pickle.dumps(half))\n"
+        "    def act(self, obs):\n        return self.half(0.6), 0.0\n"
+    )
+    db = tmp_path / "c.db"
+    done, _ = _sitgen(tmp_path, "campaign", str(_campaign(tmp_path, f"python:{module}:Pickles")),
+                      "--db", str(db), "--workers", "1")  # fmt: skip
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    assert all(o != "error" for o, _ in _stored(db)), _stored(db)
