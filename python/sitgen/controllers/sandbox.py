@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import gc
 import mmap
 import os
 import pickle
@@ -171,7 +172,6 @@ def forked(work: Callable[[], T]) -> T | Died:
     BaseException that ``work`` raises is raised here again (pickled), so that sitgen's own
     errors read as before; a user's code is expected to be guarded inside ``work``."""
     _become_subreaper()
-    before = _children()
     page = mmap.mmap(-1, _HEADER + SLOTS * NAME_BYTES)
     view = memoryview(page).cast("d")
     view[0] = -1.0
@@ -181,11 +181,19 @@ def forked(work: Callable[[], T]) -> T | Died:
         with contextlib.suppress(Exception):
             stream.flush()
     parent = os.getpid()
+    # The parent's mark (its reaper started once per process, here and not in every child).
+    mark = os.environ.get(MARK) or marked_env()[1]
+    before = _children()
+    # What the parent has allocated stays out of the child's collections: a collection that
+    # walked it would copy most of the parent's pages into the child (copy-on-write).
+    gc.freeze()
     pid = os.fork()
+    if pid != 0:
+        gc.unfreeze()
     if pid == 0:  # the child: never returns
         os.close(read_end)
         os.close(report_read)
-        _child(work, parent, view, write_end, report_write)
+        _child(work, parent, mark, view, write_end, report_write)
     os.close(write_end)
     os.close(report_write)
     try:
@@ -217,7 +225,7 @@ def forked(work: Callable[[], T]) -> T | Died:
 
 
 def _child(
-    work: Callable[[], Any], parent: int, view: Any, write_end: int, report_write: int
+    work: Callable[[], Any], parent: int, mark: str, view: Any, write_end: int, report_write: int
 ) -> None:
     code = 0
     try:
@@ -230,10 +238,7 @@ def _child(
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         _Shared.view, _Shared.names, _Shared.owner = view, {}, os.getpid()
-        inherited = os.environ.get(MARK)
-        if inherited is None:
-            inherited = marked_env()[1]
-        os.environ[MARK] = f"{inherited}.{uuid.uuid4().hex}"
+        os.environ[MARK] = f"{mark}.{uuid.uuid4().hex}"
         _core.watchdog_report(report_write)
         try:
             message = ("ok", work())
