@@ -1033,7 +1033,14 @@ def test_an_output_file_that_is_the_store_or_links_to_it_is_refused_and_the_stor
     link.symlink_to(db)
     other = tmp_path / "other.db"
     other.write_bytes(db.read_bytes())
-    for option, path in [("--junit", db), ("--summary", link), ("--junit", other)]:
+    sidecars = [tmp_path / f"c.db{x}" for x in ("-journal", "-wal", "-shm")]
+    for option, path in [
+        ("--junit", db),
+        ("--summary", link),
+        ("--junit", other),
+        *(("--junit", s) for s in sidecars[:2]),
+        ("--summary", sidecars[2]),
+    ]:
         done = run_cli("campaign", "--n", "3", "--db", str(db), option, str(path))
         assert done.returncode == 2, done.stdout + done.stderr
         lines = done.stderr.strip().splitlines()
@@ -1051,6 +1058,8 @@ def test_an_output_file_that_is_the_store_or_links_to_it_is_refused_and_the_stor
     [
         {"answer_timeout_s": 1e300},
         {"answer_timeout_s": 0},
+        {"answer_timeout_s": 1e-300},
+        {"start_timeout_s": 1e-300},
         {"answer_timeout_s": -1.0},
         {"answer_timeout_s": float("nan")},
         {"max_missed_answers": 2.5},

@@ -230,6 +230,13 @@ def check_output(output: Path | None, option: str, *inputs: Path | None) -> None
                 f"{option}: {output} is {given}, which this command reads or stores; "
                 "give another file"
             )
+        # SQLite's own files beside a store: one overwritten is read as a hot journal.
+        for sidecar in ("-journal", "-wal", "-shm"):
+            if given is not None and target == os.path.realpath(f"{given}{sidecar}"):
+                raise UsageError(
+                    f"{option}: {output} is the {sidecar.lstrip('-')} file of {given}, which "
+                    "SQLite keeps beside that store; give another file"
+                )
     if _is_sqlite(Path(target)):
         raise UsageError(f"{option}: {output} is a sitgen store (SQLite); give another file")
 

@@ -101,6 +101,9 @@ MAX_MISSED_ANSWERS = 10
 MOST_ANSWER_TIMEOUT_S = 60.0
 """Largest ``answer_timeout_s`` (wall seconds): a node that does not answer within a minute
 is not answering; every wait of a run is bounded."""
+LEAST_TIMEOUT_S = 0.01
+"""Smallest ``answer_timeout_s`` and ``start_timeout_s`` (wall seconds): a shorter wait than
+a scheduler's time slice measures the machine, not the node, and would blame the node."""
 MOST_MISSED_ANSWERS = 100_000
 """Largest ``max_missed_answers``."""
 MATCH_GRACE_S = 1.0
@@ -154,10 +157,10 @@ class Ros2Controller(UserController):
             ("answer_timeout_s", self._answer_timeout_s, MOST_ANSWER_TIMEOUT_S),
             ("start_timeout_s", self._start_timeout_s, MOST_START_TIMEOUT_S),
         ):
-            if not 0 < value <= most:
+            if not LEAST_TIMEOUT_S <= value <= most:
                 raise ControllerError(
-                    f"controller {name}: params.{param}: {value!r} is not in (0, {most:g}] "
-                    "wall seconds"
+                    f"controller {name}: params.{param}: {value!r} is not in "
+                    f"[{LEAST_TIMEOUT_S:g}, {most:g}] wall seconds"
                 )
         missed = own.get("max_missed_answers", MAX_MISSED_ANSWERS)
         if not (
