@@ -612,6 +612,14 @@ def test_a_trajectory_that_does_not_decode_is_named(small_store: Path, tmp_path:
     )
 
 
+def test_a_breakdown_that_is_not_json_is_named(small_store: Path, tmp_path: Path) -> None:
+    db = _copy(small_store, tmp_path / "damaged.db")
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE runs SET breakdown = '{not json' WHERE id = 1")
+    message = f"{db}: damaged store: run 1's breakdown is not JSON"
+    one_line_error(run_limited("report", str(db), "-o", str(tmp_path / "r")), 1, message)
+
+
 def test_runs_stored_by_an_older_sitgen_are_still_shown(small_store: Path, tmp_path: Path) -> None:
     # Before the map's edge counted as a wall, robots could be placed across it: such stored
     # runs are drawn as they were run, not refused like a situation file would be.

@@ -216,9 +216,11 @@ def run_page(
     if whole is None or whole.trajectory is None:
         return None
     situation, trajectory = whole.situation, whole.trajectory
-    events = [json.loads(line) for line in whole.events_jsonl.splitlines()]
-    breakdown = json.loads(
-        store.db.execute("SELECT breakdown FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
+    events = [store.stored_json(run_id, "events", line) for line in whole.events_jsonl.splitlines()]
+    breakdown = store.stored_json(
+        run_id,
+        "breakdown",
+        store.db.execute("SELECT breakdown FROM runs WHERE id = ?", (run_id,)).fetchone()[0],
     )
     reason = store.db.execute("SELECT reason FROM runs WHERE id = ?", (run_id,)).fetchone()[0]
     sim = row["run_spec"].get("sim", {})

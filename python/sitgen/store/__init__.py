@@ -415,8 +415,8 @@ class Store(Verdicts):
             params = (*params, top)
         out = []
         for row in self.db.execute(sql, params):
-            breakdown = json.loads(row[4])
-            failure = json.loads(row[16]) if row[16] else None
+            breakdown = self.stored_json(row[0], "breakdown", row[4])
+            failure = self.stored_json(row[0], "failure", row[16]) if row[16] else None
             out.append(
                 {
                     "run": row[0],
@@ -520,6 +520,16 @@ class Store(Verdicts):
             raise StoreError(
                 f"{self.path}: damaged store: run {run_id}'s trajectory does not decode as "
                 f"{rows} steps × {robots} robots ({TRAJECTORY_ENCODING})"
+            ) from None
+
+    def stored_json(self, run_id: int, column: str, text: Any) -> Any:
+        """``text`` (run ``run_id``'s ``column``) parsed as JSON, or a StoreError naming the
+        run and the column where it is not (a store damaged or written by hand)."""
+        try:
+            return json.loads(text)
+        except (TypeError, ValueError):
+            raise StoreError(
+                f"{self.path}: damaged store: run {run_id}'s {column} is not JSON"
             ) from None
 
     def rows(self, table: str) -> Iterator[dict[str, Any]]:
