@@ -210,3 +210,9 @@ def test_a_run_with_an_external_peer_does_not_step_until_the_peer_has_a_controll
             step()
     core.set_peers({1: lambda *observation: (0.2, 0.0)})
     assert not core.step(None)
+
+
+def test_navground_with_no_behaviour_names_the_form() -> None:
+    done = run_cli("check-controller", "navground:")
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert "controller `navground:` expected navground:BEHAVIOR" in done.stdout, done.stdout

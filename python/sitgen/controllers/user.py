@@ -97,8 +97,15 @@ def load_peer_controller(
 
 
 def navground_target(name: str) -> str:
-    """The ``module:Class`` target that runs the ``navground:BEHAVIOR`` controller ``name``."""
-    return f"{NavgroundController.__module__}:{name.removeprefix(NAVGROUND_PREFIX)}"
+    """The ``module:Class`` target that runs the ``navground:BEHAVIOR`` controller ``name``;
+    ControllerError naming the form where no behaviour is given."""
+    behavior = name.removeprefix(NAVGROUND_PREFIX)
+    if not behavior.strip():
+        raise ControllerError(
+            f"controller `{name}` expected navground:BEHAVIOR (HL, ORCA, HRVO, SocialForce, or "
+            "one a plugin registers)"
+        )
+    return f"{NavgroundController.__module__}:{behavior}"
 
 
 def check_controller_name(name: str, params: Mapping[str, float] | None = None) -> None:
