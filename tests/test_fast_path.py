@@ -239,3 +239,62 @@ def test_a_class_from_a_file_can_pickle_its_own_functions(tmp_path: Path) -> Non
                       "--db", str(db), "--workers", "1")  # fmt: skip
     assert done.returncode in (0, 1), done.stdout + done.stderr
     assert all(o != "error" for o, _ in _stored(db)), _stored(db)
+
+
+IN_TURN = """
+import sys
+import sitgen
+situation = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=1)
+for name in sys.argv[1:]:
+    sitgen.run(situation, controller=f"python:tests.controllers.careless:{name}",
+               time_limit=1.0, in_process=True)
+"""
+
+
+def test_a_run_that_changes_its_process_leaves_the_next_a_fresh_one(tmp_path: Path) -> None:
+    """Runs are made one after another by one process while each leaves it as it found it;
+    a run that leaves a thread or a signal handler behind is the last that process makes, so
+    nothing of it reaches the next run."""
+    pids = tmp_path / "pids"
+    order = ["RecordsItsProcess", "RecordsItsProcess", "SendsAlarms", "RecordsItsProcess",
+             "StartsAThread", "RecordsItsProcess"]  # fmt: skip
+    done = subprocess.run(
+        [sys.executable, "-c", IN_TURN, *order],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+        env={**os.environ, "SITGEN_TEST_PIDS": str(pids)},
+        check=False,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    seen = [line.split() for line in pids.read_text().splitlines()]
+    assert len(seen) == 4, seen
+    assert seen[0][0] == seen[1][0], "a clean run leaves its process for the next"
+    assert seen[2][0] != seen[1][0] and seen[3][0] != seen[2][0], "a dirty one does not"
+    assert all(handler == "True" and threads == "1" for _, handler, threads in seen), seen
+
+
+FORKED_RUN = """
+import json, os, sys
+import sitgen
+from sitgen import _core
+situation = sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=1)
+pid = os.fork()
+if pid == 0:
+    _core.Run(situation.to_json(), json.dumps({}), 0)
+    sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=2)
+    os._exit(0)
+_, status = os.waitpid(pid, 0)
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
+def test_a_process_forked_after_the_core_ran_in_parallel_can_build_runs() -> None:
+    """The core's parallel loops start a pool of the forked process's own: the one it
+    inherited has no threads, and waiting on it would wait for ever."""
+    done = subprocess.run(
+        [sys.executable, "-c", FORKED_RUN], capture_output=True, text=True, cwd=ROOT,
+        timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr

@@ -218,30 +218,45 @@ def run(
         situation = Situation.load(situation)
     name = _controller_name(controller)
     run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
-    core = _core.Run(situation.to_json(), spec_json(run_spec, "run"), seed)
+    forks = _forks(controller, name, situation, run_spec, in_process)
+    if not forks:
+        return _record(situation, controller, name, run_spec, seed, step_timeout_s, sensed,
+                       in_process)  # fmt: skip
+    done = sandbox.call(_record, situation, controller, name, run_spec, seed, step_timeout_s,
+                        sensed, in_process)  # fmt: skip
+    if not isinstance(done, sandbox.Died):
+        return done
+    if forks == "agent":
+        # Made again with the class in a host process of its own, which reports what it did
+        # exactly as it always has (and keeps the run up to that step).
+        return run(situation, controller, time_limit, seed, spec, params, step_timeout_s,
+                   sensed, in_process=False)  # fmt: skip
+    return _record(situation, controller, name, run_spec, seed, step_timeout_s, sensed,
+                   in_process, failed=done.reason())  # fmt: skip
+
+
+def _record(
+    situation: Situation,
+    controller: Any,
+    name: str | None,
+    run_spec: Mapping[str, Any],
+    seed: int,
+    step_timeout_s: float,
+    sensed: bool,
+    in_process: bool,
+    failed: str | None = None,
+) -> RunRecord:
+    """The run made here (``failed``: not made, ended at its start with that reason)."""
+    core = _core.Run(situation.to_json(), spec_json(dict(run_spec), "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
-    forks = _forks(core, controller, situation, run_spec, in_process)
-    if forks:
-        done = sandbox.forked(
-            lambda: _finished(
-                core, controller, situation, run_spec, step_timeout_s, senses, in_process
-            )
-        )
-        if isinstance(done, sandbox.Died):
-            if forks == "agent":
-                # Made again with the class in a host process of its own, which reports what
-                # it did exactly as it always has (and keeps the run up to that step).
-                return run(situation, controller, time_limit, seed, spec, params,
-                           step_timeout_s, sensed, in_process=False)  # fmt: skip
-            core.fail(done.reason())
-            senses = None if senses is None else [core.observe_agent()]
-            out = core.finish()
-        else:
-            out, senses = done
-    else:
+    if failed is None:
         out, senses = _finished(
             core, controller, situation, run_spec, step_timeout_s, senses, in_process
         )
+    else:
+        core.fail(failed)
+        senses = None if senses is None else [core.observe_agent()]
+        out = core.finish()
     record = json.loads(out["record"])
     return RunRecord(
         outcome=record["outcome"],
@@ -263,26 +278,32 @@ def run(
 
 
 def _forks(
-    core: _core.Run,
     controller: Any,
+    name: str | None,
     situation: Situation,
     run_spec: Mapping[str, Any],
     in_process: bool,
 ) -> str | None:
-    """Whether the run is made in a child forked for it (:mod:`sitgen.controllers.sandbox`),
-    because it calls a user's class loaded in this process by name: ``"agent"`` (the agent's
-    ``python:``/``navground:`` class, in a pool worker), ``"peers"`` (a peer's), or None.
-    Not for an object handed to :func:`run` (the caller's own, whose effects are theirs to
-    keep) nor beside a ``ros2:`` node (its middleware lives in this process)."""
-    if not isinstance(controller, (str, type(None))):
+    """Whether the run is made by a runner (:mod:`sitgen.controllers.sandbox`), because it calls
+    a user's class loaded by name: ``"agent"`` (the agent's ``python:``/``navground:`` class,
+    in a pool worker), ``"peers"`` (a peer's), or None. Not in a runner (it is the runner), for
+    an object handed to :func:`run` (the caller's own, whose effects are theirs to keep), nor
+    beside a ``ros2:`` node (its middleware lives in this process)."""
+    if sandbox.inside() or not isinstance(controller, (str, type(None))):
         return None
-    named = run_spec.get("controller") or situation.agent.controller
-    name = str(controller if controller is not None else named["name"])
-    if core.agent_is_external and in_process and name.startswith(("python:", "navground:")):
+    agent = str(name or (run_spec.get("controller") or situation.agent.controller)["name"])
+    if in_process and agent.startswith(IN_PROCESS_PREFIXES):
         return "agent"
-    if core.external_peers and not name.startswith(ROS2_PREFIX):
+    peers = (r.controller["name"] for r in situation.robots if r.role == "peer")
+    if not agent.startswith(ROS2_PREFIX) and any(
+        str(p).startswith(IN_PROCESS_PREFIXES) for p in peers
+    ):
         return "peers"
     return None
+
+
+IN_PROCESS_PREFIXES = ("python:", "navground:")
+"""Controllers called in sitgen's own process (a peer may run only these)."""
 
 
 def _finished(
@@ -346,7 +367,7 @@ def _drive(
     """Step a run whose agent or some peer has a user controller, turning their failures
     into the outcome."""
     try:
-        with _peers(core, situation, run_spec, in_process):
+        with _peers(core, situation, run_spec, in_process or sandbox.inside()):
             if core.agent_is_external:
                 _drive_agent(
                     core, controller, situation, run_spec, step_timeout_s, senses, in_process

@@ -137,7 +137,8 @@ class ForksWithoutExec(FailsAt):
 
 
 class SendsAlarms(Forward):
-    """Leaves a daemon thread that sends SIGALRM to its process every 20 ms, and a handler."""
+    """Leaves a daemon thread that sends SIGALRM to its process every 20 ms, and a SIGUSR1
+    handler."""
 
     def reset(self, info: dict[str, Any]) -> None:
         super().reset(info)
@@ -149,3 +150,14 @@ class SendsAlarms(Forward):
                 os.kill(os.getpid(), signal.SIGALRM)
 
         threading.Thread(target=pester, daemon=True).start()
+
+
+class RecordsItsProcess(Forward):
+    """Writes its process id, its SIGUSR1 handler and its thread count at reset."""
+
+    def reset(self, info: dict[str, Any]) -> None:
+        super().reset(info)
+        path = os.environ["SITGEN_TEST_PIDS"]
+        handler = signal.getsignal(signal.SIGUSR1)
+        with open(path, "a") as f:
+            f.write(f"{os.getpid()} {handler == signal.SIG_DFL} {threading.active_count()}\n")

@@ -23,6 +23,7 @@ pub mod grid;
 pub mod interchange;
 pub mod mission;
 pub mod monitor;
+pub mod parallel;
 pub mod rng;
 pub mod run;
 pub mod scoring;

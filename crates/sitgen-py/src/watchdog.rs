@@ -118,7 +118,17 @@ fn watchdog_report(fd: Option<i32>) {
     REPORT_FD.store(fd.unwrap_or(-1), Ordering::Release);
 }
 
+/// Start the threads this process's runs use — the step watchdog and the core's data-parallel
+/// pool — if they have not started: a process that makes one run after another and checks its
+/// threads between runs then sees none appear that a run did not start itself.
+#[pyfunction]
+fn start_threads() {
+    ensure_watcher();
+    sitgen_core::parallel::start();
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(start_threads, m)?)?;
     m.add_function(wrap_pyfunction!(kill_after, m)?)?;
     m.add_function(wrap_pyfunction!(watchdog_report, m)?)?;
     Ok(())

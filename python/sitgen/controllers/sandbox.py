@@ -1,33 +1,35 @@
-"""A run that calls user code in this process, made in a child forked for it: the fast path's
+"""Runs that call user code in this process, made in a child forked for them: the fast path's
 isolation.
 
-What it does: :func:`forked` calls a function in a child process forked from this one and
-returns what it returned (pickled through a pipe), or :class:`Died` when the child ended without
-an answer. The child leads a process group of its own, is killed if this process dies
-(PR_SET_PDEATHSIG), and carries a controller mark (:data:`sitgen.controllers.external.MARK`)
-under this process's, so that sitgen's reaper finds what it started should sitgen be killed
-outright. When the child ends — returning, raising, calling ``os._exit``, crashing, killed by
-the step watchdog — every process it started is killed: this process is a child subreaper
-(PR_SET_CHILD_SUBREAPER), so every orphan of the run, a double-forked daemon included, comes
-back to it as its child. What the run left in the process — threads, non-daemon ones too,
-signal handlers, a SIGALRM sender, imported modules — ends with the child. A user's fork
+What it does: :func:`call` hands a function and its arguments to this thread's *runner*, a child
+process forked from this one, and returns what it returned (pickled through pipes), or
+:class:`Died` when the runner ended without an answer. The runner leads a process group of its
+own, is killed if the thread that forked it ends (PR_SET_PDEATHSIG), carries a controller mark
+(:data:`sitgen.controllers.external.MARK`) under this process's, so that sitgen's reaper finds
+what it started should sitgen be killed outright, and is a child subreaper: every orphan of a
+run, a double-forked daemon included, comes back to it, and when a run ends every process the
+run started is killed. The runner then looks at itself: a run that left a thread, a signal
+handler, an interval timer, a blocked signal, a file descriptor, another working folder,
+process group or environment is *dirty*, and the runner answers and exits, so that the next
+run gets a fresh one forked from this process; a clean run leaves it for the next. A user's fork
 that returns into sitgen's code (a class that forks without exec) ends there at once
-(:func:`returned_in_fork`), and a ``killpg(0, …)`` reaches the run's group, never sitgen.
+(:func:`returned_in_fork`), and a ``killpg(0, …)`` reaches the runner's group, never sitgen.
 
-While the child calls a controller it writes who and when into a page shared with this process
-(:func:`note`), so that a child that dies is reported as the host process reports a controller
+While the runner calls a controller it writes who and when into a page shared with this process
+(:func:`note`), so that a runner that dies is reported as the host process reports a controller
 that dies: which controller, at what simulated time, and whether the step watchdog killed it.
 
 Why: a ``python:`` class called in a campaign's pool worker (:mod:`sitgen.controllers.inprocess`)
 runs at the core's speed but shared the worker with everything it did; a host process
-(:mod:`sitgen.controllers.host`) isolates it at the cost of a pipe round trip a step. A fork a
-run costs about a millisecond and none a step.
+(:mod:`sitgen.controllers.host`) isolates it at the cost of a pipe round trip a step. A fork for
+each run cost 10-17 ms a run (fork, exit, copy-on-write); a runner kept while clean costs a
+message each way a run, and a fork only after a run that changed its process.
 
 Parameters: :data:`NAME_BYTES` (bytes, 240) the longest controller name a report keeps; up to
 :data:`SLOTS` (16) controllers a run.
 
 Source: Linux's prctl(2) (PR_SET_CHILD_SUBREAPER, PR_SET_PDEATHSIG), pidfd_open(2), proc(5)'s
-``/proc/PID/task/TID/children``.
+``/proc/PID/task/TID/children``, ``/proc/self/task`` and ``/proc/self/fd``.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ import select
 import signal
 import struct
 import sys
+import threading
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -152,81 +155,187 @@ def _children() -> set[int]:
     return found
 
 
-def _kill_new_children(before: set[int]) -> None:
-    """SIGKILL and reap every child this process has that it did not have ``before``, again
-    and again while killing them orphans more (their own children come back here)."""
+def _kill_children_but(spared: set[int]) -> None:
+    """SIGKILL and reap every child of this process but ``spared``, again and again while
+    killing them orphans more (their own children come back to a subreaper)."""
     for _ in range(100):
-        new = _children() - before
-        if not new:
+        doomed = _children() - spared
+        if not doomed:
             return
-        for pid in new:
+        for pid in doomed:
             with contextlib.suppress(OSError):
                 os.kill(pid, signal.SIGKILL)
-        for pid in new:
+        for pid in doomed:
             with contextlib.suppress(ChildProcessError, OSError):
                 os.waitpid(pid, 0)
 
 
-def forked(work: Callable[[], T]) -> T | Died:
-    """``work()`` called in a child forked for it: its result, or how the child died. A
-    BaseException that ``work`` raises is raised here again (pickled), so that sitgen's own
-    errors read as before; a user's code is expected to be guarded inside ``work``."""
-    _become_subreaper()
-    page = mmap.mmap(-1, _HEADER + SLOTS * NAME_BYTES)
-    view = memoryview(page).cast("d")
-    view[0] = -1.0
-    read_end, write_end = os.pipe()
-    report_read, report_write = os.pipe()
-    for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
-        with contextlib.suppress(Exception):
-            stream.flush()
-    parent = os.getpid()
-    # The parent's mark (its reaper started once per process, here and not in every child).
-    mark = os.environ.get(MARK) or marked_env()[1]
-    before = _children()
-    # What the parent has allocated stays out of the child's collections: a collection that
-    # walked it would copy most of the parent's pages into the child (copy-on-write).
-    gc.freeze()
-    pid = os.fork()
-    if pid != 0:
+class _Runner:
+    """This side of a runner: its pid and the pipes and page shared with it."""
+
+    def __init__(self) -> None:
+        _become_subreaper()
+        # The parent's mark (its reaper started once per process, here and not in the runner).
+        mark = os.environ.get(MARK) or marked_env()[1]
+        self.page = mmap.mmap(-1, _HEADER + SLOTS * NAME_BYTES)
+        self.view = memoryview(self.page).cast("d")
+        self.view[0] = -1.0
+        request_read, self.requests = os.pipe()
+        self.replies, reply_write = os.pipe()
+        self.reports, report_write = os.pipe()
+        for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
+            with contextlib.suppress(Exception):
+                stream.flush()
+        parent = os.getpid()
+        # What the parent has allocated stays out of the runner's collections: a collection
+        # that walked it would copy most of the parent's pages into the runner (copy-on-write).
+        gc.freeze()
+        pid = os.fork()
+        if pid == 0:  # the runner: never returns
+            for fd in (self.requests, self.replies, self.reports):
+                os.close(fd)
+            _serve(parent, mark, self.view, request_read, reply_write, report_write)
         gc.unfreeze()
-    if pid == 0:  # the child: never returns
-        os.close(read_end)
-        os.close(report_read)
-        _child(work, parent, mark, view, write_end, report_write)
-    os.close(write_end)
-    os.close(report_write)
-    try:
-        payload, status = _wait(pid, read_end)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.kill(pid, signal.SIGKILL)
-        with contextlib.suppress(ChildProcessError, OSError):
-            os.waitpid(pid, 0)
-        raise
-    finally:
-        os.close(read_end)
-        _kill_new_children(before)
-    try:
-        watchdog = _readable(report_read) and os.read(report_read, 1) == b"W"
-    finally:
-        os.close(report_read)
-    died = None if payload is not None else _died(status, watchdog, view, page)
-    view.release()
-    page.close()
-    if died is not None:
+        for fd in (request_read, reply_write, report_write):
+            os.close(fd)
+        self.pid = pid
+        self.pidfd = _pidfd(pid)
+        self.before: set[int] = set()
+        """This process's children when the runner was last asked: not the runner's orphans."""
+        with _RUNNERS_LOCK:
+            _RUNNER_PIDS.add(pid)
+
+    def alive(self) -> bool:
+        if self.pidfd is not None:
+            return not _readable(self.pidfd)
+        return os.waitpid(self.pid, os.WNOHANG)[0] == 0
+
+    def ask(self, request: bytes) -> tuple[bytes | None, int | None]:
+        """Send ``request`` and wait: the answer and None, or None and the wait status of a
+        runner that ended without one (it is reaped)."""
+        self.before = _children()
+        try:
+            _write_all(self.requests, struct.pack("<Q", len(request)) + request)
+        except OSError:  # it ended before it read the request
+            return None, self.reap()
+        data = bytearray()
+        poller = select.poll()
+        poller.register(self.replies, select.POLLIN)
+        if self.pidfd is not None:
+            poller.register(self.pidfd, select.POLLIN)
+        while True:
+            ready = {fd for fd, _ in poller.poll(None if self.pidfd is not None else 50)}
+            if self.replies in ready:
+                chunk = os.read(self.replies, 1 << 20)
+                if not chunk:
+                    poller.unregister(self.replies)
+                data += chunk
+                answer = _framed(data)
+                if answer is not None:
+                    return answer, None
+            if (self.pidfd is None or self.pidfd in ready) and not self.alive():
+                # Whatever it wrote before it ended is in the pipe now.
+                while _readable(self.replies):
+                    chunk = os.read(self.replies, 1 << 20)
+                    if not chunk:
+                        break
+                    data += chunk
+                answer = _framed(data)
+                if answer is not None:
+                    return answer, None
+                return None, self.reap()
+
+    def reap(self) -> int:
+        """Wait for the runner to end (it is ending or has ended), kill whatever it left (its
+        orphans are this process's children now) and give its pipes back: its wait status."""
+        try:
+            status = os.waitpid(self.pid, 0)[1]
+        except ChildProcessError:
+            status = 0
+        with _RUNNERS_LOCK:
+            _RUNNER_PIDS.discard(self.pid)
+            spared = self.before | _RUNNER_PIDS
+        _kill_children_but(spared)
+        for fd in (self.requests, self.replies):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        if self.pidfd is not None:
+            os.close(self.pidfd)
+        return status
+
+    def died(self, status: int) -> Died:
+        watchdog = _readable(self.reports) and os.read(self.reports, 1) == b"W"
+        died = _died(status, watchdog, self.view, self.page)
+        self.close_page()
         return died
-    assert payload is not None
-    kind, value = pickle.loads(payload)
+
+    def close_page(self) -> None:
+        os.close(self.reports)
+        self.view.release()
+        self.page.close()
+
+
+_LOCAL = threading.local()
+"""This thread's runner (PR_SET_PDEATHSIG ties a runner to the thread that forked it)."""
+_RUNNERS_LOCK = threading.Lock()
+_RUNNER_PIDS: set[int] = set()
+"""Every live runner of this process, which killing a runner's leftovers spares."""
+
+
+def call(work: Callable[..., T], *args: Any) -> T | Died:
+    """``work(*args)`` made by this thread's runner (``work`` a module-level function, it and
+    ``args`` picklable): its result, or how the runner died. A BaseException that ``work``
+    raises is raised here again, so that sitgen's own errors read as before; a user's code is
+    expected to be guarded inside ``work``."""
+    request = pickle.dumps((work, args), protocol=pickle.HIGHEST_PROTOCOL)
+    for _ in range(2):  # a runner that ended between runs is replaced once
+        runner = _runner()
+        answer, status = runner.ask(request)
+        if answer is not None:
+            break
+        assert status is not None
+        _LOCAL.runner = None
+        died = runner.died(status)
+        if died.name:
+            return died
+        # It ended outside any controller's call: between runs (killed while idle), or in
+        # sitgen's own code of this run; a fresh runner makes the run once more.
+        last = died
+    else:
+        return last
+    (kind, value), clean = pickle.loads(answer)
+    if not clean:  # it exits after answering: the next run gets a fresh one
+        _LOCAL.runner = None
+        runner.reap()
+        runner.close_page()
     if kind == "raised":
         raise value
     result: T = value
     return result
 
 
-def _child(
-    work: Callable[[], Any], parent: int, mark: str, view: Any, write_end: int, report_write: int
+def _runner() -> _Runner:
+    runner: _Runner | None = getattr(_LOCAL, "runner", None)
+    if runner is not None and getattr(_LOCAL, "pid", None) == os.getpid() and runner.alive():
+        return runner
+    if runner is not None and getattr(_LOCAL, "pid", None) == os.getpid():
+        runner.reap()  # it ended while idle (killed from outside): its status is no run's
+        runner.close_page()
+    made = _Runner()
+    _LOCAL.runner, _LOCAL.pid = made, os.getpid()
+    return made
+
+
+def inside() -> bool:
+    """Whether this process is a runner."""
+    return _Shared.view is not None
+
+
+def _serve(
+    parent: int, mark: str, view: Any, requests: int, replies: int, report_write: int
 ) -> None:
+    """The runner: make each request's run and answer, until this process is dirty or the
+    parent closes its end."""
     code = 0
     try:
         os.setpgid(0, 0)
@@ -235,21 +344,38 @@ def _child(
         # A parent that died before the line above is not watched for: gone already.
         if os.getppid() != parent:
             os._exit(70)
+        _become_subreaper()
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         _Shared.view, _Shared.names, _Shared.owner = view, {}, os.getpid()
         os.environ[MARK] = f"{mark}.{uuid.uuid4().hex}"
         _core.watchdog_report(report_write)
-        try:
-            message = ("ok", work())
-        except BaseException as e:  # sitgen's own error, raised again in the parent
-            message = ("raised", e)
-        returned_in_fork()
-        try:
-            payload = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
-        except Exception as e:
-            payload = pickle.dumps(("raised", RuntimeError(f"unpicklable result: {e}")))
-        _write_all(write_end, struct.pack("<Q", len(payload)) + payload)
+        _core.start_threads()
+        state = _state()
+        while True:
+            request = _read_framed(requests)
+            if request is None:
+                break
+            view[0] = -1.0
+            _Shared.names = {}
+            try:
+                work, args = pickle.loads(request)
+                message: tuple[str, Any] = ("ok", work(*args))
+            except BaseException as e:  # sitgen's own error, raised again in the parent
+                message = ("raised", e)
+            returned_in_fork()
+            view[0] = -1.0  # between runs: a death now is no controller's
+            _kill_children_but(set())
+            clean = _state() == state
+            try:
+                payload = pickle.dumps((message, clean), protocol=pickle.HIGHEST_PROTOCOL)
+            except Exception as e:
+                unpicklable = ("raised", RuntimeError(f"unpicklable result: {e}"))
+                payload = pickle.dumps((unpicklable, False))
+                clean = False
+            _write_all(replies, struct.pack("<Q", len(payload)) + payload)
+            if not clean:
+                break
     except BaseException:
         code = 70
     finally:
@@ -257,6 +383,48 @@ def _child(
             with contextlib.suppress(BaseException):
                 stream.flush()
         os._exit(code)
+
+
+def _state() -> tuple[Any, ...]:
+    """What a run must leave as it found it for the runner to make the next: its threads,
+    signal dispositions, blocked signals, interval timer, file descriptors, working folder,
+    process group and environment."""
+    dispositions = []
+    for number in range(1, signal.NSIG):
+        try:
+            dispositions.append(signal.getsignal(number))
+        except (OSError, ValueError):
+            continue
+    return (
+        len(os.listdir("/proc/self/task")),
+        dispositions,
+        signal.pthread_sigmask(signal.SIG_BLOCK, []),
+        signal.getitimer(signal.ITIMER_REAL),
+        sorted(os.listdir("/proc/self/fd")),
+        os.getcwd(),
+        os.getpgid(0),
+        dict(os.environ),
+    )
+
+
+def _framed(data: bytearray) -> bytes | None:
+    if len(data) < 8:
+        return None
+    length = struct.unpack("<Q", data[:8])[0]
+    return bytes(data[8 : 8 + length]) if len(data) >= 8 + length else None
+
+
+def _read_framed(fd: int) -> bytes | None:
+    """One framed message from ``fd``; None at its end."""
+    data = bytearray()
+    while True:
+        answer = _framed(data)
+        if answer is not None:
+            return answer
+        chunk = os.read(fd, 1 << 20)
+        if not chunk:
+            return None
+        data += chunk
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -267,51 +435,6 @@ def _write_all(fd: int, data: bytes) -> None:
 
 def _readable(fd: int) -> bool:
     return bool(select.select([fd], [], [], 0)[0])
-
-
-def _wait(pid: int, read_end: int) -> tuple[bytes | None, int]:
-    """The child's answer (None if it gave none) and its wait status. The answer is read as it
-    comes (a large one would fill the pipe); the end is the child's exit, never the pipe's, which
-    a user's fork may hold open."""
-    length: int | None = None
-    data = bytearray()
-    pidfd = _pidfd(pid)
-    poller = select.poll()
-    poller.register(read_end, select.POLLIN)
-    if pidfd is not None:
-        poller.register(pidfd, select.POLLIN)
-    try:
-        while True:
-            ready = {fd for fd, _ in poller.poll(None if pidfd is not None else 50)}
-            if read_end in ready:
-                chunk = os.read(read_end, 1 << 20)
-                if not chunk:
-                    poller.unregister(read_end)
-                data += chunk
-                if length is None and len(data) >= 8:
-                    length = struct.unpack("<Q", data[:8])[0]
-                if length is not None and len(data) >= 8 + length:
-                    break
-            if pidfd is None or pidfd in ready:
-                done, status = os.waitpid(pid, os.WNOHANG)
-                if done:
-                    # Whatever it wrote before it ended is in the pipe now.
-                    while _readable(read_end):
-                        chunk = os.read(read_end, 1 << 20)
-                        if not chunk:
-                            break
-                        data += chunk
-                    if len(data) >= 8:
-                        length = struct.unpack("<Q", data[:8])[0]
-                    if length is not None and len(data) >= 8 + length:
-                        return bytes(data[8 : 8 + length]), status
-                    return None, status
-        _, status = os.waitpid(pid, 0)
-        assert length is not None
-        return bytes(data[8 : 8 + length]), status
-    finally:
-        if pidfd is not None:
-            os.close(pidfd)
 
 
 def _pidfd(pid: int) -> int | None:

@@ -58,6 +58,18 @@ class Situation:
         self._data: dict[str, Any] = json.loads(self._json)
 
     @classmethod
+    def _checked(cls, json_text: str) -> Situation:
+        """One already checked (its text as a Situation gave it): unpickling one."""
+        situation = cls.__new__(cls)
+        situation._json = json_text
+        situation._data = json.loads(json_text)
+        return situation
+
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        # Pickled as its checked text, not checked again (a run's process gets it this way).
+        return (Situation._checked, (self._json,))
+
+    @classmethod
     def load(cls, path: str | Path, allow_edited: bool = False) -> Situation:
         """Read a situation file; raises SpecError (prefixed with the file) if it is bad, or
         if it was edited after it was generated (its content hash no longer matches) unless

@@ -91,12 +91,14 @@ pub fn squared_distance_to(feature: &[bool], rows: usize, cols: usize) -> Vec<f6
     }
     // Pass 2, along each row, on the column result.
     let mut d = vec![0.0; rows * cols];
-    d.par_chunks_mut(cols.max(1))
-        .zip(column.par_chunks(cols.max(1)))
-        .for_each_init(
-            || Envelope::new(cols),
-            |envelope, (out, line)| envelope.transform(line, out),
-        );
+    crate::parallel::install(|| {
+        d.par_chunks_mut(cols.max(1))
+            .zip(column.par_chunks(cols.max(1)))
+            .for_each_init(
+                || Envelope::new(cols),
+                |envelope, (out, line)| envelope.transform(line, out),
+            );
+    });
     d
 }
 

@@ -115,39 +115,42 @@ impl Source for Perlin {
             .collect();
         let z = Axis::new(offset[2]);
         let mut values = vec![0.0; rows * cols];
-        values
-            .par_chunks_mut(cols)
-            .enumerate()
-            .for_each(|(r, row)| {
-                let y = (rows as f64 - r as f64 - 0.5) * res / self.scale_m;
-                // Octave by octave along the row, each cell's sum in the same order as cell by
-                // cell: the row shares y and z, and a run of cells shares a lattice cube,
-                // whose corners are hashed once and whose gradients pick the same terms.
-                row.fill(0.0);
-                for (&(frequency, amplitude), xs) in octaves.iter().zip(&x_parts) {
-                    let y = Axis::new(y * frequency + offset[1]);
-                    for &(start, end, first) in &xs.runs {
-                        let corners = Corners::hash(first, y, z);
-                        add_perlin_in_cube(
-                            &corners,
-                            &xs.offsets[start..end],
-                            &xs.fades[start..end],
-                            y,
-                            z,
-                            amplitude,
-                            &mut row[start..end],
-                        );
+        crate::parallel::install(|| {
+            values
+                .par_chunks_mut(cols)
+                .enumerate()
+                .for_each(|(r, row)| {
+                    let y = (rows as f64 - r as f64 - 0.5) * res / self.scale_m;
+                    // Octave by octave along the row, each cell's sum in the same order as cell
+                    // by cell: the row shares y and z, and a run of cells shares a lattice
+                    // cube, whose corners are hashed once and whose gradients pick the same
+                    // terms.
+                    row.fill(0.0);
+                    for (&(frequency, amplitude), xs) in octaves.iter().zip(&x_parts) {
+                        let y = Axis::new(y * frequency + offset[1]);
+                        for &(start, end, first) in &xs.runs {
+                            let corners = Corners::hash(first, y, z);
+                            add_perlin_in_cube(
+                                &corners,
+                                &xs.offsets[start..end],
+                                &xs.fades[start..end],
+                                y,
+                                z,
+                                amplitude,
+                                &mut row[start..end],
+                            );
+                        }
                     }
-                }
-                for out in row.iter_mut() {
-                    let sum = *out;
-                    *out = if amplitude_sum > 0.0 {
-                        (0.5 * (sum / amplitude_sum + 1.0)).clamp(0.0, 1.0)
-                    } else {
-                        0.5
-                    };
-                }
-            });
+                    for out in row.iter_mut() {
+                        let sum = *out;
+                        *out = if amplitude_sum > 0.0 {
+                            (0.5 * (sum / amplitude_sum + 1.0)).clamp(0.0, 1.0)
+                        } else {
+                            0.5
+                        };
+                    }
+                });
+        });
         Ok(Layer::Field(ScalarField { cols, rows, values }))
     }
 }
