@@ -193,3 +193,48 @@ def test_diff_s_workers_are_capped_as_everywhere(tmp_path: Path) -> None:
     done = run_cli("diff", "--b", "vo", "--n", "2", "--workers", "1000", "--db", str(db))
     assert done.returncode == 2 and done.stderr.startswith("error: --workers: 1000 is not in")
     assert not db.exists()
+
+
+def test_an_a_that_cannot_run_somewhere_is_said_per_side_and_fails_the_gate(
+    tmp_path: Path,
+) -> None:
+    """A that errs where B runs: the situation is not compared, the summary, JSON and JUnit
+    say which side could not run where, and the gate does not pass on fewer situations."""
+    junit = tmp_path / "junit.xml"
+    done = run_cli(
+        "diff", "--a", "cmd:/bin/false", "--b", "snd_follow", "--n", "2",
+        "--db", str(tmp_path / "d.db"), "--junit", str(junit), "--format", "json",
+    )  # fmt: skip
+    assert done.returncode == 1, done.stdout + done.stderr
+    report = json.loads(done.stdout)
+    assert report["failed"] and report["b_errors"] == []
+    assert [e["situation"] for e in report["not_compared"]["a"]] == [0, 1]
+    assert report["not_compared"]["b"] == [] and not report["partial"]
+    suite = ElementTree.parse(junit).getroot().find("testsuite")
+    assert suite is not None
+    case = suite.find("testcase[@name='not_compared_a']/failure")
+    assert case is not None and "2 situation(s): 0, 1" in (case.text or ""), case
+    table = run_cli(
+        "diff", "--a", "cmd:/bin/false", "--b", "snd_follow", "--n", "2",
+        "--db", str(tmp_path / "d.db"),
+    )  # fmt: skip
+    assert table.returncode == 1 and "not compared: A could not run on 2 situation(s)" in (
+        table.stdout
+    ), table.stdout
+
+
+def test_a_diff_over_fewer_situations_than_asked_does_not_pass(tmp_path: Path) -> None:
+    """A store whose diff was asked for more situations than it evaluated (stopped early) reads
+    as partial and failed, whatever its differences."""
+    from sitgen.generation.diff import diff_report
+    from sitgen.store import Store
+
+    db = tmp_path / "d.db"
+    done = run_cli("diff", "--a", "snd_follow", "--b", "snd_follow", "--n", "2", "--db", str(db))
+    assert done.returncode == 0, done.stdout + done.stderr
+    with Store(db) as store:
+        assert not diff_report(store).failed
+        with store.db:
+            store.db.execute("UPDATE campaign SET n = 5 WHERE id = 1")
+        report = diff_report(store)
+    assert report.partial and report.failed and report.asked == 5

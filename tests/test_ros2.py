@@ -342,6 +342,25 @@ def test_diff_of_two_settings_of_a_ros2_node(ros2_campaign: Path, tmp_path: Path
     assert report["situations"] == 1
 
 
+def test_a_diff_whose_side_keeps_its_node_alive_compares_every_situation(
+    ros2_campaign: Path, tmp_path: Path
+) -> None:
+    """A kept alive on one worker, B another node after it: A's node is stopped before B's
+    starts on the worker's domain, so B's runs are not refused as "domain not free" and every
+    situation is compared."""
+    kept = json.dumps({"name": FOLLOWER, "keep_alive": True})
+    fast = json.dumps({"name": FOLLOWER, "params": {"speed_m_s": 0.9, "stop_m": 0.2}})
+    done = run_cli(
+        "diff", "--a", kept, "--b", fast, "--situations", str(ros2_campaign / "two.db"),
+        "--n", "2", "--workers", "1", "--db", str(tmp_path / "d.db"), "--format", "json",
+        cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode in (0, 1), done.stderr
+    report = json.loads(done.stdout)
+    assert report["both_ran"] == 2, report
+    assert report["b_errors"] == [] and report["not_compared"] == {"a": [], "b": []}, report
+
+
 def udp_sockets(pids: set[int]) -> set[tuple[str, int]]:
     """(address, port) of every IPv4 UDP socket the processes ``pids`` hold (/proc/net/udp,
     matched by socket inode)."""

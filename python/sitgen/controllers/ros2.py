@@ -316,6 +316,11 @@ class Ros2Controller(UserController):
     def _start(self) -> None:
         bridge = self._bridge
         assert bridge is not None
+        # One node at a time on this process's domain: a node kept alive for other runs (a
+        # diff's side A, say) would talk on this one's topics, and the run would find its
+        # domain not free.
+        for node in [n for n in _KEPT.values() if n is not self]:
+            node.stop()
         env, self._mark = marked_env()
         env.update(ROS_DOMAIN_ID=str(bridge.domain), PYTHONUNBUFFERED="1")
         confine(env)

@@ -15,6 +15,8 @@ where it is robustly new somewhere and fixed nowhere, fixed where the reverse, `
 fixed`` where both, unchanged where it showed alike on every situation it showed on, and not
 robust either way for the rest. B *has robust new failures* when any class is robustly new on
 any situation: ``sitgen diff`` then exits 1, and ``--junit`` writes a failed test case for it.
+A situation either side could not run is not compared, and the diff says so per side (in its
+summary, JSON and JUnit) and fails: so does a diff that evaluated fewer situations than asked.
 
 Situations go in chunks of :data:`CHUNK`; each chunk's runs are stored as they finish and its
 verdicts in one transaction after its copies, so a killed diff resumes with the same command.
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -382,16 +384,42 @@ class DiffReport:
     reason: a regression as much as a new failure."""
     both_ran: int = 0
     """Situations both sides ran: with none, there is no verdict to give."""
+    a_errors: dict[int, str] = field(default_factory=dict)
+    """Situations where A could not run, each with A's reason: not compared."""
+    b_erred: dict[int, str] = field(default_factory=dict)
+    """Every situation where B could not run (where A could not either, too): not compared."""
+    asked: int = 0
+    """Situations the diff was asked to compare (``--n``)."""
 
     @property
     def robust_new(self) -> list[ClassDiff]:
         return [c for c in self.classes if c.new]
 
     @property
+    def partial(self) -> bool:
+        """Fewer situations evaluated than asked (stopped early)."""
+        return self.situations < self.asked
+
+    @property
     def failed(self) -> bool:
-        """Whether the gate fails: B has robust new failures, fails to run where A ran, or
-        nothing could be compared."""
-        return bool(self.robust_new or self.b_errors or (self.situations and not self.both_ran))
+        """Whether the gate fails: B has robust new failures, fails to run where A ran, a
+        situation could not be compared on either side, fewer situations were evaluated than
+        asked, or nothing could be compared: a verdict over fewer situations must not pass."""
+        return bool(
+            self.robust_new
+            or self.b_errors
+            or self.a_errors
+            or self.partial
+            or (self.situations and not self.both_ran)
+        )
+
+    def uncompared(self) -> Iterator[tuple[str, dict[int, str]]]:
+        """Each side that could not run somewhere, with those situations and its reasons (B's
+        where A could not run either: :attr:`b_errors` has the rest)."""
+        b_also = {i: r for i, r in self.b_erred.items() if i not in self.b_errors}
+        for side, erred in (("A", self.a_errors), ("B", b_also)):
+            if erred:
+                yield side, erred
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -401,6 +429,12 @@ class DiffReport:
             "runs": self.runs,
             "robust_new": len(self.robust_new),
             "b_errors": [{"situation": i, "reason": r} for i, r in self.b_errors.items()],
+            "not_compared": {
+                side.lower(): [{"situation": i, "reason": r} for i, r in erred.items()]
+                for side, erred in (("A", self.a_errors), ("B", self.b_erred))
+            },
+            "asked": self.asked,
+            "partial": self.partial,
             "both_ran": self.both_ran,
             "failed": self.failed,
             "classes": [c.as_dict() for c in self.classes],
@@ -456,6 +490,7 @@ def diff_report(store: Store) -> DiffReport:
         "AND a.outcome != 'error' AND b.outcome != 'error'"
     ).fetchone()[0]
     b_errors = {i: r for i, r in erred[1].items() if i not in erred[0]}
+    asked = int((store.campaign() or {}).get("n", evaluated))
     return DiffReport(
         plan["a"],
         plan["b"],
@@ -464,6 +499,9 @@ def diff_report(store: Store) -> DiffReport:
         classes,
         b_errors,
         int(both),
+        erred[0],
+        erred[1],
+        asked,
     )
 
 
@@ -505,6 +543,13 @@ def write_junit(report: DiffReport, out: TextIO) -> None:
     elif report.situations and not report.both_ran:
         failure = ("no_comparison", "no situation ran on both sides", "nothing was compared")
         cases.append(Case("no_comparison", "sitgen.generation.diff", failure=failure))
+    for side, erred in report.uncompared():
+        key = f"not_compared_{side.lower()}"
+        failure = (key, f"{side} could not run: situations not compared", _erred_text(erred))
+        cases.append(Case(key, "sitgen.generation.diff", failure=failure))
+    if report.partial:
+        text = f"{report.situations} of {report.asked} situations evaluated: stopped early"
+        cases.append(Case("partial", "sitgen.generation.diff", failure=("partial", text, text)))
     name = f"sitgen diff: {controller_label(report.a)} -> {controller_label(report.b)}"
     write_junit_cases(name, cases, out)
 
@@ -527,3 +572,16 @@ def summary_lines(report: DiffReport) -> Iterable[str]:
         )
     elif report.situations and not report.both_ran:
         yield "no situation ran on both sides: nothing was compared"
+    for side, erred in report.uncompared():
+        yield f"not compared: {side} could not run on {_erred_text(erred)}"
+    if report.partial:
+        yield (
+            f"partial: {report.situations} of {report.asked} situations evaluated; the verdict "
+            "does not pass until every one is"
+        )
+
+
+def _erred_text(erred: dict[int, str]) -> str:
+    """``3 situation(s): 0, 4, 7 (situation 0, run 0: reason)``."""
+    first, reason = next(iter(erred.items()))
+    return f"{len(erred)} situation(s): {', '.join(map(str, erred))} (situation {first}: {reason})"
