@@ -291,7 +291,10 @@ def _forks(
     beside a ``ros2:`` node (its middleware lives in this process)."""
     if sandbox.inside() or not isinstance(controller, (str, type(None))):
         return None
-    agent = str(name or (run_spec.get("controller") or situation.agent.controller)["name"])
+    named = run_spec.get("controller") or situation.agent.controller
+    agent = name or (named.get("name") if isinstance(named, dict) else None)
+    if not isinstance(agent, str):
+        return None  # the core refuses the spec, naming the field
     if in_process and agent.startswith(IN_PROCESS_PREFIXES):
         return "agent"
     peers = (r.controller["name"] for r in situation.robots if r.role == "peer")

@@ -109,9 +109,11 @@ class DoubleForks(Forward):
         first = os.fork()
         if first == 0:
             os.setsid()
-            if os.fork() == 0:
-                _record(os.getpid())
+            daemon = os.fork()
+            if daemon == 0:
                 time.sleep(600)
+                os._exit(0)
+            _record(daemon)  # before reset returns, so that the run's end cannot forestall it
             os._exit(0)
         os.waitpid(first, 0)
 
