@@ -245,3 +245,63 @@ def test_thinned_laser_points_keep_one_in_each_cell_and_cover_the_rest(
     assert indices == sorted(indices)
     for p in points:  # every point has a kept one in its own cell
         assert tuple(np.floor(p / cell).astype(int)) in set(cells)
+
+
+def _distance_to_walls(points: np.ndarray[Any, Any], walls: np.ndarray[Any, Any]) -> Any:
+    a, b = walls[:, :2], walls[:, 2:]
+    ab = b - a
+    length2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    out = []
+    for p in points:
+        t = np.clip(((p - a) * ab).sum(axis=1) / length2, 0.0, 1.0)
+        out.append(np.hypot(*(a + ab * t[:, None] - p).T).min())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("offset_m", [0.0, 0.3])
+def test_the_sensed_obstacles_lie_on_the_walls_wherever_the_laser_sits(offset_m: float) -> None:
+    """The laser's end points are taken from the laser, ``sim.laser.offset_x_m`` ahead of the
+    pose: every obstacle disc the sensed perception gives lies on a wall (within a cell and the
+    laser's noise), with the laser at the pose or 0.3 m ahead of it."""
+    from sitgen import _core
+    from sitgen.controllers.navground import NavgroundController
+    from sitgen.world.config import spec_json
+    from sitgen.world.sim import Observation
+
+    situation = sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=3)
+    spec = {"sim": {"laser": {"offset_x_m": offset_m}}, "controller": {"name": "navground:HL"}}
+    info = reset_info(situation, spec, situation.agent.id)
+    controller = NavgroundController("HL")
+    controller.reset(info)
+    observed = _core.Run(situation.to_json(), spec_json(spec, "run"), 0).observe_agent()
+    x, y, heading = observed["pose"]
+    obs = Observation(
+        ranges=np.asarray(observed["ranges"]), angles=np.asarray(info["laser"]["angles"]),
+        max_range=float(info["laser"]["range_m"]), pose=(x, y, heading),
+        velocity=tuple(observed["velocity"]), stalled=observed["stalled"],
+        time=observed["time"], tracks=(), waypoints_reached=0,
+    )  # fmt: skip
+    controller._perceive(obs, x, y, heading)
+    discs = controller.behavior.environment_state.static_obstacles
+    assert len(discs) >= 5, "a cave wall within the horizon"
+    grid = situation.grid
+    walls = wall_segments(grid.occupied, grid.resolution)
+    off = _distance_to_walls(np.array([d.position for d in discs]), walls)
+    assert off.max() < grid.resolution + 0.05, off.max()
+
+
+def test_ahead_kinematics_lets_the_behaviour_turn_at_full_speed(
+    situation: sitgen.Situation,
+) -> None:
+    """``ahead=1``: navground's Ahead kinematics, limited as the robot is (speed and turn rate
+    each on its own), not the two-wheel model that allows 0.29 m/s at 1 rad/s."""
+    from sitgen.controllers.navground import NavgroundController
+
+    spec = {"controller": {"name": "navground:HL"}}
+    info = reset_info(situation, spec, situation.agent.id)
+    for ahead, wheeled in ((0.0, True), (1.0, False)):
+        controller = NavgroundController("HL", ahead=ahead)
+        controller.reset(info)
+        assert controller.behavior.kinematics.is_wheeled() == wheeled
+    with pytest.raises(ValueError, match="ahead is a switch"):
+        NavgroundController("HL", ahead=0.5)

@@ -814,3 +814,49 @@ def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
     monkeypatch.setenv("SITGEN_ROS2_NATIVE", "0")
     ros2_native._native.cache_clear()
     assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE=0"
+
+
+TF_TYPE = "from sitgen.controllers.ros2_tf import tf_message_type; print(tf_message_type())"
+
+
+@pytest.mark.parametrize("damage", ["python", "extension"])
+def test_a_damaged_tf2_msgs_build_is_built_again(tmp_path: Path, damage: str) -> None:
+    """A build in the cache whose Python module does not parse, or whose extension is cut
+    short: /tf's message type is built again in its place, never a traceback."""
+    cache = tmp_path / "cache"
+    env = {**os.environ, "SITGEN_CACHE_DIR": str(cache)}
+    first = subprocess.run([sys.executable, "-c", TF_TYPE], capture_output=True, text=True,
+                           env=env, timeout=300, check=False)  # fmt: skip
+    assert first.returncode == 0 and "TFMessage" in first.stdout, first.stderr
+    (folder,) = cache.glob("ros2-tf2-msgs-*/tf2_msgs")
+    if damage == "python":
+        target = folder / "msg" / "_tf_message.py"
+        target.write_text("def (:\n")
+    else:
+        (target,) = folder.glob("*.so")
+        target.write_bytes(target.read_bytes()[:100])
+    again = subprocess.run([sys.executable, "-c", TF_TYPE], capture_output=True, text=True,
+                           env=env, timeout=300, check=False)  # fmt: skip
+    assert again.returncode == 0 and "TFMessage" in again.stdout, again.stderr
+    assert again.stderr == "", again.stderr
+    rebuilt = folder / target.relative_to(folder)
+    assert rebuilt.stat().st_size > 100 and b"def (:" not in rebuilt.read_bytes()
+
+
+def test_check_controller_says_a_users_fast_dds_profile_is_not_confined(tmp_path: Path) -> None:
+    """With the user's own Fast DDS profile sitgen does not confine the run to this machine,
+    and says so; with none (the loopback profile) it says nothing."""
+    from sitgen.controllers.dds_domain import LOOPBACK_PROFILE, unconfined
+
+    profile = tmp_path / "mine.xml"
+    shutil.copy(LOOPBACK_PROFILE, profile)
+    users = {"FASTDDS_DEFAULT_PROFILES_FILE": str(profile)}
+    assert (
+        unconfined({}) is None and unconfined({"RMW_IMPLEMENTATION": "rmw_cyclonedds_cpp"}) is None
+    )
+    assert unconfined(users) is not None and str(profile) in str(unconfined(users))
+    env = {**os.environ, **users}
+    done = subprocess.run([*sitgen_command(), "check-controller", FOLLOWER, "--steps", "5"],
+                          capture_output=True, text=True, cwd=ROOT, env=env, timeout=300,
+                          check=False)  # fmt: skip
+    assert "note network  with your Fast DDS profile" in done.stdout, done.stdout + done.stderr

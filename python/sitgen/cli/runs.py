@@ -4,6 +4,7 @@ serve-controller, crosscheck."""
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -11,6 +12,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
+from sitgen.controllers.dds_domain import unconfined
 from sitgen.controllers.user import USER_PREFIXES
 from sitgen.world.config import preset_spec
 from sitgen.world.situation import Situation, generate_situation
@@ -223,5 +225,7 @@ def check_controller_command(
     )
     for c in checks:
         typer.echo(f"{'ok  ' if c.ok else 'FAIL'} {c.name:8} {c.detail}")
+    if controller.startswith("ros2:") and (heard := unconfined(os.environ)) is not None:
+        typer.echo(f"note {'network':8} {heard}")
     if not all(c.ok for c in checks):
         raise typer.Exit(EXIT_FAILED)

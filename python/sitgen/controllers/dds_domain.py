@@ -33,7 +33,7 @@ import fcntl
 import os
 import stat
 import tempfile
-from collections.abc import Iterable, MutableMapping
+from collections.abc import Iterable, Mapping, MutableMapping
 from pathlib import Path
 from typing import IO
 
@@ -151,6 +151,21 @@ def confine(env: MutableMapping[str, str]) -> None:
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
     else:
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+def unconfined(env: Mapping[str, str]) -> str | None:
+    """Why a run with ``env`` may be heard from the network, or None where sitgen confines it
+    (:func:`confine`): a user's own Fast DDS profile is kept as it is, and Fast DDS then listens
+    on the interfaces that profile says (every one, by default), whatever the discovery range."""
+    rmw = env.get("RMW_IMPLEMENTATION", DEFAULT_RMW)
+    profile = env.get("FASTDDS_DEFAULT_PROFILES_FILE")
+    if rmw in FAST_DDS_RMWS and profile and profile != str(LOOPBACK_PROFILE):
+        return (
+            f"with your Fast DDS profile ({profile}) sitgen's participant and the node listen "
+            "where it says (every interface, unless it names one): the run is not confined to "
+            "this machine; unset FASTDDS_DEFAULT_PROFILES_FILE to confine it"
+        )
+    return None
 
 
 def rmw_problem(env: MutableMapping[str, str], lib_dirs: list[str]) -> str | None:

@@ -6,15 +6,19 @@ Python, found by navground's plugin mechanism) — towards the next waypoint of 
 route. Each decision it sets the behaviour's state from the observation (pose, velocity,
 neighbours, obstacles), targets the waypoint the monitor counts as next as a point, and returns
 the behaviour's command for two-wheel differential kinematics at the robot's limits (the wheel
-axis is the one whose turn in place at full wheel speed is the robot's largest turn rate).
+axis is the one whose turn in place at full wheel speed is the robot's largest turn rate), or,
+with ``ahead = 1``, for navground's ``Ahead`` kinematics, whose speed and turn rate are limited
+each on its own, as the simulated robot's are (the wheeled model allows 0.29 m/s at 1 rad/s where
+the robot can do 0.8: stricter than the robot).
 The robot is a disc: the body's enclosing circle about its pose, and so is every neighbour.
 
 What it sees is the run spec's controller ``perception``:
 
 - ``sensed`` (default), what a deployed robot has: neighbours are the tracks the laser gives
   (position and velocity of each robot the scan sees), static obstacles the laser's end points
-  within ``horizon`` (those on a neighbour left out), thinned to the first in each square of
-  a grid of twice ``obstacle_radius_m``, a disc of ``obstacle_radius_m`` each.
+  (from the laser's own position, ``sim.laser.offset_x_m`` ahead of the pose) within
+  ``horizon`` (those on a neighbour left out), thinned to the first in each square of a grid
+  of twice ``obstacle_radius_m``, a disc of ``obstacle_radius_m`` each.
 - ``exact``, what navground's own simulator gives: every other robot's true position and
   velocity, and the map's walls as line segments (those within ``horizon`` of the robot).
 
@@ -33,7 +37,8 @@ of every behaviour ``horizon`` (m, default navground's 5), ``safety_margin`` (m,
 ``optimal_speed`` (m/s, default the robot's top speed), ``rotation_tau`` (s, default 0.5).
 sitgen's own: ``tolerance_m`` (m, default 0.25) how near a waypoint counts as reached for the
 behaviour (under the monitor's 0.5 m, so that the monitor moves the target on first);
-``obstacle_radius_m`` (m, default 0.1) the disc of a laser end point.
+``obstacle_radius_m`` (m, default 0.1) the disc of a laser end point; ``ahead`` (0 or 1, default
+0) navground's ``Ahead`` kinematics instead of the two-wheel one.
 
 Source: navground (Guzzi et al., IDSIA; PyPI ``navground``, ``sitgen[navground]``),
 ``navground.core.Behavior``; the behaviours' papers are cited in its documentation.
@@ -63,7 +68,7 @@ should end a run, not a stall of a loaded machine (one such stall passed 1 s).""
 PERCEPTIONS = ("sensed", "exact")
 """What a controller may perceive (the run spec's ``controller.perception``)."""
 
-OWN_PARAMS = {"tolerance_m": 0.25, "obstacle_radius_m": 0.1}
+OWN_PARAMS = {"tolerance_m": 0.25, "obstacle_radius_m": 0.1, "ahead": 0.0}
 """sitgen's parameters of the adapter, with their defaults."""
 
 PEER_SWITCH_M = 0.3
@@ -149,6 +154,10 @@ class NavgroundController:
         self.tolerance_m, self.obstacle_radius_m = own["tolerance_m"], own["obstacle_radius_m"]
         if not (self.tolerance_m >= 0 and self.obstacle_radius_m > 0):
             raise ValueError("tolerance_m must be at least 0 and obstacle_radius_m above 0")
+        if own["ahead"] not in (0.0, 1.0):
+            raise ValueError(f"ahead is a switch (0 or 1), got {own['ahead']:g}")
+        self.ahead = own["ahead"] == 1.0
+        self.laser_offset_m = 0.0
         self._optimal_speed = params.pop("optimal_speed", None)
         for name, value in params.items():
             self._set(name, value)
@@ -195,9 +204,15 @@ class NavgroundController:
             raise ValueError("the exact perception needs the map's walls in the reset info")
         max_speed = float(info["max_speed_m_s"])
         max_turn = math.radians(float(info["max_turn_rate_deg_s"]))
-        b.kinematics = core.kinematics.TwoWheelsDifferentialDriveKinematics(
-            max_speed, wheel_axis_m(max_speed, max_turn)
+        b.kinematics = (
+            core.kinematics.AheadKinematics(max_speed, max_turn)
+            if self.ahead
+            else core.kinematics.TwoWheelsDifferentialDriveKinematics(
+                max_speed, wheel_axis_m(max_speed, max_turn)
+            )
         )
+        # Beams start at the laser, which may sit ahead of the robot's pose.
+        self.laser_offset_m = float(info.get("laser", {}).get("offset_x_m", 0.0))
         self.limits = (max_speed, max_turn)
         b.radius = self.radius_m = enclosing_radius_m(info["body"])
         b.optimal_speed = float(self._optimal_speed or max_speed)
@@ -264,8 +279,10 @@ class NavgroundController:
         reach_m = min(float(obs.max_range), float(self.behavior.horizon) + r)
         hit = ranges < reach_m
         bearing = np.asarray(obs.angles)[hit] + heading
+        lx = x + self.laser_offset_m * math.cos(heading)
+        ly = y + self.laser_offset_m * math.sin(heading)
         points = np.column_stack(
-            [x + ranges[hit] * np.cos(bearing), y + ranges[hit] * np.sin(bearing)]
+            [lx + ranges[hit] * np.cos(bearing), ly + ranges[hit] * np.sin(bearing)]
         )
         for t in tracks:  # a return on a neighbour is that neighbour, not a wall
             px, py = t["position"]

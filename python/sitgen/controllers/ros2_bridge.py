@@ -173,11 +173,13 @@ class Bridge:
         handed over is waited on, so /tf is sent only where it is read."""
         try:
             self.msg["TFMessage"] = tf_message_type()
-        except ControllerError as e:
-            self.tf_problem = str(e)
-        else:
             self.tf = self.node.create_publisher(m["TFMessage"], TOPICS.tf, reliable)
             self.tf_static = self.node.create_publisher(m["TFMessage"], TOPICS.tf_static, latched)
+        except ControllerError as e:
+            self.tf_problem = str(e)
+        except Exception as e:  # a tf2_msgs whose type support is broken: /tf only is lost
+            self.tf, self.tf_static = None, None
+            self.tf_problem = f"ros2: tf2_msgs's type support does not work: {e}"
         self.native = native_period()
         """The period's hand-over in C (None: in Python, ros2_native.py)."""
         self._pointers: Any = None

@@ -181,11 +181,30 @@ def _tf_message() -> tuple[Any, str | None]:
             f"ros2: /tf needs tf2_msgs, and sitgen could not build it in {cache_dir()}: {e}",
         )
     sys.path.append(str(folder))
-    importlib.invalidate_caches()
-    try:
-        return importlib.import_module(f"{PACKAGE}.msg").TFMessage, None
-    except ImportError as e:
-        return None, f"ros2: tf2_msgs built in {folder} does not import ({e})"
+    for attempt in ("as found", "built again"):
+        importlib.invalidate_caches()
+        try:
+            message = importlib.import_module(f"{PACKAGE}.msg").TFMessage
+            # Its type support loaded now, not at the first publisher: a damaged extension
+            # shows here, where it can be built again.
+            type(message).__import_type_support__()
+            return message, None
+        except Exception as e:  # a build damaged in the cache: any error its import raises
+            problem = f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
+            for name in [m for m in sys.modules if m == PACKAGE or m.startswith(f"{PACKAGE}.")]:
+                del sys.modules[name]
+            if attempt == "built again":
+                break
+            # Built afresh in its place, once (a copy another process has imported is its own).
+            shutil.rmtree(folder, ignore_errors=True)
+            try:
+                built()
+            except (ControllerError, OSError) as again:
+                return (
+                    None,
+                    f"ros2: tf2_msgs in {folder} was damaged and could not be built again: {again}",
+                )
+    return None, f"ros2: tf2_msgs built in {folder} does not import ({problem})"
 
 
 def node_python_path() -> str | None:
