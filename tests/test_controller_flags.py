@@ -114,3 +114,13 @@ def test_the_default_search_runs_a_program_controller_on_one_worker(tmp_path: Pa
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
     assert len(stored(db, "SELECT id FROM runs")) == 3
+
+
+def test_a_campaigns_stored_situations_name_the_controller_it_was_given(tmp_path: Path) -> None:
+    """``--controller`` drives the agent and is what its stored situations say drives it."""
+    db = tmp_path / "c.db"
+    done = run_cli("campaign", "--controller", "vo", "--n", "2", "--db", str(db), "--reruns", "0")
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    with sqlite3.connect(db) as c:
+        situations = [json.loads(s) for (s,) in c.execute("SELECT situation FROM situations")]
+    assert [s["robots"][0]["controller"]["name"] for s in situations] == ["vo", "vo"]

@@ -18,10 +18,14 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 import sitgen
-from sitgen.controllers.navground import thinned
+from sitgen import _core
+from sitgen.controllers.navground import NavgroundController, thinned
+from sitgen.execution.jobs import parse_campaign
 from sitgen.run import reset_info
+from sitgen.world.config import spec_json
+from sitgen.world.sim import Observation
 from sitgen.world.terrain import wall_segments
-from tests.conftest import campaign_on_2_and_1_workers, run_cli, sitgen_command
+from tests.conftest import ROOT, campaign_on_2_and_1_workers, run_cli, sitgen_command
 
 navground = pytest.importorskip("navground.core", reason="sitgen[navground] is not installed")
 
@@ -263,10 +267,6 @@ def test_the_sensed_obstacles_lie_on_the_walls_wherever_the_laser_sits(offset_m:
     """The laser's end points are taken from the laser, ``sim.laser.offset_x_m`` ahead of the
     pose: every obstacle disc the sensed perception gives lies on a wall (within a cell and the
     laser's noise), with the laser at the pose or 0.3 m ahead of it."""
-    from sitgen import _core
-    from sitgen.controllers.navground import NavgroundController
-    from sitgen.world.config import spec_json
-    from sitgen.world.sim import Observation
 
     situation = sitgen.generate_situation({"terrain": {"preset": "caves"}}, seed=3)
     spec = {"sim": {"laser": {"offset_x_m": offset_m}}, "controller": {"name": "navground:HL"}}
@@ -295,7 +295,6 @@ def test_ahead_kinematics_lets_the_behaviour_turn_at_full_speed(
 ) -> None:
     """``ahead=1``: navground's Ahead kinematics, limited as the robot is (speed and turn rate
     each on its own), not the two-wheel model that allows 0.29 m/s at 1 rad/s."""
-    from sitgen.controllers.navground import NavgroundController
 
     spec = {"controller": {"name": "navground:HL"}}
     info = reset_info(situation, spec, situation.agent.id)
@@ -305,3 +304,22 @@ def test_ahead_kinematics_lets_the_behaviour_turn_at_full_speed(
         assert controller.behavior.kinematics.is_wheeled() == wheeled
     with pytest.raises(ValueError, match="ahead is a switch"):
         NavgroundController("HL", ahead=0.5)
+
+
+def test_every_spec_the_case_study_runs_is_in_the_repository() -> None:
+    """docs/case-studies/navground.md's numbers come from commands on files the repository
+    has: every spec its commands name exists and parses."""
+
+    page = (ROOT / "docs" / "case-studies" / "navground.md").read_text()
+    commands = [
+        line
+        for block in page.split("```sh")[1:]
+        for line in block.split("```")[0].splitlines()
+        if line.startswith("sitgen ")
+    ]
+    named = {word for line in commands for word in line.split() if word.endswith(".toml")}
+    assert named, "the page runs specs"
+    for spec in sorted(named):
+        path = ROOT / spec
+        assert path.is_file(), f"{spec} is not in the repository"
+        parse_campaign(path.read_text(), spec)

@@ -26,6 +26,7 @@ import pytest
 
 import sitgen
 from sitgen.controllers import ros2_bridge, ros2_native, ros2_tf
+from sitgen.controllers.dds_domain import LOOPBACK_PROFILE, unconfined
 from sitgen.controllers.external import ControllerError
 from sitgen.controllers.ros2 import stop_kept_nodes
 from sitgen.controllers.ros2_bridge import ros2_available
@@ -846,8 +847,6 @@ def test_a_damaged_tf2_msgs_build_is_built_again(tmp_path: Path, damage: str) ->
 def test_check_controller_says_a_users_fast_dds_profile_is_not_confined(tmp_path: Path) -> None:
     """With the user's own Fast DDS profile sitgen does not confine the run to this machine,
     and says so; with none (the loopback profile) it says nothing."""
-    from sitgen.controllers.dds_domain import LOOPBACK_PROFILE, unconfined
-
     profile = tmp_path / "mine.xml"
     shutil.copy(LOOPBACK_PROFILE, profile)
     users = {"FASTDDS_DEFAULT_PROFILES_FILE": str(profile)}

@@ -91,6 +91,10 @@ def _with_controller(
         raise UsageError(f"--controller: the spec varies {varied[0]}; name one or the other")
     source = copy.deepcopy(parsed.source)
     mission = source.get("situation", {}).get("mission", {}).get("agent_controller")
+    if controller and isinstance(source.get("situation"), dict):
+        # The situations generated say which controller drives their agent, as a spec that
+        # named it in its mission would: a stored situation must not name another.
+        source["situation"].setdefault("mission", {})["agent_controller"] = {"name": controller}
     source["run"] = run_spec_with(
         source.get("run"),
         None,
