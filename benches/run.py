@@ -232,7 +232,7 @@ def compile_trivial_c_node(folder: Path) -> Path | None:
 def python_side(wanted: bool) -> Iterator[None]:
     """``ros2:`` periods handed over in Python (``SITGEN_ROS2_NATIVE=0``) where ``wanted``,
     else in C (the default)."""
-    from sitgen.controllers import ros2_native
+    from sitgen.controllers.ros2 import native as ros2_native
 
     before = os.environ.get("SITGEN_ROS2_NATIVE")
     os.environ["SITGEN_ROS2_NATIVE"] = "0" if wanted else "1"
@@ -273,8 +273,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     from user_controllers import Busy, Trivial
 
     from sitgen.controllers.navground import NavgroundController
-    from sitgen.controllers.ros2 import stop_kept_nodes
-    from sitgen.controllers.ros2_bridge import ros2_available
+    from sitgen.controllers.ros2.bridge import ros2_available
+    from sitgen.controllers.ros2.controller import stop_kept_nodes
 
     situation = sitgen.generate_situation(REFERENCE_SCENE, seed=1)
     folder = Path(__file__).resolve().parent
@@ -317,8 +317,8 @@ def bench_user_controllers(rows: list[tuple[str, dict[str, float]]]) -> dict[str
     if c_node is not None:
         kinds["ros2 trivial C node, kept alive"] = (f"ros2:{c_node}", False, None)
         kept_alive.add("ros2 trivial C node, kept alive")
-    # The trivial nodes again with sitgen's side of each period in Python (ros2_native.py):
-    # what the hand-over in C saves.
+    # The trivial nodes again with sitgen's side of each period in Python
+    # (controllers/ros2/native.py): what the hand-over in C saves.
     in_python = set()
     for kind in [k for k in kinds if k.startswith("ros2 trivial")]:
         kinds[f"{kind}, Python side"] = kinds[kind]

@@ -11,7 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from sitgen.controllers.ros2_bridge import ros2_available
+from sitgen.controllers.ros2.bridge import ros2_available
 from tests.conftest import ROOT
 
 GUIDE = ROOT / "docs" / "your-controller.md"

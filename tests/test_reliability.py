@@ -187,6 +187,28 @@ def test_a_class_in_a_host_process_that_does_not_reply_is_told_computing_or_wait
     assert late + "waiting, not computing: on a sleep, a lock" in sleeps.reason, sleeps.reason
 
 
+def test_a_class_that_loops_is_told_computing_even_when_starved_of_a_core(
+    situation: sitgen.Situation,
+) -> None:
+    """Beside four loops a core, each in a session of its own (as other jobs of a loaded
+    machine are: the scheduler shares a core out by session), the class that loops gets under
+    a fifth of a core, but is runnable all the while: computing, not waiting (its run-queue
+    time counts)."""
+    burners = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
+        for _ in range(4 * (os.cpu_count() or 1))
+    ]
+    try:
+        hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10)
+        sleeps = sitgen.run(situation, controller=f"{PY}:Swallows", time_limit=10)
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()
+    assert "it is computing, not waiting for input" in hangs.reason, hangs.reason
+    assert "it is waiting, not computing" in sleeps.reason, sleeps.reason
+
+
 def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: Path) -> None:
     db = tmp_path / "c.db"
     # In the pool workers a class is called in process (the fast path): an exception or a
@@ -1012,7 +1034,7 @@ def test_a_dds_domain_lock_never_follows_a_planted_link_nor_waits_on_a_fifo(
 ) -> None:
     """The lock files live in the shared temp folder: a symlink planted there must not have
     its target truncated, a FIFO must not block; their domains are passed over."""
-    from sitgen.controllers import dds_domain
+    from sitgen.controllers.ros2 import dds_domain
 
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     canary = tmp_path / "canary"
@@ -1078,7 +1100,7 @@ def test_a_ros2_controller_s_own_timeouts_are_bounded(params: dict[str, float]) 
     """Every wait of a run has a documented maximum: a node's answer timeout and the answers it
     may miss are refused, naming the parameter, out of their ranges."""
     from sitgen.controllers.external import ControllerError
-    from sitgen.controllers.ros2 import Ros2Controller
+    from sitgen.controllers.ros2.controller import Ros2Controller
 
     with pytest.raises(ControllerError, match=rf"params\.{next(iter(params))}: .* is not"):
         Ros2Controller("true", "`ros2:true`", params)

@@ -25,11 +25,13 @@ import numpy as np
 import pytest
 
 import sitgen
-from sitgen.controllers import ros2_bridge, ros2_native, ros2_tf
-from sitgen.controllers.dds_domain import LOOPBACK_PROFILE, unconfined
 from sitgen.controllers.external import ControllerError
-from sitgen.controllers.ros2 import stop_kept_nodes
-from sitgen.controllers.ros2_bridge import ros2_available
+from sitgen.controllers.ros2 import bridge as ros2_bridge
+from sitgen.controllers.ros2 import native as ros2_native
+from sitgen.controllers.ros2 import tf as ros2_tf
+from sitgen.controllers.ros2.bridge import ros2_available
+from sitgen.controllers.ros2.controller import stop_kept_nodes
+from sitgen.controllers.ros2.dds_domain import LOOPBACK_PROFILE, unconfined
 from sitgen.store import Store
 from sitgen.triage.recall import resimulate_checked, stored_run
 from tests.conftest import ROOT, run_cli, sitgen_command
@@ -563,7 +565,7 @@ def test_a_node_sitgen_did_not_start_on_the_runs_domain_is_found_and_the_domain_
     """A node left on the run's DDS domain by something else would answer the run as well
     (and change its score): the run errs naming that process, and the next run moves to
     another domain, where it runs clean."""
-    from sitgen.controllers.dds_domain import confine, process_domain
+    from sitgen.controllers.ros2.dds_domain import confine, process_domain
 
     domain = process_domain()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
@@ -776,9 +778,9 @@ def c_side(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
 def test_a_period_handed_over_in_c_gives_the_run_that_python_gives(
     style: str, situation: sitgen.Situation, monkeypatch: pytest.MonkeyPatch, c_side: None
 ) -> None:
-    """The hand-over in C (ros2_native.py) sends what the Python one sends, in the same order
-    with the same waits: a node in either usual style drives the same trajectory and events
-    both ways, and the C one did hand the periods over."""
+    """The hand-over in C (controllers/ros2/native.py) sends what the Python one sends, in the
+    same order with the same waits: a node in either usual style drives the same trajectory
+    and events both ways, and the C one did hand the periods over."""
     native = ros2_native.native_period()
     assert native is not None, ros2_native.native_problem()
     calls: list[int] = []
@@ -817,7 +819,7 @@ def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
     assert ros2_native.native_problem() == "SITGEN_ROS2_NATIVE=0"
 
 
-TF_TYPE = "from sitgen.controllers.ros2_tf import tf_message_type; print(tf_message_type())"
+TF_TYPE = "from sitgen.controllers.ros2.tf import tf_message_type; print(tf_message_type())"
 
 
 @pytest.mark.parametrize("damage", ["python", "extension"])

@@ -24,8 +24,8 @@ from typing import Any
 
 import pytest
 
-from sitgen.controllers import ros2
-from sitgen.controllers.ros2_bridge import ros2_available
+from sitgen.controllers.ros2 import controller as ros2
+from sitgen.controllers.ros2.bridge import ros2_available
 from sitgen.run import run
 from sitgen.world.config import preset_spec
 from sitgen.world.situation import generate_situation

@@ -25,9 +25,9 @@ from sitgen import _core
 from sitgen.controllers import sandbox
 from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.inprocess import InProcessController
-from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
-from sitgen.controllers.ros2 import stop_kept_nodes
-from sitgen.controllers.ros2_native import native_problem
+from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
+from sitgen.controllers.ros2.controller import stop_kept_nodes
+from sitgen.controllers.ros2.native import native_problem
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
 from sitgen.world.config import spec_json
 from sitgen.world.situation import Situation
@@ -442,6 +442,12 @@ def robots_at(
     run spec ``spec`` and sensor seed ``seed``: each at its pose with the rest of its route
     (as in a situation file). A user controller is started and driven there (the core
     restarts only its own controllers part-way)."""
+    if _forks(None, None, situation, spec, False):
+        # A peer's class is called: in a runner, as a run with it is (sitgen.controllers.sandbox).
+        done = sandbox.call(robots_at, situation, dict(spec), seed, t_s)
+        if isinstance(done, sandbox.Died):
+            raise ControllerError(done.reason())
+        return done
     spec_text = spec_json(dict(spec), "run")
     core = _core.Run(situation.to_json(), spec_text, seed)
     if not core.agent_is_external and not core.external_peers:
@@ -449,7 +455,7 @@ def robots_at(
             _core.robots_at(situation.to_json(), spec_text, seed, t_s)
         )
         return robots
-    with _peers(core, situation, spec, False):
+    with _peers(core, situation, spec, sandbox.inside()):
         if not core.agent_is_external:
             while core.observe_agent()["time"] < t_s - 1e-9 and not core.step(None):
                 pass

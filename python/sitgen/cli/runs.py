@@ -12,7 +12,7 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from sitgen.controllers.dds_domain import unconfined
+from sitgen.controllers.ros2.dds_domain import unconfined
 from sitgen.controllers.user import USER_PREFIXES
 from sitgen.world.config import preset_spec
 from sitgen.world.situation import Situation, generate_situation

@@ -8,7 +8,7 @@ running, runnable or waiting on a device), within a bound, Fast DDS's own thread
 
 Why: a node's executor takes messages that arrived together in the order it made its
 subscriptions, not the order they were sent; handing it a message only once it has gone back to
-waiting keeps the order sitgen sends in (ros2_bridge.py, docs/ros2.md "Timing and
+waiting keeps the order sitgen sends in (ros2/bridge.py, docs/ros2.md "Timing and
 determinism"). The threads' stat files are kept open and read again from the start: a wait
 looks at every thread of a node (a ROS 2 node has about twenty) many times a control period,
 and opening each file anew cost about 25 µs a thread.
@@ -70,13 +70,37 @@ not waiting for input): one waiting uses next to none, and one that loops gets a
 on an idle machine but may get a third of one, or less, beside a busy machine's other work."""
 
 
+def runnable_seconds(pids: Iterable[int]) -> float:
+    """The time the live threads of the processes ``pids`` have spent running or runnable
+    (waiting for a core: Linux's schedstat, running plus run-queue time); 0 where the kernel
+    keeps no schedstat."""
+    ns = 0
+    for pid in pids:
+        try:
+            tasks = os.listdir(f"/proc/{pid}/task")
+        except OSError:
+            continue
+        for tid in tasks:
+            try:
+                with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
+                    running, waiting = f.read().split()[:2]
+            except (OSError, ValueError):
+                continue
+            ns += int(running) + int(waiting)
+    return ns / 1e9
+
+
 def busy_share(pids: Iterable[int], window_s: float) -> float:
     """The share of one core the processes ``pids`` use over the next ``window_s`` seconds
-    (whose wait it costs)."""
+    (whose wait it costs), counting the time they were runnable but not run: a loop starved
+    of a core by a loaded machine is computing all the same."""
     pids = list(pids)
     before, start = cpu_seconds(pids), time.monotonic()
+    runnable = runnable_seconds(pids)
     time.sleep(window_s)
-    return (cpu_seconds(pids) - before) / (time.monotonic() - start)
+    elapsed = time.monotonic() - start
+    used = (cpu_seconds(pids) - before) / elapsed
+    return max(used, (runnable_seconds(pids) - runnable) / elapsed)
 
 
 PROTOCOL_THREADS = b"dds."

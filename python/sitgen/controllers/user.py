@@ -23,8 +23,8 @@ from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.navground import PREFIX as NAVGROUND_PREFIX
 from sitgen.controllers.navground import STEP_TIMEOUT_S as NAVGROUND_STEP_TIMEOUT_S
 from sitgen.controllers.navground import NavgroundController
-from sitgen.controllers.ros2 import PREFIX as ROS2_PREFIX
-from sitgen.controllers.ros2 import Ros2Controller, check_ros2_name, kept_node
+from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
+from sitgen.controllers.ros2.controller import Ros2Controller, check_ros2_name, kept_node
 
 USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX, NAVGROUND_PREFIX)
 """How a user controller's name starts (the core runs every other name itself)."""

@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 import numpy.typing as npt
 
-from sitgen.controllers.ros2_messages import FRAMES, occupancy_data, quaternion, sec_nanosec
+from sitgen.controllers.ros2.messages import FRAMES, occupancy_data, quaternion, sec_nanosec
 from sitgen.run import RunRecord, reset_info
 from sitgen.store import Store, StoreError
 from sitgen.triage.recall import resimulate_checked, stored_run

@@ -1,5 +1,5 @@
-"""What sitgen compiles on first use against the ROS 2 wheels (tf2_msgs: ros2_tf.py; a control
-period's hand-over: ros2_native.py), built once per Python environment and kept in a cache.
+"""What sitgen compiles on first use against the ROS 2 wheels (tf2_msgs: tf.py; a control
+period's hand-over: native.py), built once per Python environment and kept in a cache.
 
 What it does: :func:`cache_dir` is where builds are kept; :func:`build_key` names a build by
 the interpreter, its prefix, the wheels' versions and anything else it depends on;

@@ -1,6 +1,6 @@
 /* One control period of a ros2: run handed over in C: the odometry, the scan and the clock, in
  * that order, each only once every reliable reader of the one before has acknowledged it, and
- * the scan only once the node's threads have gone back to waiting (ros2_bridge.py's
+ * the scan only once the node's threads have gone back to waiting (bridge.py's
  * Bridge.hand_over, whose order and waits this keeps exactly); and the node's answer taken
  * from sitgen's /cmd_vel subscription (Twist or TwistStamped), waiting for it on that
  * subscription alone (Bridge.take).
@@ -16,7 +16,7 @@
  *
  * Source: rcl (rcl_publish, rcl_publisher_wait_for_all_acked, rcl_wait, rcl_take); proc(5)
  * for thread states.
- * Built on first use by ros2_native.py with the machine's gcc against the ROS 2 wheels. */
+ * Built on first use by native.py with the machine's gcc against the ROS 2 wheels. */
 
 #include <dirent.h>
 #include <fcntl.h>
@@ -256,7 +256,7 @@ int sitgen_period_hand_over(
   }
   wait_acked(scan_publisher, ack_timeout_s);
   /* Not settled before the clock: a node's executor takes the clock before its other messages
-   * of the same turn (ros2_bridge.py says why). */
+   * of the same turn (bridge.py says why). */
   if (rcl_publish(clock_publisher, &clock_msg, NULL) != RCL_RET_OK) {
     return failed("publishing the clock");
   }
@@ -296,7 +296,7 @@ static int take_one(const rcl_subscription_t * subscription, int stamped, double
   const geometry_msgs__msg__Twist * got = stamped ? &stamped_answer.twist : &twist;
   out[0] = got->linear.x;
   out[1] = got->angular.z;
-  /* 0 for a Twist: an unstamped answer (ros2.py's _await_answer reads it so). */
+  /* 0 for a Twist: an unstamped answer (controller.py's _await_answer reads it so). */
   out[2] = stamped ?
     (double)stamped_answer.header.stamp.sec + (double)stamped_answer.header.stamp.nanosec * 1e-9 :
     0.0;

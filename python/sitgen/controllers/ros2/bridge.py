@@ -1,10 +1,10 @@
-"""sitgen's side of a ``ros2:`` run over DDS (the controller is ros2.py): a ROS 2 context on
+"""sitgen's side of a ``ros2:`` run over DDS (the controller is controller.py): a ROS 2 context on
 this process's domain, the simulator's node, its publishers of the loopback simulator's topics
 and the messages it sends, and the ordered hand-over of one control period's inputs.
 
 What it does: :class:`Bridge` publishes the route, goal and map (transient local), the
 odometry, the scan (both reliable, so a node's default-QoS subscription matches as a sensor-data
-one does), the transforms (``/tf`` each period, ``/tf_static`` once a run: ros2_tf.py) and the
+one does), the transforms (``/tf`` each period, ``/tf_static`` once a run: tf.py) and the
 clock. :meth:`Bridge.hand_over` gives the node each of a period's inputs only
 once every reliable reader of the one before has acknowledged it, and the clock last: so a
 node's callbacks see a period's messages in one order, whatever the machine's load, and a node
@@ -33,10 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.controllers.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.external import ControllerError
 from sitgen.controllers.proc_tasks import wait_idle
-from sitgen.controllers.ros2_messages import (
+from sitgen.controllers.ros2.dds_domain import confine, process_domain, rmw_problem
+from sitgen.controllers.ros2.messages import (
     FRAMES,
     TOPICS,
     answer_of,
@@ -49,8 +49,8 @@ from sitgen.controllers.ros2_messages import (
     sec_nanosec,
     stamp,
 )
-from sitgen.controllers.ros2_native import native_period
-from sitgen.controllers.ros2_tf import tf_message_type
+from sitgen.controllers.ros2.native import native_period
+from sitgen.controllers.ros2.tf import tf_message_type
 
 ACK_TIMEOUT_S = 1.0
 """Wall seconds a node's reliable readers have to acknowledge one message of a period before
@@ -181,7 +181,7 @@ class Bridge:
             self.tf, self.tf_static = None, None
             self.tf_problem = f"ros2: tf2_msgs's type support does not work: {e}"
         self.native = native_period()
-        """The period's hand-over in C (None: in Python, ros2_native.py)."""
+        """The period's hand-over in C (None: in Python, native.py)."""
         self._pointers: Any = None
         """The rcl handles of the odometry's, scan's and clock's publishers, for the C side."""
 
@@ -248,7 +248,7 @@ class Bridge:
     ) -> None:
         """``hand_over(goal + period(info, obs, t), settle)``, where settling is waiting at
         most ``settle_s`` for the processes ``pids`` to go back to waiting: in C where it can
-        be (no new goal this period, the node does not read /tf, and ros2_native.py has its
+        be (no new goal this period, the node does not read /tf, and native.py has its
         hand-over), else in Python; the same messages, in the same order, either way."""
         if goal or self.native is None or (self.tf is not None and self.tf_read):
             self.hand_over(goal + self.period(info, obs, t), lambda: wait_idle(pids, settle_s))

@@ -1,10 +1,10 @@
-"""A control period's hand-over in C (``ros2_period.c``), for ros2_bridge.py: the odometry,
+"""A control period's hand-over in C (``period.c``), for bridge.py: the odometry,
 scan and clock published through rclpy's own publishers, in the order and with the waits of
-:meth:`Bridge.hand_over <sitgen.controllers.ros2_bridge.Bridge.hand_over>`, and the node's
+:meth:`Bridge.hand_over <sitgen.controllers.ros2.bridge.Bridge.hand_over>`, and the node's
 answer taken from rclpy's own /cmd_vel subscription as :meth:`Bridge.take
-<sitgen.controllers.ros2_bridge.Bridge.take>` takes it.
+<sitgen.controllers.ros2.bridge.Bridge.take>` takes it.
 
-What it does: :func:`native_period` builds ``ros2_period.c`` once per environment with the
+What it does: :func:`native_period` builds ``period.c`` once per environment with the
 machine's gcc against the ROS 2 wheels (native_build.py), loads it, and returns a
 :class:`NativePeriod`; None where it cannot be had (no gcc, a failed build) or is turned off
 (``SITGEN_ROS2_NATIVE=0``), and the bridge then hands every period over in Python, with the same
@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from sitgen.controllers.external import ControllerError
-from sitgen.controllers.native_build import (
+from sitgen.controllers.ros2.native_build import (
     build_key,
     build_once,
     cache_dir,
@@ -45,7 +45,7 @@ from sitgen.controllers.native_build import (
     missing_compilers,
 )
 
-SOURCE = Path(__file__).with_name("ros2_period.c")
+SOURCE = Path(__file__).with_name("period.c")
 LIBRARY = "libsitgen_ros2_period.so"
 WHAT = "the native period hand-over"
 WHEELS = (
@@ -214,7 +214,7 @@ def _folder() -> Path:
 
 
 def _build(work: Path) -> Path:
-    """``ros2_period.c`` compiled and linked under ``work``; the folder to keep."""
+    """``period.c`` compiled and linked under ``work``; the folder to keep."""
     missing = missing_compilers("gcc")
     if missing:
         raise ControllerError(f"ros2: {WHAT} is built with gcc, which is not on PATH")

@@ -4,7 +4,7 @@ fields for the run's laser, the map's cells, and a /cmd_vel answer as numbers.
 
 What it does: plain functions of the run's values and the message classes handed in (rclpy
 and the message packages are imported by the bridge, never here), shared by the bridge's Python
-side (ros2_bridge.py), its C side's inputs (ros2_native.py) and the rosbag2 export
+side (bridge.py), its C side's inputs (native.py) and the rosbag2 export
 (presentation/rosbag.py), so the three say the same thing.
 
 Why: a run read back from its bag, or handed over in C, must carry exactly the values the

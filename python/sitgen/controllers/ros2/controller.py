@@ -8,7 +8,7 @@ on the contract of Nav2's loopback simulator, over real DDS:
   (sensor_msgs/LaserScan, frame ``base_scan``, reliable, keep last 1: a node's sensor-data
   subscription matches it, and so does one with the default QoS), ``/odom``
   (nav_msgs/Odometry, ``odom`` → ``base_link``), ``/tf`` (the same pose) and ``/tf_static``
-  (``map`` → ``odom``, ``base_link`` → ``base_scan``: ros2_tf.py), the route as ``/plan``
+  (``map`` → ``odom``, ``base_link`` → ``base_scan``: tf.py), the route as ``/plan``
   (nav_msgs/Path, frame ``map``), the current waypoint as ``/goal_pose``
   (geometry_msgs/PoseStamped) and ``/map`` (nav_msgs/OccupancyGrid); the route, goal and map
   are transient-local, so a node that subscribes late (with transient-local durability) still
@@ -22,7 +22,7 @@ that needs only ``/odom`` has the robot's pose.
 
 Why lockstep: a run's result must not depend on the machine's load. Every control period
 sitgen hands the node the odometry and the scan for simulated time *t*, each once the node has
-taken the one before, then the clock at the period's end (ros2_bridge.py), and waits until
+taken the one before, then the clock at the period's end (bridge.py), and waits until
 the node answers with a ``/cmd_vel`` message (for TwistStamped, one not stamped before *t*);
 only then does simulated time move on. A node that does not answer within
 ``answer_timeout_s`` of wall time has its last command held for that period (the only way
@@ -66,7 +66,6 @@ import time
 from collections.abc import Mapping
 from typing import IO, Any
 
-from sitgen.controllers.dds_domain import confine, require_free
 from sitgen.controllers.external import (
     STDERR_TAIL_BYTES,
     STEP_TIMEOUT_S,
@@ -82,9 +81,10 @@ from sitgen.controllers.external import (
     signal_name,
 )
 from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, task_state, wait_idle
-from sitgen.controllers.ros2_bridge import LIB, Bridge, ros2_available
-from sitgen.controllers.ros2_messages import FRAMES, TOPICS, answer_of, stamp
-from sitgen.controllers.ros2_tf import node_python_path
+from sitgen.controllers.ros2.bridge import LIB, Bridge, ros2_available
+from sitgen.controllers.ros2.dds_domain import confine, require_free
+from sitgen.controllers.ros2.messages import FRAMES, TOPICS, answer_of, stamp
+from sitgen.controllers.ros2.tf import node_python_path
 
 PREFIX = "ros2:"
 
