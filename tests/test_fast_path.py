@@ -149,7 +149,7 @@ def test_what_a_class_starts_ends_with_its_run_in_every_command(
 def test_a_campaign_killed_outright_leaves_nothing_its_classes_started(tmp_path: Path) -> None:
     db = tmp_path / "killed.db"
     pids = tmp_path / "pids"
-    spec = _campaign(tmp_path, f"{CARELESS}:DoubleForks", n=40, time_limit_s=60.0)
+    spec = _campaign(tmp_path, f"{CARELESS}:DoubleForksSlowly", n=40, time_limit_s=60.0)
     proc = subprocess.Popen(
         [*sitgen_command(), "campaign", str(spec), "--db", str(db), "--workers", "2"],
         cwd=ROOT,

@@ -163,3 +163,11 @@ class RecordsItsProcess(Forward):
         handler = signal.getsignal(signal.SIGUSR1)
         with open(path, "a") as f:
             f.write(f"{os.getpid()} {handler == signal.SIG_DFL} {threading.active_count()}\n")
+
+
+class DoubleForksSlowly(DoubleForks):
+    """Starts its daemon, then takes 50 ms a step: a run lasts long enough to be killed."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        time.sleep(0.05)
+        return 0.3, 0.0

@@ -140,13 +140,15 @@ class InProcessController(UserController):
         at = [0.0]
         armed, fired = _ARMED, _FIRED
         sandbox.note(self.name, sandbox.AT_STEP, 0.0, timeout_s)
-        note_time, returned_in_fork = sandbox.note_time, sandbox.returned_in_fork
+        # Looked up once: each is read every step.
+        shared, forked = sandbox._Shared.view, sandbox.FORKED
 
         def act(
             ranges: Any, pose: Any, velocity: Any, stalled: bool, time_s: float, tracks: Any, k: int
         ) -> tuple[float, float]:
             at[0] = time_s
-            note_time(time_s)
+            if shared is not None:
+                shared[2] = time_s  # sandbox.note_time, inline
             obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
             if timed:
                 fired[0] = False
@@ -173,7 +175,8 @@ class InProcessController(UserController):
                 if timed:
                     armed[0] = False
                     signal.setitimer(signal.ITIMER_REAL, 0)
-                returned_in_fork()
+                if forked[0]:
+                    sandbox.returned_in_fork()
             if fired[0]:  # the class caught the timeout and went on: it was late all the same
                 raise StepTimeout
             return command_

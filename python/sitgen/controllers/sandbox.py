@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import fcntl
 import gc
 import mmap
 import os
@@ -96,8 +97,6 @@ class _Shared:
 
     view: Any = None
     names: ClassVar[dict[str, int]] = {}
-    owner = 0
-    """The forked run's own pid: a process that finds another is a user's fork of it."""
 
 
 def note(name: str, phase: float, time_s: float, timeout_s: float) -> None:
@@ -122,10 +121,22 @@ def note_time(time_s: float) -> None:
         view[2] = time_s
 
 
+FORKED = [False]
+"""Whether this process is a fork of a runner (set in every child ``os.fork`` makes, cleared
+by the runner itself): read each step, where a call of getpid would cost more."""
+
+
+def _forked() -> None:
+    FORKED[0] = True
+
+
+os.register_at_fork(after_in_child=_forked)
+
+
 def returned_in_fork() -> None:
-    """End this process at once if it is a user's fork of a forked run that returned into
-    sitgen's code (a class that forks without exec): only the run's own process goes on."""
-    if _Shared.view is not None and os.getpid() != _Shared.owner:
+    """End this process at once if it is a user's fork of a runner that returned into
+    sitgen's code (a class that forks without exec): only the runner goes on."""
+    if FORKED[0] and _Shared.view is not None:
         os._exit(0)
 
 
@@ -182,6 +193,10 @@ class _Runner:
         self.view[0] = -1.0
         request_read, self.requests = os.pipe()
         self.replies, reply_write = os.pipe()
+        # A run's record (its trajectory) is hundreds of kilobytes: in one pipe's worth, not in
+        # sixteen turns of a 64 KB one between two processes that may share one core.
+        with contextlib.suppress(OSError, AttributeError):
+            fcntl.fcntl(reply_write, fcntl.F_SETPIPE_SZ, 1 << 20)
         self.reports, report_write = os.pipe()
         for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
             with contextlib.suppress(Exception):
@@ -347,7 +362,8 @@ def _serve(
         _become_subreaper()
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        _Shared.view, _Shared.names, _Shared.owner = view, {}, os.getpid()
+        _Shared.view, _Shared.names = view, {}
+        FORKED[0] = False  # the runner itself: only a fork of it is a user's
         os.environ[MARK] = f"{mark}.{uuid.uuid4().hex}"
         _core.watchdog_report(report_write)
         _core.start_threads()
