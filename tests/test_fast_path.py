@@ -6,6 +6,7 @@ gets the reason the host process gives, and leaves no process behind (checked fr
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -74,7 +75,10 @@ def test_the_fast_path_and_the_host_give_a_misbehaving_class_the_same_reason(
     )
     assert done.returncode == 0, done.stdout + done.stderr
     both = json.loads(done.stdout.strip().splitlines()[-1])
-    assert both["fast"] == both["host"], both
+    # A reason's hint, computing or waiting, is measured from the processor time the class
+    # gets over a short look, which a loaded machine changes: the reason itself is compared.
+    fast, host = ([o, r.split("; it is ")[0]] for o, r in (both["fast"], both["host"]))
+    assert fast == host, both
     if "Returns" in controller:
         assert "expected (v, omega) numbers" in both["fast"][1], both
     if "SwallowsTheTimeout" in controller or "HoldsTheGil" in controller:
@@ -206,14 +210,15 @@ def test_a_class_cannot_hang_or_end_the_campaign_or_reach_later_runs(
         ("pycontrollers:Segfaults", "was killed by SIGSEGV at 0.3 s"),
         ("pycontrollers:HardExits", "exited with code 7 at 0.3 s"),
         ("careless:KillsItsGroup", "was killed by SIGTERM at 0.3 s"),
+        ("pycontrollers:HoldsTheGil", "did not reply within 1 s at 0.3 s"),
     ],
 )
 def test_a_python_peer_that_kills_its_process_ends_sitgen_run_with_a_reason(
     tmp_path: Path, careless: str, reason: str
 ) -> None:
-    """`sitgen run` steps a run with a ``python:`` peer in a process forked for it: a peer that
-    crashes, calls ``os._exit(0)`` or kills its group is that run's error, named, and the
-    command says so with exit code 1 (never 139, nor a silent 0)."""
+    """`sitgen run` steps a run with a ``python:`` peer in a runner: a peer that crashes,
+    calls ``os._exit``, kills its group or holds the GIL in C past its timeout is that run's
+    error, named, and the command says so with exit code 1 (never 139, a silent 0 or a hang)."""
     name = f"python:tests.controllers.{careless}"
     situation = two_robots((4.0, 10.0, 0.0), (4.0, 14.0, 0.0), [15.0, 14.0], {"name": name})
     path = tmp_path / "peer.json"
@@ -298,3 +303,34 @@ def test_a_process_forked_after_the_core_ran_in_parallel_can_build_runs() -> Non
         timeout=60, check=False,
     )  # fmt: skip
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_a_campaign_paused_now_and_then_stores_every_run(tmp_path: Path) -> None:
+    """A class costing 3 ms a step while the machine pauses the campaign's processes now and
+    then (SIGSTOP past the step timeout, as an overloaded or suspended VM does): an alarm that
+    fires after its call returned is dropped, never raised in sitgen's own code, so every run
+    is stored, whatever its outcome, and nothing ends with a traceback."""
+    db = tmp_path / "paused.db"
+    spec = _campaign(tmp_path, f"{CARELESS}:Costs3ms", n=6, time_limit_s=10.0)
+    proc = subprocess.Popen(
+        [*sitgen_command(), "campaign", str(spec), "--db", str(db), "--workers", "2"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        for _ in range(6):
+            time.sleep(0.4)
+            if proc.poll() is not None:
+                break
+            os.killpg(proc.pid, signal.SIGSTOP)
+            time.sleep(1.3)
+            os.killpg(proc.pid, signal.SIGCONT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGCONT)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode in (0, 1), out + err
+    assert "Traceback" not in err, err
+    assert len(_stored(db)) == 6, _stored(db)

@@ -171,3 +171,13 @@ class DoubleForksSlowly(DoubleForks):
     def act(self, obs: Any) -> tuple[float, float]:
         time.sleep(0.05)
         return 0.3, 0.0
+
+
+class Costs3ms(Forward):
+    """Spends 3 ms of processor time a step, as a real planner does."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        end = time.perf_counter() + 0.003
+        while time.perf_counter() < end:
+            pass
+        return 0.3, 0.0
