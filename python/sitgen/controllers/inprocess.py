@@ -2,24 +2,28 @@
 
 What it does: runs a controller object's ``reset(info)`` and ``act(obs) -> (v, omega)``
 without leaving the process — for an object handed to :func:`sitgen.run`, and for a
-``python:MODULE:CLASS`` controller in a campaign's pool worker, where the class is imported
-once per worker and each run gets a fresh instance. The core steps the run and calls ``act``
-whenever the agent decides (``_core.Run.drive``), with the scan as one numpy array (a copy of
-the core's buffer, never a Python float per beam) and the same :class:`Observation` the host
-process builds, so a run gives the same bytes on either path.
+``python:MODULE:CLASS`` controller in a campaign's pool worker, made there by a runner (a
+process the worker forks and keeps while runs leave it clean: :mod:`sitgen.controllers.sandbox`),
+where the class is imported once per runner and each run gets a fresh instance. The core steps
+the run and calls ``act`` whenever the agent decides (``_core.Run.drive``), with the scan as
+one numpy array (a copy of the core's buffer, never a Python float per beam) and the same
+:class:`Observation` the host process builds, so a run gives the same bytes on either path.
 
 Why: a host process (:mod:`sitgen.controllers.host`) costs a JSON round trip through two pipes
 per step, hundreds of times what a cheap controller itself costs. Its isolation is kept another
-way: an exception, ``sys.exit`` or a bad reply ends the run with the host's one-line reason;
-a call past the step timeout is interrupted (SIGALRM, main thread only), and one that cannot be
-interrupted (a C loop holding the GIL) has its worker killed ``KILL_GRACE_S`` later by a
-watchdog thread in the core. A worker that dies — that kill, ``os._exit``, a crash, the
-out-of-memory killer — is replaced, and its runs are made again each in a host process, which
-reports what the controller did exactly as it always has.
+way: an exception, ``sys.exit`` or a bad reply — raised from the class's call, from converting
+what it returned, from formatting its exception or from its ``close`` — ends the run with the
+host's one-line reason; a call past the step timeout is interrupted (SIGALRM, main thread only;
+an alarm that fires once the call has returned is dropped, and a class that swallows the
+interruption was late all the same), and one that cannot be interrupted (a C loop holding the
+GIL) has its runner killed ``KILL_GRACE_S`` later by a watchdog thread in the core. A runner
+that dies — that kill, ``os._exit``, a crash, the out-of-memory killer — is replaced, and an
+agent's run is made again in a host process, which reports what the controller did exactly as
+it always has; what the class started and left behind dies with its run.
 
 Parameters: ``step_timeout_s`` (s, default :data:`STEP_TIMEOUT_S`, 1 s) per ``act``; reset and
 class loading get :data:`START_TIMEOUT_S` (10 s); ``kill_after_s`` (s, default None: never)
-the watchdog's limit, the step or start timeout plus :data:`KILL_GRACE_S` in a pool worker.
+the watchdog's limit, the step or start timeout plus :data:`KILL_GRACE_S` in a runner.
 
 Source: sitgen's controller protocol (docs/controller-protocol.md), whose messages this path
 skips but whose meaning and error reasons it keeps.
@@ -141,14 +145,14 @@ class InProcessController(UserController):
         armed, fired = _ARMED, _FIRED
         sandbox.note(self.name, sandbox.AT_STEP, 0.0, timeout_s)
         # Looked up once: each is read every step.
-        shared, forked = sandbox._Shared.view, sandbox.FORKED
+        shared, forked = sandbox.page(), sandbox.FORKED
 
         def act(
             ranges: Any, pose: Any, velocity: Any, stalled: bool, time_s: float, tracks: Any, k: int
         ) -> tuple[float, float]:
             at[0] = time_s
             if shared is not None:
-                shared[2] = time_s  # sandbox.note_time, inline
+                shared[2] = time_s  # for the reason, should this runner die in the call
             obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
             if timed:
                 fired[0] = False

@@ -114,11 +114,10 @@ def note(name: str, phase: float, time_s: float, timeout_s: float) -> None:
     view[0], view[1], view[2], view[3] = float(slot), phase, time_s, timeout_s
 
 
-def note_time(time_s: float) -> None:
-    """Record the simulated time of the step being asked for (the controller as last noted)."""
-    view = _Shared.view
-    if view is not None:
-        view[2] = time_s
+def page() -> Any:
+    """The shared page as doubles, for a caller that records each step's simulated time in
+    its third (index 2) itself; None outside a runner."""
+    return _Shared.view
 
 
 FORKED = [False]
@@ -205,7 +204,11 @@ class _Runner:
         # What the parent has allocated stays out of the runner's collections: a collection
         # that walked it would copy most of the parent's pages into the runner (copy-on-write).
         gc.freeze()
-        pid = os.fork()
+        try:
+            pid = os.fork()
+        except BaseException:
+            gc.unfreeze()
+            raise
         if pid == 0:  # the runner: never returns
             for fd in (self.requests, self.replies, self.reports):
                 os.close(fd)
