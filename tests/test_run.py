@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import sitgen
+from sitgen.run import reset_info
 from tests.conftest import ROOT, run_cli
 from tests.controllers.pycontrollers import Forward
 
@@ -196,3 +197,17 @@ def test_a_route_follower_goes_on_past_the_routes_end_as_at_end_says(
             position = target
     with pytest.raises(sitgen.SpecError, match="at_end"):
         sitgen.RouteFollower((0.0, 0.0), [(1.0, 0.0)], "bounce", 0.1)
+
+
+def test_a_controller_is_told_what_the_monitor_judges_it_by(situation: sitgen.Situation) -> None:
+    """The reset message carries the waypoint radius and the monitor's thresholds, as the run
+    spec resolves them, on either path (a class raises with what it was told)."""
+    info = reset_info(situation, {"monitor": {"waypoint_radius_m": 0.8}}, situation.agent.id)
+    assert info["waypoint_radius_m"] == 0.8 and info["monitor"]["waypoint_radius_m"] == 0.8
+    assert info["monitor"]["unsafe_proximity_m"] == 0.5
+    assert reset_info(situation, {}, situation.agent.id)["waypoint_radius_m"] == 0.5
+    spec = {"monitor": {"waypoint_radius_m": 0.8}}
+    for fast in (False, True):
+        record = sitgen.run(situation, controller=f"{PY}:SaysItsRadius", spec=spec,
+                            time_limit=2.0, in_process=fast)  # fmt: skip
+        assert record.reason.endswith("told 0.8 m, near miss within 0.5 m"), record.reason

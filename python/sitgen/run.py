@@ -113,8 +113,10 @@ def reset_info(
     situation: Situation, run: Mapping[str, Any], robot_id: int, with_map: bool = False
 ) -> dict[str, Any]:
     """What a user controller is told at the start: its robot's id and role, route, body,
-    laser and limits, the params its controller table gives it (the run spec's for the agent,
-    if it names one, else the robot's own), and (``with_map``) the situation's map."""
+    laser and limits, the thresholds the monitor judges it by (the waypoint radius, and the
+    whole resolved ``monitor`` section), the params its controller table gives it (the run
+    spec's for the agent, if it names one, else the robot's own), and (``with_map``) the
+    situation's map."""
     robot = situation.robots[robot_id]
     # The spec as the core resolves it: defaults and the profile's fields filled in.
     resolved = json.loads(_core.check_run_spec(spec_json(dict(run), "run")))
@@ -135,6 +137,10 @@ def reset_info(
         "max_speed_m_s": float(sim["max_speed_m_s"]),
         "max_turn_rate_deg_s": float(sim["max_turn_rate_deg_s"]),
         "time_limit_s": float(resolved["time_limit_s"]),
+        # What the monitor judges the run by, so that a controller can aim at it: a waypoint
+        # (and the goal, the route's last) counts as reached within this radius of it.
+        "waypoint_radius_m": float(resolved["monitor"]["waypoint_radius_m"]),
+        "monitor": dict(resolved["monitor"]),
         "control_period_s": float(controller.get("control_period_s") or sim["dt_s"]),
         "params": dict(controller.get("params") or {}),
         "perception": controller.get("perception") or "sensed",

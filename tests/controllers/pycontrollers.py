@@ -169,3 +169,11 @@ class TellsParams:
 
     def act(self, obs: Any) -> tuple[float, float]:
         return 0.0, 0.0
+
+
+class SaysItsRadius(Forward):
+    """Raises with the waypoint radius and the near-miss distance it was told."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        radius, near = self.info["waypoint_radius_m"], self.info["monitor"]["unsafe_proximity_m"]
+        raise ValueError(f"told {radius} m, near miss within {near} m")
