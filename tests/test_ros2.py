@@ -822,6 +822,7 @@ def test_without_gcc_periods_are_handed_over_in_python_and_the_reason_is_kept(
 TF_TYPE = "from sitgen.controllers.ros2.tf import tf_message_type; print(tf_message_type())"
 
 
+@COMPILERS
 @pytest.mark.parametrize("damage", ["python", "extension"])
 def test_a_damaged_tf2_msgs_build_is_built_again(tmp_path: Path, damage: str) -> None:
     """A build in the cache whose Python module does not parse, or whose extension is cut
