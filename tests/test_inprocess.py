@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 
 import sitgen
-from sitgen.execution.campaign import run_user_job
 from sitgen.execution.jobs import build_jobs, campaign_from_data
+from sitgen.execution.workers import run_user_job
 from tests.conftest import ROOT
 
 CAUTIOUS = f"python:{ROOT / 'examples' / 'controllers' / 'cautious.py'}:Cautious"

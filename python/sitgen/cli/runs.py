@@ -204,7 +204,7 @@ def check_controller_command(
 ) -> None:
     """Check that a user controller speaks the interface: loads, resets, replies with finite
     commands in time, stays within the limits, and shuts down. Exits 1 if a check fails."""
-    from sitgen.run import check_controller
+    from sitgen.conformance import check_controller
 
     if not controller.startswith(USER_PREFIXES):
         raise UsageError(

@@ -14,21 +14,15 @@ its runs are retried one at a time, and a run that kills its worker again is sto
 
 from __future__ import annotations
 
-import atexit
 import heapq
 import json
 import math
-import multiprocessing
-import multiprocessing.connection
-import multiprocessing.forkserver
 import os
 import signal
-import threading
 import time
-import zlib
 from collections import deque
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
@@ -37,8 +31,6 @@ from typing import Any
 
 from sitgen import _core
 from sitgen import _core as core
-from sitgen.controllers.external import MARK, marked_env, pin_to_one_core
-from sitgen.controllers.host import die_with_parent
 from sitgen.execution.jobs import (
     MAX_RUNS,
     CampaignSpec,
@@ -48,7 +40,7 @@ from sitgen.execution.jobs import (
     runs_in_python,
     stream_jobs,
 )
-from sitgen.run import run
+from sitgen.execution.workers import IDLE_POOLS, alone, idle_pool, safe_user_job, shut
 from sitgen.store import RunRow, Store
 
 PACK_ALL = (-math.inf, False)
@@ -159,121 +151,6 @@ def _core_args(job: Job) -> tuple[str, int, str, int]:
     return (json.dumps(job.situation), job.seed, json.dumps(job.run), job.noise_seed)
 
 
-def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
-    """One job with a Python or external controller (in a worker process; ``in_process``: a
-    ``python:`` class is called in it, else in a host process of its own)."""
-
-    try:
-        situation = job.built()
-    except (_core.GenerationFailed, _core.SpecError) as e:
-        return {"ok": False, "error": f"generation failed: {e}"}
-    rec = run(
-        situation,
-        controller=job.controller,
-        seed=job.noise_seed,
-        spec=job.run,
-        in_process=in_process,
-    )
-    record = {
-        "outcome": rec.outcome,
-        "reason": rec.reason,
-        "score": {"total": rec.score, "breakdown": rec.breakdown},
-        "events": rec.events,
-        "steps": rec.steps,
-        "time_s": rec.time_s,
-        "failure": rec.failure,
-        "coverage": rec.coverage,
-    }
-    # Deflate's fastest level, as the core packs built-in runs (sitgen_core::run::pack_trajectory).
-    packed = zlib.compress(rec.trajectory.astype("<f4").tobytes(), 1)
-    return {
-        "ok": True,
-        "situation": situation.to_json(),
-        "record": json.dumps(record),
-        "events_jsonl": rec.events_jsonl,
-        "trajectory": packed,
-        "robots": rec.trajectory.shape[1],
-    }
-
-
-def _die_with_campaign() -> None:
-    """End this worker when the process that asked for it ends, however it ends. The worker's
-    parent is the fork server, which outlives a campaign killed outright (its workers keep it
-    alive, and it them), so the worker watches the campaign's own sentinel, a pipe that closes
-    when the campaign does, and kills itself then; the programs it started die with it."""
-    parent = multiprocessing.parent_process()
-    if parent is None or parent.sentinel is None:
-        die_with_parent()
-        return
-    sentinel = parent.sentinel
-
-    def watch() -> None:
-        multiprocessing.connection.wait([sentinel])
-        os.kill(os.getpid(), signal.SIGKILL)
-
-    threading.Thread(target=watch, name="sitgen-campaign-watch", daemon=True).start()
-
-
-def _worker_start(slots: Any = None) -> None:
-    """A pool worker: Ctrl-C is the campaign's to handle (it finishes the runs in flight), and
-    the worker dies with the campaign even if that is killed outright. What a controller called
-    in it prints goes nowhere, as a host process's output does (the campaign's own output stays
-    readable, ``--format json`` included). With ``slots`` (a shared counter), the worker takes
-    the next one and keeps to that CPU of those allowed, it and the programs it starts, so that
-    a program in lockstep with it shares its core and the workers share the cores out
-    (:func:`sitgen.controllers.external.pin_to_one_core`)."""
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    _die_with_campaign()
-    if slots is not None and hasattr(os, "sched_getaffinity"):
-        with slots.get_lock():
-            slot = slots.value
-            slots.value += 1
-        allowed = sorted(os.sched_getaffinity(0))
-        pin_to_one_core(allowed[slot % len(allowed)])
-    quiet = os.open(os.devnull, os.O_WRONLY)
-    for fd in (1, 2):
-        os.dup2(quiet, fd)
-    os.close(quiet)
-
-
-def _safe_user_job(job: Job, in_process: bool = True, cwd: str | None = None) -> dict[str, Any]:
-    """:func:`run_user_job` from the folder ``cwd`` (the campaign's: a worker forked from the
-    fork server starts in the folder the server did, and a controller's relative path or module
-    is the campaign's), with any failure of sitgen's own on that run stored as its error rather
-    than ending the campaign."""
-    if cwd is not None and os.getcwd() != cwd:
-        os.chdir(cwd)
-    try:
-        return run_user_job(job, in_process)
-    except BaseException as e:  # sitgen's own bug on one run must not end the campaign
-        return {"ok": False, "error": f"sitgen failed on this run: {type(e).__name__}: {e}"}
-
-
-def pool_context() -> multiprocessing.context.BaseContext:
-    """How pool workers start: forked from a clean server process, never from this one. A
-    process that has used the core's thread pool (a search has) cannot be forked safely: the
-    child inherits the pool without its threads, and its first parallel call waits forever.
-    The server imports the campaign's code once, so a worker starts in milliseconds."""
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload([__name__])
-    # The server starts carrying this process's controller mark, and so does every process
-    # forked from it or from its workers without exec (a user's daemon): /proc shows a forked
-    # process the environment its ancestor was executed with, so this process's reaper finds
-    # them all should it die outright (sitgen.controllers.external.marked_env).
-    mark = marked_env()[1]
-    previous = os.environ.get(MARK)
-    os.environ[MARK] = mark
-    try:
-        multiprocessing.forkserver.ensure_running()
-    finally:
-        if previous is None:
-            del os.environ[MARK]
-        else:
-            os.environ[MARK] = previous
-    return context
-
-
 def _failed(job: Job) -> dict[str, Any] | None:
     """The result of a job that cannot run (it could not be built), else None."""
     return None if job.error is None else {"ok": False, "error": job.error}
@@ -378,7 +255,7 @@ class Executor:
         while not self._stopping:
             if suspects:
                 job = suspects.popleft()
-                yield job, _alone(job)
+                yield job, alone(job)
                 continue
             broken = yield from self._pool_pass(jobs, suspects)
             if not broken:
@@ -389,13 +266,13 @@ class Executor:
     ) -> Generator[tuple[Job, dict[str, Any]], None, bool]:
         """Run jobs in one pool until they run out (False) or the pool breaks (True, with the
         runs it had in flight put in ``suspects``)."""
-        pool = _idle_pool(self.workers)
+        pool = idle_pool(self.workers)
         inflight: dict[Future[dict[str, Any]], Job] = {}
         finished = False
         try:
             while True:
                 for job in (yield from self._take(jobs, self.window - len(inflight))):
-                    inflight[pool.submit(_safe_user_job, job, True, os.getcwd())] = job
+                    inflight[pool.submit(safe_user_job, job, True, os.getcwd())] = job
                 if not inflight:
                     finished = True
                     return False
@@ -417,9 +294,9 @@ class Executor:
             # A pool left idle serves the next batch (a search's screen asks for a few copies
             # at a time); one stopped part way, or broken, is shut with what runs in it.
             if finished:
-                _IDLE_POOLS[self.workers] = pool
+                IDLE_POOLS[self.workers] = pool
             else:
-                _shut(pool)
+                shut(pool)
 
     def _ray_results(self, jobs: Iterator[Job]) -> Iterator[tuple[Job, dict[str, Any]]]:
         ray = self._ray
@@ -445,55 +322,6 @@ class Executor:
         self._stopping = True
         if self._stream is not None:
             self._stream.stop()
-
-
-_IDLE_POOLS: dict[int, ProcessPoolExecutor] = {}
-"""Pools whose last batch finished, by worker count, kept for the next batch of this process
-(workers start once, not once per batch); shut when the process exits."""
-
-
-def _idle_pool(workers: int) -> ProcessPoolExecutor:
-    """An idle pool of ``workers`` workers, kept from an earlier batch or new."""
-    pool = _IDLE_POOLS.pop(workers, None)
-    if pool is not None:
-        return pool
-    context = pool_context()
-    slots = context.Value("i", 0)
-    return ProcessPoolExecutor(workers, context, initializer=_worker_start, initargs=(slots,))
-
-
-@atexit.register
-def _shut_idle_pools() -> None:
-    while _IDLE_POOLS:
-        _shut(_IDLE_POOLS.popitem()[1])
-
-
-def _alone(job: Job) -> dict[str, Any]:
-    """Run one job in a worker of its own, a ``python:`` class in a host process of its own
-    there (so that what killed a worker is reported as the host reports it): its result, or
-    an error if the worker dies."""
-    pool = ProcessPoolExecutor(1, pool_context(), initializer=_worker_start)
-    try:
-        return pool.submit(_safe_user_job, job, False, os.getcwd()).result()
-    except BrokenProcessPool:
-        return {
-            "ok": False,
-            "error": "the worker process running it died (killed by a signal or out of memory)",
-        }
-    finally:
-        _shut(pool)
-
-
-def _shut(pool: ProcessPoolExecutor) -> None:
-    """Shut a pool down now: queued runs are cancelled and its workers killed (their
-    controllers die with them), so nothing outlives the campaign."""
-    processes = list(getattr(pool, "_processes", {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for process in processes:
-        if process.is_alive():
-            process.kill()
-    for process in processes:
-        process.join()
 
 
 def _ray_batch(

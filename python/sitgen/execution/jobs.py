@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
+from sitgen.conformance import resets
 from sitgen.controllers.external import ControllerError
 from sitgen.controllers.user import check_controller_name, is_user_controller
-from sitgen.run import resets
 from sitgen.world.config import load_spec, spec_json
 from sitgen.world.situation import Situation, situation_of
 
@@ -373,9 +373,9 @@ KEEP_ALIVE_CHECK_STEPS = 30
 def check_kept_alive(spec: CampaignSpec, seed: int, table: dict[str, Any], path: str) -> None:
     """Where the agent's controller table ``table`` (the field ``path``) keeps its ``ros2:``
     node alive across runs (``keep_alive``), check that the node runs the campaign's first
-    situation after its second as a fresh node runs it (:func:`sitgen.run.resets`: three short
-    runs, two node starts); else every run after a worker's first would be another than the
-    run it stands for. Raises SpecError naming the field."""
+    situation after its second as a fresh node runs it (:func:`sitgen.conformance.resets`:
+    three short runs, two node starts); else every run after a worker's first would be another
+    than the run it stands for. Raises SpecError naming the field."""
     if not table.get("keep_alive"):
         return
     try:

@@ -42,7 +42,7 @@ after a simulator's reset), a new ``/initialpose`` (geometry_msgs/PoseWithCovari
 frame ``map``), ``/plan``, ``/goal_pose`` and ``/map``, and every ``std_srvs`` Trigger or Empty
 service named ``reset`` or ``…/reset`` that the node offers called. Every run, a fresh node's
 too, gets the same reset, so a node that resets fully runs as a fresh one would; one that does
-not is refused before any run (:func:`sitgen.run.resets`). A run that fails stops its node.
+not is refused before any run (:func:`sitgen.conformance.resets`). A run that fails stops its node.
 
 Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
 ``answer_timeout_s`` (wall seconds, default the step timeout, 1 s), ``start_timeout_s`` (wall
