@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -120,6 +120,11 @@ bench-vo: install-test
 # (scheduler autogroups; docs/ros2.md, "Timing and determinism"; about 10 minutes on 2 cores).
 bench-ros2-start: install-test
 	$(BIN)/python benches/ros2_start.py
+
+# What a python: class on the fast path costs: the trivial class's row of `make bench` and a
+# 200-run campaign's wall time (benches/fast_path.py; about 40 s on 2 cores).
+bench-fast-path: install-test
+	$(BIN)/python benches/fast_path.py
 
 # Where a step's time goes: the reference scene without Python under perf (Linux perf needed).
 profile:

@@ -160,3 +160,11 @@ def two_robots(agent: tuple[float, float, float], peer: tuple[float, float, floa
     ]
     empty = np.zeros((200, 200), dtype=bool)
     return Situation(_core.shrunk_situation(base.to_json(), empty, 0.1, json.dumps(robots)))
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie waiting to be reaped does not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
+    except OSError:
+        return False

@@ -16,10 +16,9 @@ import sys
 import time
 from pathlib import Path
 
-import psutil
 import pytest
 
-from tests.conftest import ROOT, Result, sitgen_command, two_robots
+from tests.conftest import ROOT, Result, alive, sitgen_command, two_robots
 
 CARELESS = "python:tests.controllers.careless"
 PY = "python:tests.controllers.pycontrollers"
@@ -120,13 +119,6 @@ def _sitgen(tmp_path: Path, *args: str, timeout_s: float = 90.0) -> tuple[Result
     return Result(proc.returncode, out, err), recorded
 
 
-def _alive(pid: int) -> bool:
-    try:
-        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
-    except psutil.NoSuchProcess:
-        return False
-
-
 def _stored(db: Path) -> list[tuple[str, str]]:
     with sqlite3.connect(db) as c:
         return c.execute("SELECT outcome, reason FROM runs ORDER BY id").fetchall()
@@ -144,10 +136,10 @@ def test_what_a_class_starts_ends_with_its_run_in_every_command(
     assert done.returncode == 0, done.stdout + done.stderr
     # Each run and each of its robustness copies started one.
     assert len(pids) >= 4 and len(_stored(db)) == 4, (pids, _stored(db))
-    assert [p for p in pids if _alive(p)] == [], "nothing a run started outlives it"
+    assert [p for p in pids if alive(p)] == [], "nothing a run started outlives it"
     again, more = _sitgen(tmp_path, "robustness", str(db), "0", "--reruns", "2")
     assert again.returncode in (0, 1), again.stdout + again.stderr
-    assert len(more) == len(pids) + 2 and [p for p in more if _alive(p)] == []
+    assert len(more) == len(pids) + 2 and [p for p in more if alive(p)] == []
 
 
 def test_a_campaign_killed_outright_leaves_nothing_its_classes_started(tmp_path: Path) -> None:
@@ -168,14 +160,14 @@ def test_a_campaign_killed_outright_leaves_nothing_its_classes_started(tmp_path:
         ):
             time.sleep(0.05)
         started = [int(p) for p in pids.read_text().split()]
-        assert any(_alive(p) for p in started), "a daemon at work"
+        assert any(alive(p) for p in started), "a daemon at work"
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     deadline = time.monotonic() + 20
-    while any(_alive(p) for p in started) and time.monotonic() < deadline:
+    while any(alive(p) for p in started) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert [p for p in started if _alive(p)] == [], "no daemon outlives a killed campaign"
+    assert [p for p in started if alive(p)] == [], "no daemon outlives a killed campaign"
 
 
 @pytest.mark.parametrize(

@@ -35,7 +35,7 @@ import sitgen
 from sitgen.controllers.proc_tasks import protocol_thread, wait_idle
 from sitgen.execution.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
-from tests.conftest import ROOT, Result, run_cli, sitgen_command
+from tests.conftest import ROOT, Result, alive, run_cli, sitgen_command
 
 MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehaving.py'}"
 PY = "python:tests.controllers.pycontrollers"
@@ -295,14 +295,6 @@ def test_a_controller_named_in_a_situation_spec_is_checked_at_generate(tmp_path:
     one_line_error(done, 2, "mission.agent_controller.name: unknown controller `turbo`")
 
 
-def _alive(pid: int) -> bool:
-    """Whether ``pid`` runs (a zombie waiting to be reaped does not)."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 def _processes_with(marker: str) -> list[int]:
     found = []
     for entry in Path("/proc").iterdir():
@@ -311,7 +303,7 @@ def _processes_with(marker: str) -> list[int]:
                 cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
             except OSError:
                 continue
-            if marker in cmdline and _alive(int(entry.name)):
+            if marker in cmdline and alive(int(entry.name)):
                 found.append(int(entry.name))
     return found
 
@@ -323,7 +315,7 @@ def test_a_controllers_children_end_with_its_run(situation_file: Path, tmp_path:
     done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
     assert done.returncode == 1 and "did not reply within 1 s" in done.stdout, done.stdout
     child, program = (int(p) for p in pids.read_text().split())
-    assert not _alive(program) and not _alive(child), "the program's whole group is killed"
+    assert not alive(program) and not alive(child), "the program's whole group is killed"
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
@@ -353,11 +345,11 @@ def test_killing_a_campaign_outright_leaves_no_worker_or_controller(tmp_path: Pa
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     deadline = time.monotonic() + 10
-    while any(_alive(p) for p in started) and time.monotonic() < deadline:
+    while any(alive(p) for p in started) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not any(_alive(p) for p in servers), "no pool worker outlives the campaign"
+    assert not any(alive(p) for p in servers), "no pool worker outlives the campaign"
     assert _processes_with("pycontrollers:Slow") == [], "no controller outlives the campaign"
-    assert not any(_alive(p) for p in started), "nothing the campaign started outlives it"
+    assert not any(alive(p) for p in started), "nothing the campaign started outlives it"
 
 
 # Resources are bounded, up front.
@@ -1024,9 +1016,9 @@ def test_a_hung_stage_and_everything_it_started_end_with_the_crosscheck(
         run_stage(situation, {}, StageTool(fake, tmp_path), folder, timeout_s=2.0)
     child = int(pids.read_text())
     deadline = time.monotonic() + 5
-    while _alive(child) and time.monotonic() < deadline:
+    while alive(child) and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert not _alive(child), "the hung Stage's child still runs"
+    assert not alive(child), "the hung Stage's child still runs"
 
 
 def test_a_dds_domain_lock_never_follows_a_planted_link_nor_waits_on_a_fifo(

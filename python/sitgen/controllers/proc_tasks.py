@@ -75,19 +75,26 @@ def runnable_seconds(pids: Iterable[int]) -> float:
     (waiting for a core: Linux's schedstat, running plus run-queue time); 0 where the kernel
     keeps no schedstat."""
     ns = 0
+    for pid, tid in threads(pids):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
+                running, waiting = f.read().split()[:2]
+        except (OSError, ValueError):
+            continue
+        ns += int(running) + int(waiting)
+    return ns / 1e9
+
+
+def threads(pids: Iterable[int]) -> Iterator[tuple[int, str]]:
+    """(pid, thread id) of every live thread of the processes ``pids`` (a process gone has
+    none)."""
     for pid in pids:
         try:
-            tasks = os.listdir(f"/proc/{pid}/task")
+            tids = os.listdir(f"/proc/{pid}/task")
         except OSError:
             continue
-        for tid in tasks:
-            try:
-                with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
-                    running, waiting = f.read().split()[:2]
-            except (OSError, ValueError):
-                continue
-            ns += int(running) + int(waiting)
-    return ns / 1e9
+        for tid in tids:
+            yield pid, tid
 
 
 def busy_share(pids: Iterable[int], window_s: float) -> float:
@@ -150,15 +157,10 @@ class _TaskStats:
     def states(self, pids: list[int]) -> Iterator[bytes]:
         """The state letter of every thread of ``pids`` but Fast DDS's own (threads started
         since are found, and those gone dropped, on each call)."""
-        for pid in pids:
-            try:
-                tids = os.listdir(f"/proc/{pid}/task")
-            except OSError:
-                continue
-            for tid in tids:
-                state = self._state(pid, tid)
-                if state is not None:
-                    yield state
+        for pid, tid in threads(pids):
+            state = self._state(pid, tid)
+            if state is not None:
+                yield state
 
     def _state(self, pid: int, tid: str) -> bytes | None:
         key = (pid, tid)
