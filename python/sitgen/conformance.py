@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
+from sitgen.controllers.external import ControllerError
 from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2.controller import stop_kept_nodes
 from sitgen.controllers.ros2.native import native_problem
@@ -44,7 +44,7 @@ def check_controller(
     controller: Any,
     situation: Situation,
     steps: int = 50,
-    step_timeout_s: float = STEP_TIMEOUT_S,
+    step_timeout_s: float | None = None,
     params: Mapping[str, float] | None = None,
     kept_after: Situation | None = None,
 ) -> list[Check]:

@@ -21,7 +21,11 @@ import numpy.typing as npt
 
 from sitgen import _core
 from sitgen.controllers import sandbox
-from sitgen.controllers.external import STEP_TIMEOUT_S, ControllerError
+from sitgen.controllers.external import (
+    MACHINE_RETRIES,
+    ControllerError,
+    MachineError,
+)
 from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
@@ -164,24 +168,33 @@ def run_spec_with(
     base: Mapping[str, Any] | None = None,
     perception: str | None = None,
     keep_alive: bool = False,
+    step_timeout_s: float | None = None,
 ) -> dict[str, Any]:
     """The run spec ``spec`` with a time limit and a built-in or user controller (by name,
-    with ``params`` over its own, its ``perception`` and ``keep_alive``) given on top, as the
-    commands' options give them. The controller table given on top of is the spec's, else
-    ``base`` (the situation's agent's): for the same controller its params, fault,
-    ``control_period_s``, ``perception`` and ``keep_alive`` stay; another controller keeps
-    only ``control_period_s`` and ``perception``."""
+    with ``params`` over its own, its ``perception``, ``keep_alive`` and ``step_timeout_s``)
+    given on top, as the commands' options give them. The controller table given on top of is
+    the spec's, else ``base`` (the situation's agent's): for the same controller its params,
+    fault, ``control_period_s``, ``perception``, ``keep_alive`` and ``step_timeout_s`` stay;
+    another controller keeps only ``control_period_s`` and ``perception``."""
     run_spec: dict[str, Any] = dict(spec or {})
     if time_limit is not None:
         run_spec["time_limit_s"] = time_limit
-    if not controller and not params and not perception and not keep_alive:
+    if not controller and not params and not perception and not keep_alive and not step_timeout_s:
         return run_spec
     given = dict(run_spec.get("controller") or base or {})
     if controller and given.get("name") not in (None, controller):
         given = {k: v for k, v in given.items() if k in ("control_period_s", "perception")}
     name = controller or given.get("name")
     if not name:
-        option = "--param" if params else "--perception" if perception else "--keep-alive"
+        option = (
+            "--param"
+            if params
+            else "--perception"
+            if perception
+            else "--keep-alive"
+            if keep_alive
+            else "--step-timeout"
+        )
         raise _core.SpecError(f"{option}: no controller to give it to; name one with --controller")
     run_spec["controller"] = {
         **given,
@@ -189,6 +202,7 @@ def run_spec_with(
         "params": {**dict(given.get("params") or {}), **dict(params or {})},
         **({"perception": perception} if perception else {}),
         **({"keep_alive": True} if keep_alive else {}),
+        **({"step_timeout_s": step_timeout_s} if step_timeout_s else {}),
     }
     return run_spec
 
@@ -200,7 +214,7 @@ def run(
     seed: int = 0,
     spec: Mapping[str, Any] | None = None,
     params: Mapping[str, float] | None = None,
-    step_timeout_s: float = STEP_TIMEOUT_S,
+    step_timeout_s: float | None = None,
     sensed: bool = False,
     in_process: bool = False,
 ) -> RunRecord:
@@ -215,9 +229,43 @@ def run(
     ``sensed``: keep what the agent sensed at every step (:class:`Sensed`; the run is the same).
     ``in_process``: call a ``python:`` class in this process, not in a host process of its own
     (for disposable pool workers: :mod:`sitgen.controllers.inprocess`; the run is the same).
+    ``step_timeout_s``: the processor seconds a user controller may spend on one step (default:
+    the spec controller's ``step_timeout_s``, else 1 s; 10 s for ``navground:``).
+
+    A run the machine fails (a controller starved of a core past its backstop, a runner lost)
+    is made again, up to :data:`MACHINE_RETRIES` times; one it still fails is stored with
+    outcome ``error`` and a reason that begins "the machine", never as the controller's.
     """
     if not isinstance(situation, Situation):
         situation = Situation.load(situation)
+    for _ in range(MACHINE_RETRIES):
+        try:
+            return _run(situation, controller, time_limit, seed, spec, params, step_timeout_s,
+                        sensed, in_process)  # fmt: skip
+        except MachineError:
+            continue
+    try:
+        return _run(situation, controller, time_limit, seed, spec, params, step_timeout_s,
+                    sensed, in_process)  # fmt: skip
+    except MachineError as e:
+        name = _controller_name(controller)
+        run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
+        return _record(situation, controller, name, run_spec, seed, None, sensed, False,
+                       failed=f"{e} (after {MACHINE_RETRIES + 1} tries)")  # fmt: skip
+
+
+def _run(
+    situation: Situation,
+    controller: Any,
+    time_limit: float | None,
+    seed: int,
+    spec: Mapping[str, Any] | None,
+    params: Mapping[str, float] | None,
+    step_timeout_s: float | None,
+    sensed: bool,
+    in_process: bool,
+) -> RunRecord:
+    """One try of :func:`run`; MachineError where the machine failed it."""
     name = _controller_name(controller)
     run_spec = run_spec_with(spec, time_limit, name, params, situation.agent.controller)
     forks = _forks(controller, name, situation, run_spec, in_process)
@@ -231,8 +279,8 @@ def run(
     if forks == "agent":
         # Made again with the class in a host process of its own, which reports what it did
         # exactly as it always has (and keeps the run up to that step).
-        return run(situation, controller, time_limit, seed, spec, params, step_timeout_s,
-                   sensed, in_process=False)  # fmt: skip
+        return _run(situation, controller, time_limit, seed, spec, params, step_timeout_s,
+                    sensed, in_process=False)  # fmt: skip
     return _record(situation, controller, name, run_spec, seed, step_timeout_s, sensed,
                    in_process, failed=done.reason())  # fmt: skip
 
@@ -243,7 +291,7 @@ def _record(
     name: str | None,
     run_spec: Mapping[str, Any],
     seed: int,
-    step_timeout_s: float,
+    step_timeout_s: float | None,
     sensed: bool,
     in_process: bool,
     failed: str | None = None,
@@ -316,7 +364,7 @@ def _finished(
     controller: Any,
     situation: Situation,
     run_spec: Mapping[str, Any],
-    step_timeout_s: float,
+    step_timeout_s: float | None,
     senses: list[Mapping[str, Any]] | None,
     in_process: bool,
 ) -> tuple[dict[str, Any], list[Mapping[str, Any]] | None]:
@@ -365,7 +413,7 @@ def _drive(
     controller: Any,
     situation: Situation,
     run_spec: Mapping[str, Any],
-    step_timeout_s: float,
+    step_timeout_s: float | None,
     senses: list[Mapping[str, Any]] | None = None,
     in_process: bool = False,
 ) -> None:
@@ -381,6 +429,8 @@ def _drive(
                 core.run_to_end()
             else:
                 _step(core, None, senses)
+    except MachineError:
+        raise  # made again by run(), never the controller's failure
     except ControllerError as e:
         core.fail(str(e))
 
@@ -390,7 +440,7 @@ def _drive_agent(
     controller: Any,
     situation: Situation,
     run_spec: Mapping[str, Any],
-    step_timeout_s: float,
+    step_timeout_s: float | None,
     senses: list[Mapping[str, Any]] | None,
     in_process: bool,
 ) -> None:
@@ -399,7 +449,8 @@ def _drive_agent(
         controller = named["name"]
     assert is_user_controller(controller)
     keep_alive = bool(named.get("keep_alive"))
-    user = load_controller(controller, step_timeout_s, named.get("params"), in_process, keep_alive)
+    timeout_s = step_timeout_s or named.get("step_timeout_s")
+    user = load_controller(controller, timeout_s, named.get("params"), in_process, keep_alive)
     try:
         user.reset(reset_info(situation, run_spec, core.agent, user.wants_map))
         # Between the controller's decisions (its control period) its last command stays in
@@ -426,7 +477,11 @@ def user_peers(
             named = situation.robots[i].controller
             name = str(named["name"])
             peer = load_peer_controller(
-                name, f"`{name}` of peer {i}", named.get("params"), isolated
+                name,
+                f"`{name}` of peer {i}",
+                named.get("params"),
+                isolated,
+                named.get("step_timeout_s"),
             )
             loaded.append(peer)
             peer.reset(reset_info(situation, run_spec, i))
@@ -463,7 +518,7 @@ def robots_at(
                 pass
         else:
             named = spec.get("controller") or situation.agent.controller
-            user = load_controller(named["name"], STEP_TIMEOUT_S, named.get("params"))
+            user = load_controller(named["name"], named.get("step_timeout_s"), named.get("params"))
             try:
                 user.reset(reset_info(situation, spec, core.agent, user.wants_map))
                 while (obs := core.observe_agent())["time"] < t_s - 1e-9:

@@ -29,6 +29,7 @@ pub fn robot(id: u32, start: (f64, f64, f64), waypoints: &[[f64; 2]], controller
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         },
         at_end: AtEnd::Stop,
     }

@@ -247,18 +247,20 @@ impl PyRun {
     /// `tracks` a tuple of dicts (`id`, `position`, `velocity`); or, with `line`, as
     /// `act(message, time_s)`, `message` the controller protocol's observation line (bytes),
     /// for a program. An exception from `act` stops the run where it is and propagates (the
-    /// caller ends the run with its reason). `kill_after_s`: a call still running after this
-    /// long kills this process (see `watchdog`; for disposable pool workers only).
-    #[pyo3(signature = (act, kill_after_s=None, line=false))]
+    /// caller ends the run with its reason). `limits`: (cpu_s, wall_s, kill_grace_s) of each
+    /// call — the calling thread gets SIGALRM after `wall_s` of wall clock, and with a
+    /// `kill_grace_s` this process is killed that long past either limit (see `watchdog`; for
+    /// disposable processes only); None: calls are not watched.
+    #[pyo3(signature = (act, limits=None, line=false))]
     fn drive(
         &mut self,
         py: Python<'_>,
         act: &Bound<'_, PyAny>,
-        kill_after_s: Option<f64>,
+        limits: Option<(f64, f64, Option<f64>)>,
         line: bool,
     ) -> PyResult<()> {
         self.served()?;
-        let watchdog = kill_after_s.map(Watchdog::new);
+        let watchdog = limits.map(|(cpu_s, wall_s, grace_s)| Watchdog::new(cpu_s, wall_s, grace_s));
         let peers = std::mem::take(&mut self.peers);
         let driven = self.drive_with(py, act, watchdog, line, &peers);
         self.peers = peers;
@@ -411,6 +413,7 @@ fn check_controller(name: &str, field: &str) -> PyResult<()> {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     };
     control::check(&spec, "").map_err(|e| SpecError::new_err(format!("{field}: {}", e.message)))
 }

@@ -125,6 +125,19 @@ KeepAliveOption = Annotated[
 ]
 
 
+StepTimeoutOption = Annotated[
+    float | None,
+    typer.Option(
+        "--step-timeout",
+        min=0.001,
+        max=600.0,
+        help="Seconds of processor time a user controller may spend on one step (default 1; "
+        "10 for navground:), over the spec's step_timeout_s. A wall-clock backstop of ten "
+        "times this ends one that waits; a loaded machine changes neither.",
+    ),
+]
+
+
 def parse_params(items: list[str] | None, option: str = "--param") -> dict[str, float]:
     """``NAME=VALUE`` items as a controller's params; SpecError names the option and item."""
     import math

@@ -35,7 +35,9 @@ from sitgen.cli.app import (
     PerceptionOption,
     RerunsOption,
     SeedOption,
+    StepTimeoutOption,
     T,
+    TimeLimitOption,
     UsageError,
     WeightsOption,
     WorkersOption,
@@ -57,15 +59,20 @@ def _campaign_spec(
     params: list[str] | None = None,
     perception: str | None = None,
     keep_alive: bool = False,
+    step_timeout: float | None = None,
+    time_limit: float | None = None,
 ) -> CampaignSpec:
     """The campaign spec in file ``spec``, or the paper's, with the agent's controller, its
-    params, perception and keep_alive as ``--controller``, ``--param``, ``--perception`` and
-    ``--keep-alive`` give them (:func:`_with_controller`)."""
+    params, perception, keep_alive and step timeout, and the runs' time limit, as
+    ``--controller``, ``--param``, ``--perception``, ``--keep-alive``, ``--step-timeout`` and
+    ``--time-limit`` give them (:func:`_with_controller`)."""
     from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
-    return _with_controller(parsed, controller, params, perception, keep_alive)
+    return _with_controller(
+        parsed, controller, params, perception, keep_alive, step_timeout, time_limit
+    )
 
 
 def _with_controller(
@@ -74,15 +81,22 @@ def _with_controller(
     params: list[str] | None,
     perception: str | None = None,
     keep_alive: bool = False,
+    step_timeout: float | None = None,
+    time_limit: float | None = None,
 ) -> CampaignSpec:
     """``parsed`` whose runs give the agent ``controller`` (over the spec's run controller, or
-    its mission's) with ``params`` over its own, ``perception`` and ``keep_alive``; unchanged
-    without any."""
+    its mission's) with ``params`` over its own, ``perception``, ``keep_alive`` and
+    ``step_timeout`` (processor seconds a step), and last ``time_limit`` simulated seconds;
+    unchanged without any."""
     from sitgen.execution.jobs import campaign_from_data
     from sitgen.run import run_spec_with
 
     given = parse_params(params)
-    if not controller and not given and not perception and not keep_alive:
+    if time_limit is not None:
+        source = copy.deepcopy(parsed.source)
+        source["run"] = {**dict(source.get("run") or {}), "time_limit_s": time_limit}
+        parsed = campaign_from_data(source)
+    if not controller and not given and not perception and not keep_alive and not step_timeout:
         return parsed
     if controller:
         _core.check_controller(controller, "--controller")
@@ -103,6 +117,7 @@ def _with_controller(
         mission or {"name": "snd_follow"},
         perception,
         keep_alive,
+        step_timeout,
     )
     return campaign_from_data(source)
 
@@ -134,6 +149,8 @@ def campaign(
     param: ParamOption = None,
     perception: PerceptionOption = None,
     keep_alive: KeepAliveOption = False,
+    step_timeout: StepTimeoutOption = None,
+    time_limit: TimeLimitOption = None,
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
@@ -189,7 +206,9 @@ def campaign(
     _check_reruns(reruns)
     check_output(junit, "--junit", db, spec)
     check_output(summary_json, "--summary", db, spec, junit)
-    parsed = _campaign_spec(spec, controller, param, perception, keep_alive)
+    parsed = _campaign_spec(
+        spec, controller, param, perception, keep_alive, step_timeout, time_limit
+    )
     total_n = parsed.n if n is None else n
     result = _stored(
         "campaign",
@@ -350,6 +369,8 @@ def search(
     param: ParamOption = None,
     perception: PerceptionOption = None,
     keep_alive: KeepAliveOption = False,
+    step_timeout: StepTimeoutOption = None,
+    time_limit: TimeLimitOption = None,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -431,7 +452,9 @@ def search(
         source.setdefault("run", {})["scoring"] = learned.table()
         parsed = campaign_from_data(source)
     # Last: a directed search varies the run it starts from, driven by this controller.
-    parsed = _with_controller(parsed, controller, param, perception, keep_alive)
+    parsed = _with_controller(
+        parsed, controller, param, perception, keep_alive, step_timeout, time_limit
+    )
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
         plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)

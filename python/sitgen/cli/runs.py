@@ -27,6 +27,7 @@ from sitgen.cli.app import (
     PerceptionOption,
     RunSpecOption,
     SensorSeedOption,
+    StepTimeoutOption,
     TimeLimitOption,
     UsageError,
     _read_run_spec,
@@ -109,6 +110,7 @@ def run_command(
     controller: ControllerOption = None,
     param: ParamOption = None,
     perception: PerceptionOption = None,
+    step_timeout: StepTimeoutOption = None,
     time_limit: TimeLimitOption = None,
     seed: SensorSeedOption = 0,
     spec: RunSpecOption = None,
@@ -139,6 +141,7 @@ def run_command(
         parse_params(param),
         loaded.agent.controller,
         perception,
+        step_timeout_s=step_timeout,
     )
     record = run(
         loaded,
@@ -192,6 +195,7 @@ def check_controller_command(
     ] = None,
     steps: Annotated[int, typer.Option("--steps", min=1, max=100_000, help="Steps to drive.")] = 50,
     param: ParamOption = None,
+    step_timeout: StepTimeoutOption = None,
     allow_edited: AllowEditedOption = False,
     keep_alive: Annotated[
         bool,
@@ -221,7 +225,12 @@ def check_controller_command(
     # Another situation for the node's run before, where it is kept alive.
     before = generate_situation(preset_spec("open_field"), seed=1) if keep_alive else None
     checks = check_controller(
-        controller, loaded, steps=steps, params=parse_params(param), kept_after=before
+        controller,
+        loaded,
+        steps=steps,
+        params=parse_params(param),
+        kept_after=before,
+        step_timeout_s=step_timeout,
     )
     for c in checks:
         typer.echo(f"{'ok  ' if c.ok else 'FAIL'} {c.name:8} {c.detail}")

@@ -112,8 +112,9 @@ def shrink(
     """Shrink a failing run to the smallest situation found that still fails with the same
     failure class for the same controller and run spec (docs/shrink.md): write it, its run
     spec and a figure of the original beside it, and print what shrank. With a campaign store
-    the result is also kept in the store (its report shows it). --controller, --time-limit,
-    --spec and --seed are for a situation file: a stored run keeps its own."""
+    the result is also kept in the store (its report shows it). --controller, --spec and
+    --seed are for a situation file: a stored run keeps its own (--time-limit caps its time
+    limit). Each probe is watched only until its failure is decided."""
     from sitgen.run import run_spec_with
     from sitgen.triage.failures import FailureFilterError, check_class
     from sitgen.triage.shrink import ShrinkError, save_side_by_side, shrink_run
@@ -132,13 +133,16 @@ def shrink(
             if is_store:
                 if run_id is None:
                     raise UsageError(f"{source}: give the run to shrink: sitgen shrink DB RUN")
-                if controller or param or time_limit is not None or spec is not None:
+                if controller or param or spec is not None:
                     raise UsageError(
-                        "--controller, --param, --time-limit and --spec are for a situation "
-                        "file; a stored run is shrunk with its own controller and run spec"
+                        "--controller, --param and --spec are for a situation file; a stored "
+                        "run is shrunk with its own controller and run spec (--time-limit caps "
+                        "its time limit)"
                     )
                 require_store(source)
-                result = shrink_run(source, run_id, workers, max_probes, failure_class, on_progress)
+                result = shrink_run(
+                    source, run_id, workers, max_probes, failure_class, on_progress, time_limit
+                )
             else:
                 if run_id is not None:
                     raise UsageError(f"{source}: a run id is for a campaign store (.db)")

@@ -18,6 +18,8 @@ from sitgen.cli.app import (
     AddressOption,
     BackendOption,
     CampaignSeedOption,
+    StepTimeoutOption,
+    TimeLimitOption,
     UsageError,
     WorkersOption,
     app,
@@ -63,6 +65,7 @@ def faults(
         typer.Option("--faults", help="Comma-separated fault ids (default: all the controller's)."),
     ] = None,
     format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+    time_limit: TimeLimitOption = None,
     workers: WorkersOption = None,
     backend: BackendOption = "local",
     address: AddressOption = None,
@@ -86,7 +89,7 @@ def faults(
         budget,
         "situations",
         lambda on_progress, stop: run_faults(
-            _campaign_spec(spec),
+            _campaign_spec(spec, time_limit=time_limit),
             db,
             seed=seed,
             budget=budget,
@@ -150,10 +153,32 @@ def diff_command(
         typer.Option(
             "--param",
             "-p",
-            help="NAME=VALUE: a parameter given to both A and B, over their own (repeatable; a "
-            "JSON table in --a or --b gives one side its own).",
+            help="NAME=VALUE: a parameter given to both A and B, over their own (repeatable; "
+            "--a-param and --b-param give one side its own).",
         ),
     ] = None,
+    a_param: Annotated[
+        list[str] | None,
+        typer.Option("--a-param", help="NAME=VALUE: a parameter of A only (repeatable)."),
+    ] = None,
+    b_param: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--b-param",
+            help="NAME=VALUE: a parameter of B only, over --param (repeatable): "
+            "--a snd_follow --b snd_follow --b-param safety_distance=0.3.",
+        ),
+    ] = None,
+    reruns: Annotated[
+        int,
+        typer.Option(
+            "--reruns",
+            help="Perturbed copies a side of each difference (at least 7, the fewest that can "
+            "show one at the test's level; more, the surer).",
+        ),
+    ] = 8,
+    time_limit: TimeLimitOption = None,
+    step_timeout: StepTimeoutOption = None,
     n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
     seed: CampaignSeedOption = 0,
     situations: Annotated[
@@ -178,6 +203,7 @@ def diff_command(
     compared. Ctrl-C stops; the same command resumes."""
     from sitgen.generation.diff import (
         DiffPlan,
+        check_copies,
         diff_report,
         parse_controller,
         run_diff,
@@ -193,13 +219,23 @@ def diff_command(
         raise UsageError("--b: the controller to compare with A is required")
     check_output(junit, "--junit", db, spec, situations)
     given = parse_params(param)
+    sides = [
+        with_params(
+            parse_controller(text, f"--{side}"),
+            {**given, **parse_params(own, f"--{side}-param")},
+            f"--{side}",
+            step_timeout,
+        )
+        for side, text, own in (("a", a, a_param), ("b", b, b_param))
+    ]
     plan = DiffPlan(
-        with_params(parse_controller(a, "--a"), given, "--a"),
-        with_params(parse_controller(b, "--b"), given, "--b"),
+        sides[0],
+        sides[1],
         "stored" if situations else "random",
         str(situations) if situations else None,
+        check_copies(reruns),
     )
-    parsed = _campaign_spec(spec)
+    parsed = _campaign_spec(spec, time_limit=time_limit)
     result = _stored(
         "diff",
         n,
@@ -289,8 +325,10 @@ def robustness(
     for column in ("run", "class", "recurs", "verdict", "copies' classes"):
         table.add_column(column, justify="right" if column == "run" else "left")
     for r in rows:
+        erred = len(r["classes"]) - r["reruns"]
+        left_out = f" ({erred} erred, left out)" if erred else ""
         table.add_row(
-            str(r["run_id"]), r["failure_class"], f"{r['recurs']}/{r['reruns']}",
+            str(r["run_id"]), r["failure_class"], f"{r['recurs']}/{r['reruns']}{left_out}",
             verdict(r["recurs"], r["reruns"]), tally(r["classes"]),
         )  # fmt: skip
     Console(width=200).print(table)

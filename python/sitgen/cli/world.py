@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from sitgen import _core
-from sitgen.store import require_store
+from sitgen.store import StoreError, require_store
 from sitgen.world.config import preset_names, preset_spec
 from sitgen.world.situation import Situation, generate_situation
 from sitgen.world.terrain import Grid, generate_terrain
@@ -174,7 +174,9 @@ def export(
             "--format",
             "-f",
             help="Situation: stage (Player/Stage world) or ros (map YAML+PGM). "
-            "Campaign: parquet or csv (one file per table), or rosbag2 (one run, --run).",
+            "Campaign: parquet or csv (one file per table); with --run, rosbag2 (the run as "
+            "a rosbag2) or situation (its situation file and run spec, to run, shrink or "
+            "edit).",
         ),
     ] = "stage",
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder to write.")] = Path(
@@ -184,7 +186,7 @@ def export(
     allow_edited: AllowEditedOption = False,
     run_id: Annotated[
         int | None,
-        typer.Option("--run", help="With --format rosbag2: the stored run to write."),
+        typer.Option("--run", help="With --format rosbag2 or situation: the stored run to write."),
     ] = None,
 ) -> None:
     """Export a situation for Stage (with how it is run: --spec's laser, limits and time limit,
@@ -195,6 +197,9 @@ def export(
         from sitgen.triage.rank import export_tables
 
         require_store(source)
+        if format == "situation":
+            _export_situation(source, run_id, output)
+            return
         if format == "rosbag2" or run_id is not None:
             _export_rosbag2(source, run_id, format, output)
             return
@@ -212,6 +217,36 @@ def export(
     with _writing(output, "the export"):
         for path in Situation.load(source, allow_edited).export(output, format, run=run_spec):
             typer.echo(f"wrote {path}")
+
+
+def _export_situation(db: Path, run_id: int | None, output: Path) -> None:
+    """Stored run ``run_id``'s situation file and run spec, written into folder ``output``
+    (the situation as stored, or generated again from its spec and seed: no run is made)."""
+    from sitgen.store import Store
+    from sitgen.triage.recall import regenerate, stored_run
+
+    if run_id is None:
+        raise UsageError("--format situation: give the run to write with --run ID")
+    try:
+        with Store(db) as store:
+            row = stored_run(store, run_id)
+    except StoreError as e:
+        raise UsageError(str(e)) from None
+    if row["content_hash"] is None:
+        raise UsageError(f"run {run_id}: its situation was never generated: {row['reason']}")
+    situation = (
+        Situation(row["situation"], check_start=False)
+        if row["situation"] is not None
+        else regenerate(row)
+    )
+    situation_path = output / f"run-{run_id}.json"
+    spec_path = output / f"run-{run_id}.run.json"
+    with _writing(output, "the run's files"):
+        output.mkdir(parents=True, exist_ok=True)
+        situation.save(situation_path)
+        spec_path.write_text(json.dumps(row["run_spec"], indent=2, sort_keys=True) + "\n")
+    typer.echo(f"wrote {situation_path}, {spec_path}")
+    typer.echo(f"rerun: sitgen run {situation_path} --spec {spec_path} --seed {row['run_seed']}")
 
 
 def _export_rosbag2(db: Path, run_id: int | None, format: str, output: Path) -> None:

@@ -8,7 +8,8 @@ Both plug in as the agent's controller, named like the built-in ones:
 - ``cmd:program args…``: a program started without a shell, spoken to in lockstep, one JSON
   object per line each way (docs/controller-protocol.md).
 
-Both get a per-step wall-clock timeout, start in a process group of their own that is killed
+Both get a per-step deadline of processor time with a wall-clock backstop, start in a process
+group of their own that is killed
 with everything in it when the run ends, and die with sitgen. Anything that goes wrong inside a
 controller — an exception, ``sys.exit``, a crash, a hang, a closed pipe, a reply that is not a
 command — raises :exc:`ControllerError` with a one-line reason; a run turns it into an ``error``
@@ -35,11 +36,23 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.controllers.host import MAX_LINE_BYTES
-from sitgen.controllers.proc_tasks import BUSY_SHARE, busy_share
+from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, schedstat_seconds
 from sitgen.world.sim import Observation
 
 STEP_TIMEOUT_S = 1.0
-"""Default wall-clock time a program has to answer one observation."""
+"""Default processor time (seconds of CPU) a controller may spend answering one observation:
+its step deadline counts its own work, so that a loaded machine, which slows a controller down
+without changing what it computes, cannot change a verdict (docs/controller-protocol.md,
+"Deadlines")."""
+BACKSTOP_FACTOR = 10.0
+"""A controller that waits (a sleep, a lock, input of its own) spends no processor time: the
+wall-clock backstop that ends it is this many step deadlines, and at least
+:data:`LEAST_BACKSTOP_S`."""
+LEAST_BACKSTOP_S = 2.0
+PAUSED_S = 0.25
+"""A wait for a program's reply that wakes this much later than it asked was paused with sitgen
+(SIGSTOP, a suspended machine): the pause is added to the backstop, which measures the
+program's waiting, not the machine's."""
 START_TIMEOUT_S = 10.0
 """Default wall-clock time a program has to start and answer the reset message (an
 interpreter's start-up can take seconds on a loaded machine)."""
@@ -48,9 +61,10 @@ END_TIMEOUT_S = 1.0
 MAX_REPLY_BYTES = MAX_LINE_BYTES
 """Longest line a controller program may send (a reply is a few dozen bytes; a program that
 writes more without a newline is broken, and is stopped before it costs memory)."""
-BUSY_LOOK_S = 0.2
-"""Wall seconds a program that did not reply in time is watched for, to tell whether it is
-computing or waiting (it is killed after)."""
+CPU_LOOK_S = 0.05
+"""How often (wall seconds) the processor time of a program that has not replied within its
+step timeout of wall clock is read, until it replies, uses up that timeout of processor time or
+reaches its backstop."""
 STDERR_TAIL_BYTES = 4096
 """What is kept of a controller program's stderr: its tail, read as it comes, so that the
 last line can be quoted when it dies however much it writes."""
@@ -58,6 +72,61 @@ last line can be quoted when it dies however much it writes."""
 
 class ControllerError(Exception):
     """A controller failed: the message is one line saying how and when."""
+
+
+class MachineError(ControllerError):
+    """The machine, not the controller, failed the run: a controller starved of a core past
+    its backstop, a worker lost. The run is made again; it is never stored as the controller's
+    failure (``sitgen.run`` gives up after :data:`MACHINE_RETRIES` and says so)."""
+
+
+MACHINE_RETRIES = 3
+"""How often a run the machine failed is made again before its error is stored (with a reason
+that says the machine failed it, which triage does not count as the controller's)."""
+
+MACHINE_PREFIX = "the machine "
+"""How the stored reason of a run the machine failed begins (triage leaves such runs out)."""
+
+
+def backstop_s(step_timeout_s: float) -> float:
+    """The wall-clock backstop of a call whose processor-time deadline is ``step_timeout_s``."""
+    return max(BACKSTOP_FACTOR * step_timeout_s, LEAST_BACKSTOP_S)
+
+
+def computing_too_long(name: str, cpu_s: float, when: str) -> str:
+    """Why a controller that used up its processor time failed (the same words on every path)."""
+    return (
+        f"controller {name} did not reply within {cpu_s:g} s of processor time {when}; it is "
+        "computing, not waiting for input: a loop that does not end?"
+    )
+
+
+def waiting_too_long(name: str, wall_s: float, when: str, hint: str) -> str:
+    """Why a controller that waited past its wall-clock backstop failed; ``hint``: on what."""
+    return f"controller {name} did not reply within {wall_s:g} s {when}; it is waiting, not {hint}"
+
+
+WAITING_ON_ITS_OWN = "computing: on a sleep, a lock or input of its own?"
+"""What a class that waits past its backstop waits on (a program's is :data:`WAITING_ON_OUTPUT`)."""
+WAITING_ON_OUTPUT = (
+    "computing: a reply left in its output buffer? (flush after every reply: "
+    "docs/controller-protocol.md)"
+)
+
+
+def starved(wall_s: float, running_s: float, queued_s: float) -> bool:
+    """Whether a call that has not returned after ``wall_s`` was kept from a core by the
+    machine: runnable for a good share of the time (:data:`BUSY_SHARE`), and more of it waiting
+    on a run queue than running."""
+    return (running_s + queued_s) >= BUSY_SHARE * wall_s and queued_s >= running_s
+
+
+def starved_reason(name: str, wall_s: float, when: str) -> MachineError:
+    """The machine's error for a controller starved of a core past its backstop."""
+    return MachineError(
+        f"{MACHINE_PREFIX}starved controller {name} of processor time {when}: runnable but not "
+        f"run for most of {wall_s:g} s (a loaded or paused machine); not the controller's failure"
+    )
 
 
 @runtime_checkable
@@ -370,10 +439,10 @@ class ProcessController(UserController):
     def _converse(
         self, message: dict[str, Any] | bytes, timeout_s: float, when: str
     ) -> dict[str, Any]:
-        deadline = time.monotonic() + timeout_s
+        start = time.monotonic()
         line = message if isinstance(message, bytes) else json.dumps(message).encode() + b"\n"
-        self._write(line, deadline, when)
-        line = self._read_line(deadline, timeout_s, when)
+        self._write(line, start + backstop_s(timeout_s), when)
+        line = self._read_line(start, timeout_s, when)
         try:
             reply = json.loads(line)
         except ValueError:
@@ -424,7 +493,11 @@ class ProcessController(UserController):
                 except OSError:
                     raise ControllerError(self._died(when)) from None
 
-    def _read_line(self, deadline: float, timeout_s: float, when: str) -> bytes:
+    def _read_line(self, start: float, timeout_s: float, when: str) -> bytes:
+        """The program's next line. Its deadline counts the program's processor time from
+        ``start`` (``timeout_s`` of it), read only once a step timeout of wall clock has passed
+        (a program that computes for less wall time cannot have used more, unless threaded, and
+        the common step costs no read); a wall-clock backstop ends one that waits."""
         proc = self._proc
         assert proc is not None and proc.stdout is not None
         if b"\n" not in self._buffer:
@@ -437,17 +510,33 @@ class ProcessController(UserController):
             if chunk == b"":
                 raise ControllerError(self._died(when))
             self._buffer += chunk or b""
+        backstop = start + backstop_s(timeout_s)
+        look_at, cpu_start = start + timeout_s, None
+        window: tuple[float, float, float] | None = None
         while b"\n" not in self._buffer:
             if len(self._buffer) > MAX_REPLY_BYTES:
                 raise ControllerError(
                     f"controller {self.name} sent a malformed reply {when}: a line longer than "
                     f"{MAX_REPLY_BYTES} bytes"
                 )
-            left = deadline - time.monotonic()
-            ready = self._selector.select(left) if left > 0 else []
-            if not ready:
-                late = f"did not reply within {timeout_s:g} s"
-                raise ControllerError(self._stuck(late, when) + self._busy_or_waiting())
+            if cpu_start is None:  # what it used before it was waited for is next to nothing
+                cpu_start = cpu_seconds([proc.pid])
+            now = time.monotonic()
+            if now >= look_at:
+                if cpu_seconds([proc.pid]) - cpu_start >= timeout_s:
+                    raise ControllerError(
+                        self._stuck("", when) or computing_too_long(self.name, timeout_s, when)
+                    )
+                if window is None:
+                    window = (now, *schedstat_seconds(self._pids()))
+                look_at = now + CPU_LOOK_S
+            if now >= backstop:
+                raise self._overdue(backstop_s(timeout_s), window, when)
+            asked = min(look_at, backstop)
+            ready = self._selector.select(max(0.0, asked - now))
+            late = time.monotonic() - asked
+            if late > PAUSED_S:
+                backstop += late
             if any(key.fileobj is proc.stderr for key, _ in ready):
                 self._drain_stderr()
             if not any(key.fileobj is proc.stdout for key, _ in ready):
@@ -496,24 +585,36 @@ class ProcessController(UserController):
         assert self._proc is not None
         if self._proc.poll() is not None:
             return self._died(when)
-        return f"controller {self.name} {how} {when}"
+        return f"controller {self.name} {how} {when}" if how else ""
 
-    def _busy_or_waiting(self) -> str:
-        """What the error for a program that has not replied adds: whether it is computing
-        (a loop that does not end) or waiting (for a program, most often on a reply left in its
-        output buffer, the commonest way one hangs in lockstep), from its processor time over a
-        short look. The share
-        is not quoted: a run's stored reason is the same every time it ends so."""
-        if self._proc is None or self._proc.poll() is not None:
-            return ""
-        if busy_share({self._proc.pid, *marked_pids(self._mark)}, BUSY_LOOK_S) >= BUSY_SHARE:
-            return "; it is computing, not waiting for input: a loop that does not end?"
-        if self._host:  # sitgen's host writes the class's replies; the class itself waits
-            return "; it is waiting, not computing: on a sleep, a lock or input of its own?"
-        return (
-            "; it is waiting, not computing: a reply left in its output buffer? (flush after "
-            "every reply: docs/controller-protocol.md)"
-        )
+    def _pids(self) -> set[int]:
+        assert self._proc is not None
+        return {self._proc.pid, *marked_pids(self._mark)}
+
+    def _overdue(
+        self, wall_s: float, window: tuple[float, float, float] | None, when: str
+    ) -> ControllerError:
+        """The error of a program that has not replied by its backstop: it died; the machine
+        starved it (its threads' schedstat since its step timeout of wall clock, ``window``:
+        when, running and queued seconds then); it computes (threads or children of its own
+        used the time); or it waits — for a program most often on a reply left in its output
+        buffer, the commonest way one hangs in lockstep."""
+        died = self._stuck("", when)
+        if died:
+            return ControllerError(died)
+        if window is not None:
+            running, queued = schedstat_seconds(self._pids())
+            elapsed = time.monotonic() - window[0]
+            used, waited = running - window[1], queued - window[2]
+            if starved(elapsed, used, waited):
+                return starved_reason(self.name, wall_s, when)
+            if used >= BUSY_SHARE * elapsed:
+                return ControllerError(
+                    f"controller {self.name} did not reply within {wall_s:g} s {when}; it is "
+                    "computing, not waiting for input: a loop that does not end?"
+                )
+        hint = WAITING_ON_ITS_OWN if self._host else WAITING_ON_OUTPUT
+        return ControllerError(waiting_too_long(self.name, wall_s, when, hint))
 
     def _died(self, when: str) -> str:
         """Why the program stopped answering: its exit code, or that it closed its output and

@@ -13,17 +13,22 @@ Why: a host process (:mod:`sitgen.controllers.host`) costs a JSON round trip thr
 per step, hundreds of times what a cheap controller itself costs. Its isolation is kept another
 way: an exception, ``sys.exit`` or a bad reply — raised from the class's call, from converting
 what it returned, from formatting its exception or from its ``close`` — ends the run with the
-host's one-line reason; a call past the step timeout is interrupted (SIGALRM, main thread only;
-an alarm that fires once the call has returned is dropped, and a class that swallows the
-interruption was late all the same), and one that cannot be interrupted (a C loop holding the
-GIL) has its runner killed ``KILL_GRACE_S`` later by a watchdog thread in the core. A runner
+host's one-line reason. A call that uses up its step timeout of processor time is interrupted
+(SIGPROF), one that waits past the wall-clock backstop too (SIGALRM, which the core's watchdog
+thread sends; a call the machine starved of a core then is the machine's error, made again,
+never the controller's) — main thread only; a signal that lands once the call has returned is
+dropped, and a class that swallows the interruption was late all the same — and one that cannot
+be interrupted (a C loop holding the GIL) has its runner killed ``KILL_GRACE_S`` later by that
+thread. A runner
 that dies — that kill, ``os._exit``, a crash, the out-of-memory killer — is replaced, and an
 agent's run is made again in a host process, which reports what the controller did exactly as
 it always has; what the class started and left behind dies with its run.
 
-Parameters: ``step_timeout_s`` (s, default :data:`STEP_TIMEOUT_S`, 1 s) per ``act``; reset and
-class loading get :data:`START_TIMEOUT_S` (10 s); ``kill_after_s`` (s, default None: never)
-the watchdog's limit, the step or start timeout plus :data:`KILL_GRACE_S` in a runner.
+Parameters: ``step_timeout_s`` (seconds of processor time, default :data:`STEP_TIMEOUT_S`,
+1 s) per ``act``, with a wall-clock backstop of ten times that and at least 10 s
+(:func:`~sitgen.controllers.external.backstop_s`); reset and class loading get
+:data:`START_TIMEOUT_S` (10 s) of each; in a runner the watchdog kills :data:`KILL_GRACE_S`
+past either limit.
 
 Source: sitgen's controller protocol (docs/controller-protocol.md), whose messages this path
 skips but whose meaning and error reasons it keeps.
@@ -46,8 +51,14 @@ from sitgen.controllers.external import (
     END_TIMEOUT_S,
     START_TIMEOUT_S,
     STEP_TIMEOUT_S,
+    WAITING_ON_ITS_OWN,
     ControllerError,
     UserController,
+    backstop_s,
+    computing_too_long,
+    starved,
+    starved_reason,
+    waiting_too_long,
 )
 from sitgen.controllers.host import BadReply, command, exception_line, find_class, instantiate
 from sitgen.world.sim import Observation
@@ -59,7 +70,8 @@ worker (a pool worker only; the run is then made again in a host process)."""
 
 class StepTimeout(BaseException):
     """A call ran past its timeout (a BaseException, so that a controller's own
-    ``except Exception`` cannot swallow it)."""
+    ``except Exception`` cannot swallow it): its processor time (``cpu``) or its wall-clock
+    backstop (``wall``)."""
 
 
 class InProcessController(UserController):
@@ -139,7 +151,7 @@ class InProcessController(UserController):
         raises ControllerError when the controller fails (the run stops at that step)."""
         target_act, observation = self._target.act, self._observation
         timeout_s = self._step_timeout_s
-        caught, reason_of = self._caught, self._reason_of
+        caught, reason_of, overdue = self._caught, self._reason_of, self._overdue
         timed = _can_time()
         at = [0.0]
         armed, fired = _ARMED, _FIRED
@@ -155,9 +167,9 @@ class InProcessController(UserController):
                 shared[2] = time_s  # for the reason, should this runner die in the call
             obs = observation(ranges, pose, velocity, stalled, time_s, tracks, k)
             if timed:
-                fired[0] = False
+                fired[0] = ""
                 armed[0] = True
-                signal.setitimer(signal.ITIMER_REAL, timeout_s)
+                signal.setitimer(signal.ITIMER_PROF, timeout_s)
             try:
                 value = target_act(obs)
                 # The common reply, checked inline: a pair of floats is the command as it is.
@@ -169,8 +181,8 @@ class InProcessController(UserController):
                         command_ = command(value, f"at {time_s:.1f} s")
                 else:
                     command_ = command(value, f"at {time_s:.1f} s")
-            except StepTimeout:
-                raise
+            except StepTimeout as late:
+                raise overdue(str(late), f"at {time_s:.1f} s", timeout_s) from None
             except BadReply as e:
                 raise ControllerError(f"controller {self.name} {e}") from None
             except caught as e:  # a user's bug must end this run only
@@ -178,19 +190,19 @@ class InProcessController(UserController):
             finally:
                 if timed:
                     armed[0] = False
-                    signal.setitimer(signal.ITIMER_REAL, 0)
+                    signal.setitimer(signal.ITIMER_PROF, 0)
                 if forked[0]:
                     sandbox.returned_in_fork()
             if fired[0]:  # the class caught the timeout and went on: it was late all the same
-                raise StepTimeout
+                raise overdue(fired[0], f"at {time_s:.1f} s", timeout_s)
             return command_
 
-        kill_after_s = timeout_s + KILL_GRACE_S if self._isolated else None
+        limits = self._limits(timeout_s) if timed else None
         try:
             with _alarm(timed):
-                core.drive(act, kill_after_s)
-        except StepTimeout:
-            raise ControllerError(self._late(timeout_s, f"at {at[0]:.1f} s")) from None
+                core.drive(act, limits)
+        except StepTimeout as late:
+            raise overdue(str(late), f"at {at[0]:.1f} s", timeout_s) from None
 
     def peer_act(self) -> Callable[..., tuple[float, float]]:
         """The call the core makes whenever the peer this controller drives decides (the
@@ -238,8 +250,22 @@ class InProcessController(UserController):
             waypoints_reached=waypoints_reached,
         )
 
-    def _late(self, timeout_s: float, when: str) -> str:
-        return f"controller {self.name} did not reply within {timeout_s:g} s {when}"
+    def _limits(self, timeout_s: float) -> tuple[float, float, float | None]:
+        """The watchdog's limits for a call of processor-time deadline ``timeout_s``: SIGALRM
+        at its backstop and, in a runner, the kill :data:`KILL_GRACE_S` past either."""
+        return timeout_s, backstop_s(timeout_s), KILL_GRACE_S if self._isolated else None
+
+    def _overdue(self, how: str, when: str, timeout_s: float) -> ControllerError:
+        """The error of a call past its deadline (``how``: ``cpu`` or ``wall``); at the
+        backstop, the machine's error if it kept the call from a core (read while the call is
+        still watched)."""
+        if how == "cpu":
+            return ControllerError(computing_too_long(self.name, timeout_s, when))
+        wall_s = backstop_s(timeout_s)
+        seen = _core.watched_call()
+        if seen is not None and starved(*seen):
+            return starved_reason(self.name, wall_s, when)
+        return ControllerError(waiting_too_long(self.name, wall_s, when, WAITING_ON_ITS_OWN))
 
     def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
         """``call()`` (the class's code, and converting what it returned) under ``timeout_s``:
@@ -251,10 +277,10 @@ class InProcessController(UserController):
             finally:
                 sandbox.returned_in_fork()
             if _FIRED[0]:  # the class caught the timeout and went on: it was late all the same
-                raise StepTimeout
+                raise StepTimeout(_FIRED[0])
             return value
-        except StepTimeout:
-            raise ControllerError(self._late(timeout_s, when)) from None
+        except StepTimeout as late:
+            raise self._overdue(str(late), when, timeout_s) from None
         except BadReply as e:
             raise ControllerError(f"controller {self.name} {e}") from None
         except self._caught as e:  # a user's bug must end this run only
@@ -268,15 +294,16 @@ class InProcessController(UserController):
 
     @contextlib.contextmanager
     def _watched(self, timeout_s: float) -> Iterator[None]:
-        """The watchdog armed around a call made from Python (a pool worker only)."""
-        if not self._isolated:
+        """The watchdog armed around a call made from Python: its backstop, and in a runner
+        its kill."""
+        if not _can_time():
             yield
             return
-        _core.kill_after(timeout_s + KILL_GRACE_S)
+        _core.watch_call(self._limits(timeout_s))
         try:
             yield
         finally:
-            _core.kill_after(None)
+            _core.watch_call(None)
 
     def close(self) -> str | None:
         """Best effort, under :data:`END_TIMEOUT_S` as a program's exit after ``end`` is: the
@@ -306,47 +333,51 @@ def _can_time() -> bool:
 
 
 _ARMED = [False]
-"""Whether a call is under its deadline now: an alarm that fires once the call has returned
+"""Whether a call is under its deadline now: a signal that lands once the call has returned
 (late, or pending while the machine paused this process) is dropped, never raised in sitgen's
 own code."""
-_FIRED = [False]
-"""Whether the deadline of the call under way fired: a class that catches the StepTimeout and
-goes on was late all the same."""
+_FIRED = [""]
+"""Which deadline of the call under way fired (``cpu``, ``wall``; "" none): a class that
+catches the StepTimeout and goes on was late all the same."""
+_DEADLINES = {signal.SIGPROF: "cpu", signal.SIGALRM: "wall"}
 
 
 def _expire(signum: int, frame: object) -> None:
     if _ARMED[0]:
-        _FIRED[0] = True
-        raise StepTimeout
+        _FIRED[0] = _DEADLINES[signal.Signals(signum)]
+        raise StepTimeout(_FIRED[0])
 
 
 @contextlib.contextmanager
 def _alarm(timed: bool) -> Iterator[None]:
-    """SIGALRM raises StepTimeout within the block (when ``timed``)."""
+    """SIGPROF (the call's processor time) and SIGALRM (its backstop, from the watchdog) raise
+    StepTimeout within the block (when ``timed``)."""
     if not timed:
         yield
         return
-    previous = signal.signal(signal.SIGALRM, _expire)
+    previous = {number: signal.signal(number, _expire) for number in _DEADLINES}
     try:
         yield
     finally:
         _ARMED[0] = False
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 @contextlib.contextmanager
 def _deadline(timeout_s: float) -> Iterator[None]:
-    """Interrupt the block with StepTimeout after ``timeout_s`` of wall time (SIGALRM, so only
-    in the main thread; elsewhere the block runs unbounded)."""
+    """Interrupt the block with StepTimeout after ``timeout_s`` of this process's processor
+    time (SIGPROF, so only in the main thread; elsewhere the block runs unbounded); its
+    backstop is the watchdog's (:meth:`InProcessController._watched`)."""
     if not _can_time():
         yield
         return
-    _FIRED[0] = False
+    _FIRED[0] = ""
     _ARMED[0] = True
-    signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    signal.setitimer(signal.ITIMER_PROF, timeout_s)
     try:
         yield
     finally:
         _ARMED[0] = False
-        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.setitimer(signal.ITIMER_PROF, 0)

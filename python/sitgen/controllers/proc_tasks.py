@@ -4,7 +4,8 @@ gone back to waiting after a message, and whether its process has exited.
 What it does: :func:`wait_idle` waits until every thread of some processes is asleep (none
 running, runnable or waiting on a device), within a bound, Fast DDS's own threads left out
 (:func:`protocol_thread`); :func:`task_state` reads one process's or thread's state letter;
-:func:`cpu_seconds` the processor time some processes have used.
+:func:`cpu_seconds` the processor time some processes have used, :func:`schedstat_seconds`
+how long their threads ran and waited for a core.
 
 Why: a node's executor takes messages that arrived together in the order it made its
 subscriptions, not the order they were sent; handing it a message only once it has gone back to
@@ -70,19 +71,20 @@ not waiting for input): one waiting uses next to none, and one that loops gets a
 on an idle machine but may get a third of one, or less, beside a busy machine's other work."""
 
 
-def runnable_seconds(pids: Iterable[int]) -> float:
-    """The time the live threads of the processes ``pids`` have spent running or runnable
-    (waiting for a core: Linux's schedstat, running plus run-queue time); 0 where the kernel
-    keeps no schedstat."""
-    ns = 0
+def schedstat_seconds(pids: Iterable[int]) -> tuple[float, float]:
+    """The time the live threads of the processes ``pids`` have spent running, and runnable
+    but waiting on a run queue for a core (Linux's schedstat); zeros where the kernel keeps
+    none."""
+    running_ns = queued_ns = 0
     for pid, tid in threads(pids):
         try:
             with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
-                running, waiting = f.read().split()[:2]
+                running, queued = f.read().split()[:2]
         except (OSError, ValueError):
             continue
-        ns += int(running) + int(waiting)
-    return ns / 1e9
+        running_ns += int(running)
+        queued_ns += int(queued)
+    return running_ns / 1e9, queued_ns / 1e9
 
 
 def threads(pids: Iterable[int]) -> Iterator[tuple[int, str]]:
@@ -95,19 +97,6 @@ def threads(pids: Iterable[int]) -> Iterator[tuple[int, str]]:
             continue
         for tid in tids:
             yield pid, tid
-
-
-def busy_share(pids: Iterable[int], window_s: float) -> float:
-    """The share of one core the processes ``pids`` use over the next ``window_s`` seconds
-    (whose wait it costs), counting the time they were runnable but not run: a loop starved
-    of a core by a loaded machine is computing all the same."""
-    pids = list(pids)
-    before, start = cpu_seconds(pids), time.monotonic()
-    runnable = runnable_seconds(pids)
-    time.sleep(window_s)
-    elapsed = time.monotonic() - start
-    used = (cpu_seconds(pids) - before) / elapsed
-    return max(used, (runnable_seconds(pids) - runnable) / elapsed)
 
 
 PROTOCOL_THREADS = b"dds."

@@ -52,7 +52,13 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 from sitgen import _core
-from sitgen.controllers.external import MARK, marked_env, signal_name
+from sitgen.controllers.external import (
+    MARK,
+    backstop_s,
+    computing_too_long,
+    marked_env,
+    signal_name,
+)
 
 T = TypeVar("T")
 
@@ -75,8 +81,9 @@ class Died:
 
     how: str
     """``was killed by SIGSEGV``, ``exited with code 7``, …"""
-    watchdog: bool
-    """The step watchdog killed it: a call ran past its timeout and ignored SIGALRM."""
+    watchdog: str
+    """Why the step watchdog killed it: ``cpu`` (a call used up its processor time and ignored
+    SIGPROF), ``wall`` (it ran past its backstop and ignored SIGALRM); "" it did not."""
     name: str
     """The controller it was calling (its shown name), or "" if none was noted."""
     when: str
@@ -87,8 +94,10 @@ class Died:
     def reason(self) -> str:
         """The run's one-line reason, worded as the host process's."""
         who = f"controller {self.name}" if self.name else "the run's process"
+        if self.watchdog == "cpu":
+            return computing_too_long(self.name, self.timeout_s, self.when)
         if self.watchdog:
-            return f"{who} did not reply within {self.timeout_s:g} s {self.when}"
+            return f"{who} did not reply within {backstop_s(self.timeout_s):g} s {self.when}"
         return f"{who} {self.how} {self.when}".rstrip()
 
 
@@ -282,7 +291,8 @@ class _Runner:
         return status
 
     def died(self, status: int) -> Died:
-        watchdog = _readable(self.reports) and os.read(self.reports, 1) == b"W"
+        said = os.read(self.reports, 1) if _readable(self.reports) else b""
+        watchdog = {b"W": "wall", b"C": "cpu"}.get(said, "")
         died = _died(status, watchdog, self.view, self.page)
         self.close_page()
         return died
@@ -406,7 +416,7 @@ def _serve(
 
 def _state() -> tuple[Any, ...]:
     """What a run must leave as it found it for the runner to make the next: its threads,
-    signal dispositions, blocked signals, interval timer, file descriptors, working folder,
+    signal dispositions, blocked signals, interval timers, file descriptors, working folder,
     process group and environment."""
     dispositions = []
     for number in range(1, signal.NSIG):
@@ -419,6 +429,7 @@ def _state() -> tuple[Any, ...]:
         dispositions,
         signal.pthread_sigmask(signal.SIG_BLOCK, []),
         signal.getitimer(signal.ITIMER_REAL),
+        signal.getitimer(signal.ITIMER_PROF),
         sorted(os.listdir("/proc/self/fd")),
         os.getcwd(),
         os.getpgid(0),
@@ -463,14 +474,14 @@ def _pidfd(pid: int) -> int | None:
         return None
 
 
-def _died(status: int, watchdog: bool, view: Any, page: mmap.mmap) -> Died:
+def _died(status: int, watchdog: str, view: Any, page: mmap.mmap) -> Died:
     if os.WIFSIGNALED(status):
         how = f"was killed by {signal_name(os.WTERMSIG(status))}"
     else:
         how = f"exited with code {os.waitstatus_to_exitcode(status)}"
     slot = int(view[0])
     if slot < 0:
-        return Died(how, False, "", "", 0.0)
+        return Died(how, "", "", "", 0.0)
     phase, time_s, timeout_s = view[1], view[2], view[3]
     start = _HEADER + slot * NAME_BYTES
     name = bytes(page[start : start + NAME_BYTES]).split(b"\0", 1)[0].decode(errors="replace")

@@ -32,7 +32,7 @@ USER_PREFIXES = ("python:", "cmd:", ROS2_PREFIX, NAVGROUND_PREFIX)
 
 def load_controller(
     name: str | Any,
-    step_timeout_s: float = STEP_TIMEOUT_S,
+    step_timeout_s: float | None = None,
     params: Mapping[str, float] | None = None,
     in_process: bool = False,
     keep_alive: bool = False,
@@ -44,17 +44,20 @@ def load_controller(
     a disposable pool worker (:mod:`sitgen.controllers.inprocess`), not in a host process of
     its own. ``keep_alive``: a ``ros2:`` node is the one kept alive in this process for such
     runs (:func:`sitgen.controllers.ros2.kept_node`). Raises ControllerError if it cannot be
-    started."""
+    started. ``step_timeout_s``: processor seconds per step (None: the kind's default)."""
     if not isinstance(name, str):
-        return InProcessController(name, f"`{type(name).__name__}`", step_timeout_s)
+        return InProcessController(
+            name, f"`{type(name).__name__}`", step_timeout_s or STEP_TIMEOUT_S
+        )
     shown = f"`{name}`"
     if name.startswith(NAVGROUND_PREFIX):
         # A navground behaviour is a Python class of sitgen's, on the path a `python:` class
         # takes: called in a pool worker, in a host process of its own elsewhere. Its steps
-        # take milliseconds; a wall-clock limit near that would make a loaded machine's
-        # stall the behaviour's error, so only a step that hangs ends its run.
+        # take milliseconds, and a crowd's can take far more; only a step that hangs ends its
+        # run unless the user says otherwise.
         name = f"python:{navground_target(name)}"
-        step_timeout_s = max(step_timeout_s, NAVGROUND_STEP_TIMEOUT_S)
+        step_timeout_s = step_timeout_s or NAVGROUND_STEP_TIMEOUT_S
+    step_timeout_s = step_timeout_s or STEP_TIMEOUT_S
     if name.startswith("python:") and in_process:
         target = name.removeprefix("python:")
         return InProcessController(target, shown, step_timeout_s, True, params)
@@ -78,11 +81,16 @@ def load_controller(
 
 
 def load_peer_controller(
-    name: str, shown: str, params: Mapping[str, float] | None, isolated: bool
+    name: str,
+    shown: str,
+    params: Mapping[str, float] | None,
+    isolated: bool,
+    step_timeout_s: float | None = None,
 ) -> InProcessController:
     """A peer's controller (``python:…`` or ``navground:…``, the only kinds a peer may run),
     called in this process, ``shown`` in its errors; ``isolated``: this process is a
-    disposable pool worker. Raises ControllerError if it cannot be loaded."""
+    disposable pool worker; ``step_timeout_s``: processor seconds per step (None: the kind's
+    default). Raises ControllerError if it cannot be loaded."""
     if name.startswith(NAVGROUND_PREFIX):
         target, timeout_s = navground_target(name), NAVGROUND_STEP_TIMEOUT_S
     elif name.startswith("python:"):
@@ -91,7 +99,7 @@ def load_peer_controller(
         raise ControllerError(
             f"controller {shown}: a peer's controller is built in, python: or navground:"
         )
-    controller = InProcessController(target, shown, timeout_s, isolated, params)
+    controller = InProcessController(target, shown, step_timeout_s or timeout_s, isolated, params)
     controller.load()
     return controller
 

@@ -46,8 +46,16 @@ from sitgen.generation.faults import Situations, outcome_of
 from sitgen.store import Store, StoreError
 from sitgen.triage.junit import Case
 from sitgen.triage.junit import write_junit as write_junit_cases
-from sitgen.triage.kill import ALPHA, COPIES, STAGES, Outcome, outcome_of_copy, verdict
-from sitgen.triage.robustness import perturbed
+from sitgen.triage.kill import (
+    ALPHA,
+    COPIES,
+    STAGES,
+    Outcome,
+    outcome_of_copy,
+    p_value,
+    verdict,
+)
+from sitgen.triage.robustness import MAX_RERUNS, perturbed
 
 CHUNK = 16
 """Situations run between two rounds of perturbed copies."""
@@ -89,10 +97,16 @@ def parse_controller(text: str, option: str) -> dict[str, Any]:
 
 
 def with_params(
-    controller: dict[str, Any], params: Mapping[str, float], option: str
+    controller: dict[str, Any],
+    params: Mapping[str, float],
+    option: str,
+    step_timeout_s: float | None = None,
 ) -> dict[str, Any]:
-    """``controller`` (as :func:`parse_controller` gives it) with ``params`` over its own;
-    SpecError names the option if the controller does not take them."""
+    """``controller`` (as :func:`parse_controller` gives it) with ``params`` over its own, and
+    a user controller's ``step_timeout_s`` (a built-in has none); SpecError names the option
+    if the controller does not take them."""
+    if step_timeout_s and is_user_controller(str(controller["name"])):
+        controller = {**controller, "step_timeout_s": step_timeout_s}
     if not params:
         return controller
     given = {**controller, "params": {**dict(controller.get("params") or {}), **params}}
@@ -111,6 +125,14 @@ class DiffPlan:
     b: dict[str, Any]
     strategy: str = "random"
     situations: str | None = None
+    copies: int = COPIES
+    """Perturbed copies a side of each difference (``--reruns``)."""
+
+    @property
+    def stages(self) -> tuple[int, ...]:
+        """After how many copies a side the differences are judged: the kill rule's stages
+        below :attr:`copies`, then :attr:`copies`."""
+        return (*(s for s in STAGES if s < self.copies), self.copies)
 
     def as_dict(self) -> dict[str, Any]:
         source = {} if self.situations is None else {"situations": self.situations}
@@ -119,7 +141,7 @@ class DiffPlan:
             "a": self.a,
             "b": self.b,
             "strategy": self.strategy,
-            "kill_rule": {"alpha": ALPHA, "copies": COPIES, "stages": list(STAGES)},
+            "kill_rule": {"alpha": ALPHA, "copies": self.copies, "stages": list(self.stages)},
         }
 
     def controller(self, side: str) -> dict[str, Any]:
@@ -138,6 +160,11 @@ class Difference:
     new: bool | None = None
     """B's copies show it significantly more often (None: undecided yet)."""
     fixed: bool | None = None
+    total: int = COPIES
+    """Copies a side it is judged on at most."""
+    erred: int = 0
+    """Copies left out because A's or B's erred (a copy that did not run says nothing about
+    whether the class shows; both sides' copy ``k`` are left out together)."""
 
     @property
     def verdict(self) -> str:
@@ -149,10 +176,11 @@ class Difference:
 
     def settle(self) -> bool:
         """Decide what the copies so far allow; whether both directions are decided."""
+        judged, total = self.copies - self.erred, self.total - self.erred
         if self.new is None:
-            self.new = verdict(self.b_recurs, self.a_recurs, self.copies)
+            self.new = verdict(self.b_recurs, self.a_recurs, judged, total)
         if self.fixed is None:
-            self.fixed = verdict(self.a_recurs, self.b_recurs, self.copies)
+            self.fixed = verdict(self.a_recurs, self.b_recurs, judged, total)
         return self.new is not None and self.fixed is not None
 
 
@@ -166,6 +194,18 @@ def _jobs(situations: Situations, i: int, plan: DiffPlan) -> list[Job]:
         Job(2 * i + k, base.seed, base.situation, _run_of(base, plan, side), base.error)
         for k, side in enumerate(SIDES)
     ]
+
+
+def check_copies(copies: int) -> int:
+    """``copies`` if the kill rule's test can decide with that many a side, else an error
+    naming ``--reruns``: under 7 a side not even all against none reaches its level."""
+    least = next(k for k in range(1, 100) if p_value(k, 0, k) <= ALPHA)
+    if isinstance(copies, bool) or not least <= copies <= MAX_RERUNS:
+        raise _core.SpecError(
+            f"--reruns: {copies!r} is not in [{least}, {MAX_RERUNS}] (fewer copies a side "
+            f"cannot show a difference at the test's level, {ALPHA:g})"
+        )
+    return copies
 
 
 def _differences(store: Store, chunk: range) -> tuple[list[Difference], list[tuple[int, str]]]:
@@ -200,7 +240,7 @@ def _judge(
     seen: dict[tuple[str, int, int], Outcome] = {}
     copies = 0
     done = 0
-    for target in STAGES:
+    for target in plan.stages:
         open_ = [j for j in differences if not (j.new is not None and j.fixed is not None)]
         if not open_:
             break
@@ -235,9 +275,14 @@ def _judge(
         for index, key in enumerate(wanted):
             seen[key] = got[index]
         for j in open_:
+            j.total = plan.copies
             for k in range(done + 1, target + 1):
-                j.a_recurs += seen[("a", j.situation, k)].failure_class == j.failure_class
-                j.b_recurs += seen[("b", j.situation, k)].failure_class == j.failure_class
+                a, b = seen[("a", j.situation, k)], seen[("b", j.situation, k)]
+                if a.error or b.error:
+                    j.erred += 1
+                    continue
+                j.a_recurs += a.failure_class == j.failure_class
+                j.b_recurs += b.failure_class == j.failure_class
             j.copies = target
             j.settle()
         done = target
@@ -322,7 +367,7 @@ def _row_of(j: Difference) -> dict[str, Any]:
         "failure_class": j.failure_class,
         "a_recurs": j.a_recurs,
         "b_recurs": j.b_recurs,
-        "copies": j.copies,
+        "copies": j.copies - j.erred,
         "verdict": j.verdict,
     }
 

@@ -95,11 +95,12 @@ def _resolved_sizes() -> dict[str, float]:
 
 
 def measured_as_now(stored: dict[str, Any] | None, reruns: int) -> bool:
-    """Whether a stored robustness row counts as measured now: as many copies, perturbed and
-    watched as copies are today (a row from before the horizon is measured again)."""
+    """Whether a stored robustness row counts as measured now: as many copies run (those that
+    erred included; its ``reruns`` counts only those judged), perturbed and watched as copies
+    are today (a row from before the horizon is measured again)."""
     return (
         stored is not None
-        and stored["reruns"] == reruns
+        and len(stored["classes"]) == reruns
         and stored.get("perturbation") == perturbation_sizes()
     )
 
@@ -124,7 +125,14 @@ class Robustness:
 
     @property
     def reruns(self) -> int:
-        return len(self.classes)
+        """The copies judged: those that ran (a copy that erred says nothing about whether
+        the failure recurs, and is left out, never counted as not recurring)."""
+        return len(self.classes) - self.errors
+
+    @property
+    def errors(self) -> int:
+        """The copies that failed to run (their controller failed, or the machine did)."""
+        return sum(c == ERROR for c in self.classes)
 
     @property
     def recurs(self) -> int:
@@ -153,7 +161,9 @@ def is_robust(recurs: int, reruns: int) -> bool:
 
 
 def verdict(recurs: int, reruns: int) -> str:
-    """``robust`` or ``knife-edge``."""
+    """``robust`` or ``knife-edge``; ``unjudged`` where no copy ran (every one erred)."""
+    if reruns == 0:
+        return "unjudged"
     return "robust" if is_robust(recurs, reruns) else "knife-edge"
 
 

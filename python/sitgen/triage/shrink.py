@@ -60,6 +60,7 @@ from sitgen.triage.candidate import Candidate, Measure, ShrinkResult, Target
 from sitgen.triage.ddmin import ddmin
 from sitgen.triage.failures import distinct_failures
 from sitgen.triage.recall import stored_run, whole_run
+from sitgen.triage.robustness import HORIZON_AFTER_S, MOST_HORIZON_S, horizon_of
 from sitgen.world.config import spec_json
 from sitgen.world.figure import draw_situation
 from sitgen.world.situation import Situation
@@ -147,14 +148,18 @@ class Shrinker:
         workers: int,
         max_probes: int,
         on_progress: Callable[[int, int], None] | None = None,
+        watch: dict[str, Any] | None = None,
     ) -> None:
         """Bind a shrink to ``original`` run with ``run_spec`` and ``run_seed``; runs it once to
-        find what must be kept (raises :exc:`ShrinkError` if it does not fail so)."""
+        find what must be kept (raises :exc:`ShrinkError` if it does not fail so). ``watch``:
+        how far to watch that run (a stored run's failure says: :func:`watch_of`); without it
+        that one run goes to its time limit. Every later probe is watched until its failure is
+        decided."""
         self.original = original
         self.original_json = original.to_json()
         self.resolution = original.grid.resolution
         self.run_spec = run_spec
-        self.run_json = spec_json(run_spec, "run")
+        self._watch(watch)
         self.run_seed = run_seed
         self.workers = workers
         self.max_probes = max_probes
@@ -178,6 +183,12 @@ class Shrinker:
         self.exhausted = False
         self.dt_s = float(run_spec.get("sim", {}).get("dt_s", 0.1))
         self.target = self._target(failure_class)
+        self._watch(watch_of(self.target, self.target.time_s(self.probe(self.start))))
+
+    def _watch(self, watch: dict[str, Any] | None) -> None:
+        """Probe from now on with the run spec watched as ``watch`` says (None: whole runs)."""
+        self.probe_spec = self.run_spec if watch is None else {**self.run_spec, "watch": watch}
+        self.run_json = spec_json(self.probe_spec, "run")
 
     # Building and probing candidates.
 
@@ -209,7 +220,9 @@ class Shrinker:
                 self.exhausted = True
             situations = [self.situation_json(c) for _, c in batch]
             probes = (
-                user_probes(situations, self.run_spec, self.run_seed, self.leg_margin, self.workers)
+                user_probes(
+                    situations, self.probe_spec, self.run_seed, self.leg_margin, self.workers
+                )
                 if self.user
                 else _core.shrink_probes(
                     situations, self.run_json, self.run_seed, self.leg_margin, self.workers
@@ -238,7 +251,8 @@ class Shrinker:
         if c.key not in self.paths:
             self.probes += 1
             situation = Situation(self.kept_json(c))
-            self.paths[c.key] = run(situation, seed=self.run_seed, spec=self.run_spec).trajectory
+            watched = run(situation, seed=self.run_seed, spec=self.probe_spec)
+            self.paths[c.key] = watched.trajectory
         return self.paths[c.key]
 
     def robots_at(self, c: Candidate, t_s: float) -> list[dict[str, Any]]:
@@ -437,6 +451,16 @@ def _first_failing(
     return next((c for c, f in zip(candidates, fails(candidates), strict=True) if f), None)
 
 
+def watch_of(target: Target, first_s: float) -> dict[str, Any]:
+    """How a probe of a shrink toward ``target``, whose original showed it first at
+    ``first_s``, is watched: as a robustness copy is (:data:`HORIZON_AFTER_S` past that, and
+    on until it has shown the class or a worse one), so that a probe of a run that sat stuck
+    until a long time limit costs what its failure took. A class merely shown (``--class``) is
+    watched to the horizon."""
+    horizon_s = min(first_s + HORIZON_AFTER_S, MOST_HORIZON_S)
+    return {"horizon_s": horizon_s} | ({} if target.shown else {"watch_for": target.failure_class})
+
+
 def _with_robot(c: Candidate, i: int, robot: dict[str, Any]) -> Candidate:
     return c.with_robots([*c.robots[:i], robot, *c.robots[i + 1 :]])
 
@@ -458,17 +482,19 @@ def shrink(
     workers: int | None = None,
     max_probes: int = MAX_PROBES,
     on_progress: Callable[[int, int], None] | None = None,
+    watch: dict[str, Any] | None = None,
 ) -> ShrinkResult:
     """Shrink ``situation`` run with ``run_spec`` and sensor seed ``run_seed``: the smallest
     situation found that still fails with its failure class (with ``failure_class``: that
-    still shows that class). Raises :exc:`ShrinkError` if it does not fail so, and SpecError
-    for a bad run spec or a controller that is not built in."""
+    still shows that class). ``watch``: how far its first run is watched (:class:`Shrinker`).
+    Raises :exc:`ShrinkError` if it does not fail so, and SpecError for a bad run spec or a
+    controller that is not built in."""
     if not 1 <= max_probes <= MOST_PROBES:
         raise ShrinkError(f"--max-probes: {max_probes} is not in [1, {MOST_PROBES}]")
     threads = check_workers(workers, "local")
     started = time.perf_counter()
     shrinker = Shrinker(
-        situation, run_spec, run_seed, failure_class, threads, max_probes, on_progress
+        situation, run_spec, run_seed, failure_class, threads, max_probes, on_progress, watch
     )
     minimal, reductions = shrinker.shrink()
     return ShrinkResult(
@@ -510,9 +536,12 @@ def shrink_run(
     max_probes: int = MAX_PROBES,
     failure_class: str | None = None,
     on_progress: Callable[[int, int], None] | None = None,
+    time_limit_s: float | None = None,
 ) -> ShrinkResult:
-    """Shrink stored run ``run_id`` (its situation, run spec and seed) and keep the result in
-    the store's ``shrinks`` table."""
+    """Shrink stored run ``run_id`` (its situation, run spec and seed; ``time_limit_s`` over
+    its time limit) and keep the result in the store's ``shrinks`` table. Its first run is
+    watched as its stored failure says (:func:`horizon_of`), every probe until its failure is
+    decided."""
 
     with Store(db) as store:
         row = stored_run(store, run_id)
@@ -521,14 +550,18 @@ def shrink_run(
         whole = whole_run(store, row)
     if whole is None:
         raise ShrinkError("its situation was not generated, so there is nothing to shrink")
+    run_spec = dict(row["run_spec"])
+    if time_limit_s is not None:
+        run_spec["time_limit_s"] = time_limit_s
     result = shrink(
         whole.situation,
-        row["run_spec"],
+        run_spec,
         row["run_seed"],
         failure_class,
         workers,
         max_probes,
         on_progress,
+        None if failure_class is not None else horizon_of(row["failure"]),
     )
     with Store(db) as store:
         store.record_shrink(run_id, result.store_row())

@@ -643,6 +643,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         };
         assert!(crate::control::build(&spec, "c").is_ok());
     }
@@ -799,6 +800,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         };
         let mut failures = Vec::new();
         for seed in 1..=10 {
@@ -847,6 +849,7 @@ mod tests {
                 control_period_s: None,
                 perception: None,
                 keep_alive: false,
+                step_timeout_s: None,
             };
             run_situation(&s, &driver, 600, |w| {
                 if w.steps() % 10 == 0 {
@@ -862,6 +865,7 @@ mod tests {
                     control_period_s: None,
                     perception: None,
                     keep_alive: false,
+                    step_timeout_s: None,
                 };
                 let mut c = crate::control::build(&spec, "c").unwrap();
                 c.reset(&s.robots[0]);

@@ -246,6 +246,7 @@ mod tests {
                 control_period_s: None,
                 perception: None,
                 keep_alive: false,
+                step_timeout_s: None,
             },
             at_end,
         }
@@ -267,6 +268,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         }
     }
 

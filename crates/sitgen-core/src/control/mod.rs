@@ -151,6 +151,20 @@ pub fn check(spec: &ControllerSpec, path: &str) -> Result<(), SpecError> {
             ),
         ));
     }
+    if let Some(timeout) = spec.step_timeout_s {
+        let field = join(path, "step_timeout_s");
+        SpecError::check_positive(&field, timeout, 600.0)?;
+        if !is_external(&spec.name) {
+            return Err(SpecError::new(
+                field,
+                format!(
+                    "`{}` is built in and runs inside the step loop; a step timeout is for a \
+                     user's controller (python:, cmd:, ros2:, navground:)",
+                    spec.name
+                ),
+            ));
+        }
+    }
     if spec.keep_alive && !spec.name.starts_with("ros2:") {
         return Err(SpecError::new(
             join(path, "keep_alive"),

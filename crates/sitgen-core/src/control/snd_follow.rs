@@ -151,6 +151,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         }
     }
 
@@ -295,6 +296,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         };
         let err = |p: &[(&str, f64)]| {
             crate::control::build(&spec(p), "mission.agent_controller")

@@ -74,6 +74,7 @@ fn drive(spec_text: &str, seed: u64, steps: usize) -> World {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     };
     run_situation(&s, &straight, steps, |_| false)
 }
@@ -110,6 +111,7 @@ pub(crate) fn build_error(name: &str, params: &[(&str, f64)], path: &str) -> Str
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     };
     build(&spec, path)
         .err()
@@ -150,6 +152,7 @@ fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     };
     let start = s.robots[1].start;
     let dt = SimSpec::default().dt_s;
@@ -168,6 +171,7 @@ fn a_straight_peer_with_start_s_stands_until_then_and_then_drives() {
 fn keep_alive_is_for_a_ros2_node_only() {
     let spec = |name: &str| ControllerSpec {
         keep_alive: true,
+        step_timeout_s: None,
         ..ControllerSpec::named(name)
     };
     assert!(super::check(&spec("ros2:python3 node.py"), "run.controller").is_ok());

@@ -380,6 +380,7 @@ mod tests {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         }
     }
 

@@ -86,6 +86,12 @@ pub struct ControllerSpec {
     /// Default false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub keep_alive: bool,
+    /// A user controller only: the processor time it may spend deciding one step, seconds of
+    /// CPU, in (0, 600] (its process's, or in process its thread's; a wall-clock backstop of
+    /// ten times this, at least 10 s, ends one that waits instead: docs/controller-protocol.md,
+    /// "Deadlines"). Default 1 s (10 s for `navground:`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_timeout_s: Option<f64>,
 }
 
 /// What a controller perceives of the world beyond its own state.
@@ -112,6 +118,7 @@ impl ControllerSpec {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         }
     }
 }

@@ -192,9 +192,9 @@ impl Run {
             controllers.push(Some(c));
         }
         let limit_steps = (spec.time_limit_s / spec.sim.dt_s - 1e-9).ceil() as u64;
-        let horizon = spec.perturbation.as_ref().and_then(|p| {
-            let steps = (p.horizon_s? / spec.sim.dt_s - 1e-9).ceil() as u64;
-            (steps < limit_steps).then_some((steps, p.watch_for))
+        let horizon = spec.horizon().and_then(|(horizon_s, watch_for)| {
+            let steps = (horizon_s / spec.sim.dt_s - 1e-9).ceil() as u64;
+            (steps < limit_steps).then_some((steps, watch_for))
         });
         let mut run = Self {
             world,
@@ -497,7 +497,7 @@ impl Run {
             self.ended = Some((
                 Outcome::Stopped,
                 format!(
-                    "stopped at the copy's horizon, {:.1} s",
+                    "stopped at the watch's horizon, {:.1} s",
                     self.world.time_s()
                 ),
             ));

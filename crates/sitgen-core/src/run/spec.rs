@@ -44,6 +44,23 @@ pub struct RunSpec {
     /// and start offsets a real robot would not notice ([`perturb`]). Default none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub perturbation: Option<Perturbation>,
+    /// Watch the run only until its failure is decided, as a perturbed copy is watched (its
+    /// `horizon_s` and `watch_for`, [`perturb`]), without perturbing it: what a shrink's probe
+    /// asks. Default none: to the time limit.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub watch: Option<Watch>,
+}
+
+/// How far a run is watched: to `horizon_s` simulated seconds, and past it only until it has
+/// shown `watch_for` or a more severe class (then to its time limit).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Watch {
+    /// Simulated seconds, in (0, 86400].
+    pub horizon_s: f64,
+    /// A failure class; default none: stop at the horizon.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub watch_for: Option<crate::failure::FailureClass>,
 }
 
 fn default_time_limit_s() -> f64 {
@@ -60,6 +77,7 @@ impl Default for RunSpec {
             monitor: MonitorSpec::default(),
             scoring: ScoringSpec::default(),
             perturbation: None,
+            watch: None,
         }
     }
 }
@@ -87,12 +105,25 @@ impl RunSpec {
         if let Some(p) = &self.perturbation {
             p.validate(&join(path, "perturbation"))?;
         }
+        if let Some(w) = &self.watch {
+            SpecError::check_positive(&join(path, "watch.horizon_s"), w.horizon_s, 86_400.0)?;
+        }
         self.monitor.validate(&join(path, "monitor"))?;
         self.scoring.validate(&join(path, "scoring"))
     }
 
     /// The simulator settings and sensor-noise seed of a run with seed `seed`: the spec's own,
     /// or its perturbed copy's.
+    /// How far the run is watched: its `watch`, else its perturbation's horizon, as
+    /// (horizon_s, watch_for); None: to the time limit.
+    pub(super) fn horizon(&self) -> Option<(f64, Option<crate::failure::FailureClass>)> {
+        match (&self.watch, &self.perturbation) {
+            (Some(w), _) => Some((w.horizon_s, w.watch_for)),
+            (None, Some(p)) => p.horizon_s.map(|h| (h, p.watch_for)),
+            (None, None) => None,
+        }
+    }
+
     pub(super) fn world_settings(&self, seed: u64) -> (SimSpec, u64) {
         match &self.perturbation {
             Some(p) => (p.sim(&self.sim), p.seed(seed)),

@@ -21,6 +21,7 @@ pub(crate) fn spec(controller: Option<&str>, time_limit_s: f64) -> RunSpec {
             control_period_s: None,
             perception: None,
             keep_alive: false,
+            step_timeout_s: None,
         }),
         time_limit_s,
         ..RunSpec::default()

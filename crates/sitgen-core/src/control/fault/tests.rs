@@ -23,6 +23,7 @@ fn spec(name: &str, fault: Option<&str>) -> ControllerSpec {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     }
 }
 

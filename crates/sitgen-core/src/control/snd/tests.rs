@@ -417,6 +417,7 @@ fn parameters_are_checked_and_named() {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     };
     let err = |p: &[(&str, f64)]| {
         crate::control::build(&spec(p), "agent")
@@ -472,6 +473,7 @@ fn named(name: &str) -> ControllerSpec {
         control_period_s: None,
         perception: None,
         keep_alive: false,
+        step_timeout_s: None,
     }
 }
 
