@@ -111,26 +111,30 @@ def campaign_spec(path: Path, controller: str, n: int = 3, time_limit_s: float =
 @pytest.mark.parametrize(
     ("controller", "reason"),
     [
-        (f"{PY}:Hangs", "did not reply within 1 s at 0.3 s"),
+        (f"{PY}:Hangs", "did not reply within 0.2 s of processor time at 0.3 s"),
         (f"{PY}:Exits", "called sys.exit(0) at 0.3 s"),
         (f"{PY}:HardExits", "exited with code 7 at 0.3 s"),
         (f"{PY}:Segfaults", "was killed by SIGSEGV at 0.3 s"),
         (f"{MISBEHAVING} closeout", "closed its output at 0.4 s"),
         (f"{MISBEHAVING} deaf", "stopped reading its input at"),
-        (f"{MISBEHAVING} hang", "did not reply within 1 s at 0.4 s; it is waiting, not computing"),
-        (f"{MISBEHAVING} noflush", "did not reply within 1 s at 0.4 s; it is waiting, not comp"),
-        (f"{MISBEHAVING} spin", "did not reply within 1 s at 0.4 s; it is computing"),
+        (f"{MISBEHAVING} hang", "did not reply within 2 s at 0.4 s; it is waiting, not computing"),
+        (f"{MISBEHAVING} noflush", "did not reply within 2 s at 0.4 s; it is waiting, not comp"),
+        (f"{MISBEHAVING} spin", "within 0.2 s of processor time at 0.4 s; it is computing"),
     ],
 )
 def test_a_controller_that_hangs_exits_or_crashes_is_that_runs_error(
     situation_file: Path, controller: str, reason: str
 ) -> None:
     """Each ends its run with an error that says how; one that did not reply says whether it
-    is computing (a loop) or waiting (a reply not flushed, most often)."""
-    done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
+    is computing (a loop: its step timeout of processor time) or waiting (a reply not
+    flushed, most often: the wall-clock backstop, ten step timeouts and at least 2 s)."""
+    timeout = ("--step-timeout", "0.2")
+    done = run_limited(
+        "run", str(situation_file), "--controller", controller, *timeout, timeout_s=60
+    )
     assert done.returncode == 1, done.stdout + done.stderr
     assert "outcome error" in done.stdout and reason in done.stdout, done.stdout
-    checked = run_limited("check-controller", controller, timeout_s=60)
+    checked = run_limited("check-controller", controller, *timeout, timeout_s=60)
     assert checked.returncode == 1 and "FAIL act" in checked.stdout, checked.stdout
 
 
@@ -172,7 +176,8 @@ def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
     from tests.controllers.pycontrollers import Exits, Hangs
 
     hung = sitgen.run(situation, controller=Hangs(), time_limit=10, step_timeout_s=0.3)
-    assert hung.outcome == "error" and "did not reply within 0.3 s at 0.3 s" in hung.reason
+    assert hung.outcome == "error", hung.reason
+    assert "did not reply within 0.3 s of processor time at 0.3 s" in hung.reason, hung.reason
     exited = sitgen.run(situation, controller=Exits(), time_limit=10)
     assert exited.outcome == "error" and "called sys.exit(0) at 0.3 s" in exited.reason
 
@@ -180,10 +185,11 @@ def test_an_object_run_in_process_is_interrupted_and_may_not_exit(
 def test_a_class_in_a_host_process_that_does_not_reply_is_told_computing_or_waiting(
     situation: sitgen.Situation,
 ) -> None:
-    late = "did not reply within 1 s at 0.3 s; it is "
-    hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10)
+    hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10, step_timeout_s=0.2)
+    late = "did not reply within 0.2 s of processor time at 0.3 s; it is "
     assert late + "computing, not waiting for input" in hangs.reason, hangs.reason
-    sleeps = sitgen.run(situation, controller=f"{PY}:Swallows", time_limit=10)
+    sleeps = sitgen.run(situation, controller=f"{PY}:Swallows", time_limit=10, step_timeout_s=0.2)
+    late = "did not reply within 2 s at 0.3 s; it is "
     assert late + "waiting, not computing: on a sleep, a lock" in sleeps.reason, sleeps.reason
 
 
@@ -199,8 +205,10 @@ def test_a_class_that_loops_is_told_computing_even_when_starved_of_a_core(
         for _ in range(4 * (os.cpu_count() or 1))
     ]
     try:
-        hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10)
-        sleeps = sitgen.run(situation, controller=f"{PY}:Swallows", time_limit=10)
+        hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10, step_timeout_s=0.3)
+        sleeps = sitgen.run(
+            situation, controller=f"{PY}:Swallows", time_limit=10, step_timeout_s=0.3
+        )
     finally:
         for burner in burners:
             burner.kill()
@@ -214,13 +222,19 @@ def test_a_campaign_of_dying_controllers_stores_every_run_as_an_error(tmp_path: 
     # In the pool workers a class is called in process (the fast path): an exception or a
     # timeout ends its run there; a crash, or a loop in C that no signal interrupts (the core's
     # watchdog kills its worker), has the run made again in a host process, which says why.
-    late = "did not reply within 1 s at 0.3 s"
+    late = (
+        "did not reply within 1 s of processor time at 0.3 s; it is computing, not waiting for "
+        "input: a loop that does not end?"
+    )
     reasons = {
         "Exits": "called sys.exit(0) at 0.3 s",
         "Segfaults": "was killed by SIGSEGV at 0.3 s",
         "Hangs": late,
-        "HoldsTheGil": late + "; it is computing, not waiting for input: a loop that does not end?",
-        "Swallows": late,
+        "HoldsTheGil": late,
+        "Swallows": (
+            "did not reply within 10 s at 0.3 s; it is waiting, not computing: on a sleep, a "
+            "lock or input of its own?"
+        ),
         "HardExits": "exited with code 7 at 0.3 s",
     }
     for name, reason in reasons.items():
@@ -312,8 +326,11 @@ def _processes_with(marker: str) -> list[int]:
 def test_a_controllers_children_end_with_its_run(situation_file: Path, tmp_path: Path) -> None:
     pids = tmp_path / "pids"
     controller = f"{MISBEHAVING} spawn {pids}"
-    done = run_limited("run", str(situation_file), "--controller", controller, timeout_s=60)
-    assert done.returncode == 1 and "did not reply within 1 s" in done.stdout, done.stdout
+    done = run_limited(
+        "run", str(situation_file), "--controller", controller, "--step-timeout", "0.2",
+        timeout_s=60,
+    )  # fmt: skip
+    assert done.returncode == 1 and "did not reply within 2 s" in done.stdout, done.stdout
     child, program = (int(p) for p in pids.read_text().split())
     assert not alive(program) and not alive(child), "the program's whole group is killed"
 

@@ -250,26 +250,36 @@ class InProcessController(UserController):
             waypoints_reached=waypoints_reached,
         )
 
-    def _limits(self, timeout_s: float) -> tuple[float, float, float | None]:
+    def _limits(
+        self, timeout_s: float, wall_s: float | None = None
+    ) -> tuple[float, float, float | None]:
         """The watchdog's limits for a call of processor-time deadline ``timeout_s``: SIGALRM
-        at its backstop and, in a runner, the kill :data:`KILL_GRACE_S` past either."""
-        return timeout_s, backstop_s(timeout_s), KILL_GRACE_S if self._isolated else None
+        at ``wall_s`` (default its backstop) and, in a runner, the kill :data:`KILL_GRACE_S`
+        past either."""
+        wall_s = wall_s or backstop_s(timeout_s)
+        return timeout_s, wall_s, KILL_GRACE_S if self._isolated else None
 
-    def _overdue(self, how: str, when: str, timeout_s: float) -> ControllerError:
-        """The error of a call past its deadline (``how``: ``cpu`` or ``wall``); at the
-        backstop, the machine's error if it kept the call from a core (read while the call is
-        still watched)."""
+    def _overdue(
+        self, how: str, when: str, timeout_s: float, wall_s: float | None = None
+    ) -> ControllerError:
+        """The error of a call past its deadline (``how``: ``cpu`` or ``wall``, at ``wall_s``,
+        default its backstop); at the backstop, the machine's error if it kept the call from a
+        core (read while the call is still watched)."""
         if how == "cpu":
             return ControllerError(computing_too_long(self.name, timeout_s, when))
-        wall_s = backstop_s(timeout_s)
+        wall_s = wall_s or backstop_s(timeout_s)
         seen = _core.watched_call()
         if seen is not None and starved(*seen):
             return starved_reason(self.name, wall_s, when)
         return ControllerError(waiting_too_long(self.name, wall_s, when, WAITING_ON_ITS_OWN))
 
-    def _call(self, call: Callable[[], Any], when: str, timeout_s: float) -> Any:
-        """``call()`` (the class's code, and converting what it returned) under ``timeout_s``:
-        whatever it raises, however late it is, ends this run only, with the host's reason."""
+    def _call(
+        self, call: Callable[[], Any], when: str, timeout_s: float, wall_s: float | None = None
+    ) -> Any:
+        """``call()`` (the class's code, and converting what it returned) under ``timeout_s``
+        of processor time (and ``wall_s`` of wall clock, default its backstop: the watchdog's,
+        :meth:`_watched`): whatever it raises, however late it is, ends this run only, with the
+        host's reason."""
         try:
             try:
                 with _alarm(_can_time()), _deadline(timeout_s):
@@ -280,7 +290,7 @@ class InProcessController(UserController):
                 raise StepTimeout(_FIRED[0])
             return value
         except StepTimeout as late:
-            raise self._overdue(str(late), when, timeout_s) from None
+            raise self._overdue(str(late), when, timeout_s, wall_s) from None
         except BadReply as e:
             raise ControllerError(f"controller {self.name} {e}") from None
         except self._caught as e:  # a user's bug must end this run only
@@ -293,13 +303,13 @@ class InProcessController(UserController):
         return ControllerError(f"controller {self.name} raised {when}: {exception_line(e)}")
 
     @contextlib.contextmanager
-    def _watched(self, timeout_s: float) -> Iterator[None]:
-        """The watchdog armed around a call made from Python: its backstop, and in a runner
-        its kill."""
+    def _watched(self, timeout_s: float, wall_s: float | None = None) -> Iterator[None]:
+        """The watchdog armed around a call made from Python: its backstop (``wall_s``,
+        default :func:`backstop_s`), and in a runner its kill."""
         if not _can_time():
             yield
             return
-        _core.watch_call(self._limits(timeout_s))
+        _core.watch_call(self._limits(timeout_s, wall_s))
         try:
             yield
         finally:
@@ -313,8 +323,9 @@ class InProcessController(UserController):
             return None
         sandbox.note(self.name, sandbox.IN_CLOSE, 0.0, END_TIMEOUT_S)
         try:
-            with self._watched(END_TIMEOUT_S):
-                self._call(close, "in close()", END_TIMEOUT_S)
+            # Wall clock, as a program's exit after `end` is: the run is over.
+            with self._watched(END_TIMEOUT_S, END_TIMEOUT_S):
+                self._call(close, "in close()", END_TIMEOUT_S, END_TIMEOUT_S)
         except ControllerError as e:
             return str(e).removeprefix(f"controller {self.name} ")
         return None

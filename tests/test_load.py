@@ -1,0 +1,74 @@
+"""Verdicts a loaded machine cannot change: a controller's step deadline counts the processor
+time it spends, so a planner that costs milliseconds a step gets the same campaign, robustness
+verdicts and repro exit codes beside processes burning every core as alone (docs/
+controller-protocol.md, "Deadlines")."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sqlite3
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+from tests.conftest import ROOT, run_cli
+
+COSTS_3MS = "python:tests.controllers.careless:Costs3ms"
+
+
+@contextlib.contextmanager
+def _loaded() -> Iterator[None]:
+    """Four loops a core, each in a session of its own (as other jobs of a loaded machine
+    are: the scheduler shares a core out by session): a process of sitgen's gets a fifth of a
+    core or less, and a step of 3 ms of processor time takes several times that of wall time."""
+    burners = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
+        for _ in range(4 * (os.cpu_count() or 1))
+    ]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()
+
+
+def _campaign(folder: Path, name: str) -> tuple[list[tuple[object, ...]], list[tuple[object, ...]]]:
+    """A campaign of the 3 ms class with a 20 ms step timeout (a wall-clock deadline that
+    short fails steps on a loaded machine): its runs and robustness rows."""
+    spec = folder / "slow.toml"
+    spec.write_text(
+        'n = 4\n[situation.terrain]\npreset = "open_field"\n'
+        "[situation.mission]\npeers_min = 1\npeers_max = 2\n"
+        "[run]\ntime_limit_s = 8.0\n"
+        f'[run.controller]\nname = "{COSTS_3MS}"\nstep_timeout_s = 0.02\n'
+    )
+    db = folder / name
+    done = run_cli("campaign", str(spec), "--db", str(db), "--workers", "2", "--reruns", "2",
+                   cwd=ROOT)  # fmt: skip
+    assert done.returncode in (0, 1), done.stdout + done.stderr
+    with sqlite3.connect(db) as con:
+        runs = con.execute("SELECT id, outcome, reason, score FROM runs ORDER BY id").fetchall()
+        robust = con.execute(
+            "SELECT run_id, reruns, recurs, classes FROM robustness ORDER BY run_id"
+        ).fetchall()
+    return runs, robust
+
+
+def test_a_slow_class_gets_the_same_verdicts_on_a_loaded_machine_as_alone(tmp_path: Path) -> None:
+    alone = _campaign(tmp_path, "alone.db")
+    assert all(outcome != "error" for _, outcome, _, _ in alone[0]), alone[0]
+    with _loaded():
+        loaded = _campaign(tmp_path, "loaded.db")
+        done = run_cli("export", str(tmp_path / "alone.db"), "--run", "0", "--format",
+                       "situation", "-o", str(tmp_path / "repro"), cwd=ROOT)  # fmt: skip
+        assert done.returncode == 0, done.stdout + done.stderr
+        repro = ("run", str(tmp_path / "repro" / "run-0.json"), "--spec",
+                 str(tmp_path / "repro" / "run-0.run.json"))  # fmt: skip
+        busy = run_cli(*repro, cwd=ROOT)
+    idle = run_cli(*repro, cwd=ROOT)
+    assert loaded == alone
+    assert busy.returncode == idle.returncode == 0, busy.stdout + idle.stdout
+    assert busy.stdout.splitlines()[0] == idle.stdout.splitlines()[0]
