@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import contextlib
 import json
+import resource
+import time
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,6 +87,10 @@ class RunRecord:
     sensed: Sensed | None = field(default=None, repr=False)
     """What the agent sensed at every step, if the run was asked to keep it (``sensed=True``:
     for a rosbag2 of the run)."""
+    cost: tuple[float, float] = field(default=(0.0, 0.0), compare=False)
+    """What the run cost the machine: (wall seconds, processor seconds of the process that
+    made it and of the controller processes it started and ended). Not part of the run: the
+    same run costs more on a loaded machine."""
 
     def to_dict(self) -> dict[str, Any]:
         """Everything but the trajectory, as JSON-ready data."""
@@ -297,6 +303,7 @@ def _record(
     failed: str | None = None,
 ) -> RunRecord:
     """The run made here (``failed``: not made, ended at its start with that reason)."""
+    started, cpu = time.perf_counter(), _cpu_s()
     core = _core.Run(situation.to_json(), spec_json(dict(run_spec), "run"), seed)
     senses: list[Mapping[str, Any]] | None = [] if sensed else None
     if failed is None:
@@ -324,7 +331,16 @@ def _record(
         failure=record.get("failure"),
         coverage=record.get("coverage"),
         sensed=None if senses is None else _sensed(senses),
+        cost=(time.perf_counter() - started, _cpu_s() - cpu),
     )
+
+
+def _cpu_s() -> float:
+    """Processor seconds this process and its children that have ended used so far (a
+    controller's host process or program ends, and is waited for, before its run's record)."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    ended = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
 
 
 def _forks(

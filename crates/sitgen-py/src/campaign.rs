@@ -9,9 +9,7 @@ use pyo3::exceptions::PyStopIteration;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use rayon::prelude::*;
-use sitgen_core::run::{
-    pack_trajectory, run_batch, run_job, Job, JobResult, JobSituation, RunSpec,
-};
+use sitgen_core::run::{pack_trajectory, par_map, run_job, Job, JobResult, JobSituation, RunSpec};
 use sitgen_core::situation::Situation;
 use sitgen_core::spec;
 
@@ -81,13 +79,8 @@ fn run_jobs<'py>(
         .filter(|(_, j)| j.is_ok())
         .map(|(i, _)| rule(i))
         .collect();
-    let results = py.detach(|| {
-        run_batch(&good, threads)
-            .into_iter()
-            .zip(good_rules)
-            .map(|(result, rule)| pack_result(result, rule))
-            .collect::<Vec<_>>()
-    });
+    let paired: Vec<(&Job, PackRule)> = good.iter().zip(good_rules).collect();
+    let results = py.detach(|| par_map(&paired, threads, |&(j, rule)| timed(j, rule)));
     let mut results = results.into_iter();
     parsed
         .into_iter()
@@ -101,23 +94,46 @@ fn run_jobs<'py>(
         .collect()
 }
 
-/// A finished job, serialised off the GIL: (situation, record, events, trajectory, robots).
-type Packed = Result<(String, String, String, Option<Vec<u8>>, usize), String>;
+/// A finished job, serialised off the GIL: (situation, record, events, trajectory, robots,
+/// (wall seconds, processor seconds) it took).
+type Packed = Result<(String, String, String, Option<Vec<u8>>, usize, (f64, f64)), String>;
 
-fn pack_result(result: JobResult, (min_score, failures): PackRule) -> Packed {
+fn pack_result(result: JobResult, (min_score, failures): PackRule, took: (f64, f64)) -> Packed {
     result.map(|(s, rec)| {
         let keep = rec.score.total >= min_score || (failures && rec.failure.is_some());
         let packed = keep.then(|| pack_trajectory(&rec.trajectory));
         let record = serde_json::to_string(&rec).expect("records serialize");
-        (s.to_json(), record, rec.events_jsonl(), packed, rec.robots)
+        (s.to_json(), record, rec.events_jsonl(), packed, rec.robots, took)
     })
+}
+
+/// This thread's processor time, seconds.
+fn thread_cpu_s() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes the timespec it is given.
+    unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) };
+    t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+}
+
+/// `job` generated and run on this thread, with the wall and processor time it took (what
+/// `sitgen failures` and the export show of each run's cost).
+fn timed(job: &Job, rule: PackRule) -> Packed {
+    let (started, cpu) = (std::time::Instant::now(), thread_cpu_s());
+    let result = run_job(job);
+    let took = (started.elapsed().as_secs_f64(), thread_cpu_s() - cpu);
+    pack_result(result, rule, took)
 }
 
 fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
     match result {
-        Ok((situation, record, events, trajectory, robots)) => {
+        Ok((situation, record, events, trajectory, robots, (wall_s, cpu_s))) => {
             d.set_item("ok", true)?;
+            d.set_item("wall_s", wall_s)?;
+            d.set_item("cpu_s", cpu_s)?;
             d.set_item("situation", situation)?;
             d.set_item("record", record)?;
             d.set_item("events_jsonl", events)?;
@@ -164,7 +180,7 @@ impl JobStream {
                     .par_bridge()
                     .for_each_with(tx, |tx, (id, tuple, rule)| {
                         let result = (!stopping.load(Ordering::Relaxed))
-                            .then(|| job(id, &tuple).and_then(|j| pack_result(run_job(&j), rule)));
+                            .then(|| job(id, &tuple).and_then(|j| timed(&j, rule)));
                         // The receiver is gone only if Python dropped the stream.
                         let _ = tx.send((id, result));
                     })

@@ -304,11 +304,18 @@ class OnProgress(Protocol):
     def __call__(self, done: int, total: int, status: str = "") -> None: ...
 
 
+PROGRESS_STEP = 0.05
+"""Off a terminal, a progress line each time this share of the work is done..."""
+PROGRESS_EVERY_S = 60.0
+"""...or this many seconds have passed since the last, whichever comes first."""
+
+
 @contextmanager
 def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
-    """A progress bar on a terminal (or with SITGEN_PROGRESS set): yields the
-    ``on_progress(done, total, status)`` to call, which also shows the rate of this call's
-    work."""
+    """A progress bar on a terminal (or with SITGEN_PROGRESS set); elsewhere (a CI log, a
+    pipe, nohup) a line to stderr every few percent and at least every minute: work done,
+    rate, time left and what was found so far. Yields the ``on_progress(done, total,
+    status)`` to call."""
 
     from rich.progress import (
         BarColumn,
@@ -320,6 +327,7 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
     )
 
     started = time.perf_counter()
+    bar = sys.stderr.isatty() or "SITGEN_PROGRESS" in os.environ
     with Progress(
         TextColumn(f"[bold]{label}"),
         BarColumn(),
@@ -329,21 +337,44 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
         TextColumn("ETA"),
         TimeRemainingColumn(),
         TextColumn("{task.fields[status]}"),
-        disable=not sys.stderr.isatty() and "SITGEN_PROGRESS" not in os.environ,
+        disable=not bar,
     ) as progress:
         task = progress.add_task(unit, total=total, rate="", status="")
         first: list[int] = []
+        said = [-1.0, started]  # share and time of the last line written
 
         def on_progress(done: int, total: int, status: str = "") -> None:
             if not first:
                 first.append(done)
-            elapsed = time.perf_counter() - started
+            now = time.perf_counter()
+            elapsed = now - started
             rate = (done - first[0]) / elapsed if elapsed > 0 else 0.0
             progress.update(
                 task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s", status=status
             )
+            share = done / total if total else 1.0
+            if bar or not (share >= said[0] + PROGRESS_STEP or now - said[1] >= PROGRESS_EVERY_S
+                           or done == total):  # fmt: skip
+                return
+            said[:] = [share, now]
+            left = (total - done) / rate if rate > 0 else None
+            eta = "" if left is None else f", ETA {_clock(left)}"
+            found = f"; {status}" if status else ""
+            print(
+                f"{label}: {done}/{total} {unit} ({100 * share:.0f}%), {rate:.2g} {unit}/s, "
+                f"{_clock(elapsed)} so far{eta}{found}",
+                file=sys.stderr,
+                flush=True,
+            )
 
         yield on_progress
+
+
+def _clock(seconds: float) -> str:
+    """``1:02:03`` or ``2:03``."""
+    whole = int(round(seconds))
+    hours, rest = divmod(whole, 3600)
+    return f"{hours}:{rest // 60:02d}:{rest % 60:02d}" if hours else f"{rest // 60}:{rest % 60:02d}"
 
 
 def main() -> None:

@@ -267,7 +267,8 @@ def failures(
     weights: WeightsOption = None,
 ) -> None:
     """One row per distinct failure of a campaign, the most dangerous (best score) first: its
-    class, sentence, runs, share of runs, best score, representative run and median duration."""
+    class, sentence, runs, share of runs, best score, representative run, median duration,
+    median processor seconds a run cost, and robustness."""
     from sitgen.store import Store
     from sitgen.triage.failures import distinct_failures, write_failures
 
@@ -283,7 +284,10 @@ def failures(
         write_failures(found, format, sys.stdout)
         return
     table = Table(title=f"{db}: {len(found)} distinct failures")
-    columns = ("class", "failure", "runs", "share", "best score", "run", "median s", "robustness")
+    columns = (
+        "class", "failure", "runs", "share", "best score", "run", "median s", "cpu s/run",
+        "robustness",
+    )  # fmt: skip
     for column in columns:
         table.add_column(
             column, justify="left" if column in ("class", "failure", "robustness") else "right"
@@ -291,7 +295,8 @@ def failures(
     for f in found:
         table.add_row(
             f.key, f.description, str(f.runs), f"{100 * f.share:.1f}%", f"{f.best_score:.1f}",
-            str(f.representative), f"{f.median_duration_s:.1f}", f.robustness,
+            str(f.representative), f"{f.median_duration_s:.1f}",
+            "" if f.median_cpu_s is None else f"{f.median_cpu_s:.2g}", f.robustness,
         )  # fmt: skip
     Console(width=200).print(table)
 

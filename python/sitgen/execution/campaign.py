@@ -128,6 +128,7 @@ def run_row(job: Job, result: Mapping[str, Any]) -> RunRow:
         events_jsonl=result.get("events_jsonl", ""),
         trajectory=result.get("trajectory"),
         robots=result.get("robots", 0),
+        cost=(float(result["wall_s"]), float(result["cpu_s"])) if "cpu_s" in result else None,
     )
 
 
@@ -357,7 +358,7 @@ def run_campaign(
     workers: int | None = None,
     backend: str = "local",
     address: str | None = None,
-    on_progress: Callable[[int, int], None] | None = None,
+    on_progress: Callable[..., None] | None = None,
     stop: Callable[[], bool] | None = None,
     keep_trajectories: str = DEFAULT_KEEP,
 ) -> CampaignResult:
@@ -385,7 +386,7 @@ def run_campaign(
         keep.start(store)
         executor = Executor(workers, backend, address, user=user, pack_rule=keep.pack_rule)
         jobs = stream_jobs(spec, seed, (i for i in range(n) if i not in done))
-        ran = 0
+        ran = errors = 0
         if stop is not None and stop():
             executor.stop()
         for job, result in executor.results(jobs):
@@ -393,8 +394,9 @@ def run_campaign(
             # One transaction per run: a kill loses only the runs in flight.
             store.add_runs([row], demote=pushed_out)
             ran += 1
+            errors += row.record is None or row.record.get("outcome") == "error"
             if on_progress:
-                on_progress(n - todo + ran, n)
+                on_progress(n - todo + ran, n, f"{errors} errors" if errors else "")
             if stop is not None and stop():
                 executor.stop()
         interrupted = ran < todo

@@ -62,6 +62,8 @@ def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
         "events_jsonl": rec.events_jsonl,
         "trajectory": packed,
         "robots": rec.trajectory.shape[1],
+        "wall_s": rec.cost[0],
+        "cpu_s": rec.cost[1],
     }
 
 

@@ -256,6 +256,13 @@ def run_page(
         f" {end_s:.1f} s, controller <code>{html.escape(row['controller'])}</code>,"
         f" {len(situation.robots) - 1} peers, situation seed {row['situation_seed']}</p>"
     )
+    cost = store.costs([run_id]).get(run_id)
+    if cost is not None and not blind:
+        body.append(
+            f"<p id='cost' data-wall-s='{cost[0]:.3f}' data-cpu-s='{cost[1]:.3f}'>It cost "
+            f"{cost[1]:.2f} s of processor time and {cost[0]:.2f} s of wall time to run "
+            "(the machine's figures, not the run's).</p>"
+        )
     failure = row["failure"]
     deciding = frozenset(
         i for i in (failure or {}).get("events", []) if isinstance(i, int) and 0 <= i < len(events)

@@ -42,6 +42,7 @@ from sitgen.store.records import (
     unpack_json,
 )
 from sitgen.store.schema import (
+    COST_SCHEMA,
     DIFF_SCHEMA,
     FAULT_SCHEMA,
     JUDGEMENT_SCHEMA,
@@ -129,6 +130,7 @@ class Store(Verdicts):
                     + ROBUSTNESS_SCHEMA
                     + KILL_TEST_SCHEMA
                     + DIFF_SCHEMA
+                    + COST_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -331,6 +333,14 @@ class Store(Verdicts):
             )
         self.db.execute("PRAGMA query_only = ON")
 
+    def costs(self, run_ids: Iterable[int] | None = None) -> dict[int, tuple[float, float]]:
+        """What runs cost the machine that made them, (wall seconds, processor seconds), by
+        run id (every run with a cost if ``run_ids`` is None; runs stored before sitgen kept
+        costs have none)."""
+        rows = self.db.execute("SELECT run_id, wall_s, cpu_s FROM run_costs").fetchall()
+        wanted = None if run_ids is None else set(run_ids)
+        return {r: (w, c) for r, w, c in rows if wanted is None or r in wanted}
+
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
 
@@ -372,6 +382,11 @@ class Store(Verdicts):
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             row.run_values(),
         )
+        if row.cost is not None:
+            self.db.execute(
+                "INSERT OR REPLACE INTO run_costs (run_id, wall_s, cpu_s) VALUES (?, ?, ?)",
+                (row.id, *row.cost),
+            )
         if not row.whole:
             return
         self.db.executemany(
@@ -552,6 +567,7 @@ class Store(Verdicts):
 
 
 __all__ = [
+    "COST_SCHEMA",
     "DIFF_SCHEMA",
     "FAULT_SCHEMA",
     "JUDGEMENT_SCHEMA",

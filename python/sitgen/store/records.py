@@ -94,6 +94,8 @@ class RunRow:
     """The runs a search mutated to make it (empty for a fresh draw; None in a campaign)."""
     genes: dict[str, Any] | None = None
     """A search's genome for it: each varied field's draw and the situation seed."""
+    cost: tuple[float, float] | None = None
+    """What it cost the machine that made it: (wall seconds, processor seconds)."""
     keep: bool = True
     """Store the run whole (its situation, specs, event log and trajectory), or only its
     summary (a campaign's run: its specs follow from the campaign, and the rest comes back by

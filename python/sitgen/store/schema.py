@@ -8,7 +8,7 @@ import sqlite3
 
 from sitgen import _core
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 10
 
 
 SCHEMA = """
@@ -183,6 +183,18 @@ CREATE TABLE IF NOT EXISTS robustness (
 """
 
 
+COST_SCHEMA = """
+CREATE TABLE IF NOT EXISTS run_costs (
+    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
+    wall_s REAL NOT NULL,
+    cpu_s REAL NOT NULL
+);
+"""
+"""What each run cost the machine that made it (wall and processor seconds): kept apart from
+``runs`` because it is the machine's, not the run's: a run's row is the same bytes on any
+machine, under any load, on any worker count."""
+
+
 DIFF_SCHEMA = """
 CREATE TABLE IF NOT EXISTS diff (
     id INTEGER PRIMARY KEY CHECK (id = 1),
@@ -285,6 +297,10 @@ def upgrade(db: sqlite3.Connection, version: int) -> None:
         add_columns(db, "fault_kills", *KILL_TEST_COLUMNS)
         # And controller diffs (sitgen diff): their plan and verdicts.
         db.executescript(DIFF_SCHEMA)
+    if version < 10:
+        # Version 10 adds what each run cost (wall and processor seconds); runs stored
+        # before have none.
+        db.executescript(COST_SCHEMA)
     db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 

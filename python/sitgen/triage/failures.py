@@ -29,6 +29,7 @@ from sitgen.triage.robustness import (
     is_robust,
     measure_runs,
     measured_as_now,
+    verdict,
 )
 from sitgen.triage.rows import write_rows
 
@@ -87,7 +88,11 @@ class DistinctFailure:
     reruns: int | None = None
     """How many copies of the representative were run."""
     rerun_classes: list[str | None] = field(default_factory=list)
-    """Each copy's failure class (None: no failure)."""
+    """Each copy's failure class (None: no failure; ``error``: it failed to run, and is not
+    counted in :attr:`reruns`)."""
+    median_cpu_s: float | None = None
+    """Median over its runs of the processor seconds each cost (None: no run's cost was
+    stored)."""
 
     @property
     def robust(self) -> bool | None:
@@ -101,7 +106,9 @@ class DistinctFailure:
         """``robust 7/8``, ``knife-edge 3/8``, or ``unmeasured``."""
         if self.recurs is None or self.reruns is None:
             return "unmeasured"
-        return f"{'robust' if self.robust else 'knife-edge'} {self.recurs}/{self.reruns}"
+        erred = len(self.rerun_classes) - self.reruns
+        left_out = f" ({erred} erred)" if erred > 0 else ""
+        return f"{verdict(self.recurs, self.reruns)} {self.recurs}/{self.reruns}{left_out}"
 
     def as_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -127,13 +134,17 @@ def distinct_failures(store: Store) -> list[DistinctFailure]:
         )
     sentences = dict(classes())
     measured = store.robustness()
+    costs = store.costs()
     out = []
     for key, runs in by_class.items():
         for marks, part in split(runs):
             words = [w for w, _ in marks]
             description = sentences.get(key, key) + (f", {', '.join(words)}" if words else "")
             sub_key = "/".join([key, *[t for _, t in marks]])
-            out.append(_group(sub_key, key, description, part, total, measured))
+            group = _group(sub_key, key, description, part, total, measured)
+            cpu = [costs[i][1] for i in group.run_ids if i in costs]
+            group.median_cpu_s = statistics.median(cpu) if cpu else None
+            out.append(group)
     out.sort(key=lambda d: (-d.best_score, d.key))
     return out
 
@@ -384,6 +395,7 @@ FAILURE_COLUMNS = (
     "robust",
     "recurs",
     "reruns",
+    "median_cpu_s",
 )
 
 

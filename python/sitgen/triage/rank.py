@@ -38,7 +38,15 @@ RANK_COLUMNS = (
     "robustness",
 )
 
-TABLES = ("campaign", "situations", "runs", "events", "trajectories", "judgements")
+TABLES = (
+    "campaign",
+    "situations",
+    "runs",
+    "run_costs",
+    "events",
+    "trajectories",
+    "judgements",
+)
 
 
 def ranked_rows(
