@@ -294,3 +294,44 @@ def test_snd_turning_to_and_fro_beside_a_wall_is_an_oscillation() -> None:
     assert o["details"]["reversals"] > 100
     assert record.failure is not None
     assert record.failure["class"] == "oscillated_beside_wall"
+
+
+def test_a_planner_circling_a_waypoint_has_a_class_that_ranks_above_a_plain_timeout() -> None:
+    """An agent that orbits its first waypoint at about a metre until the time limit fails as
+    ``circled_waypoint``, with the orbit's radius and whole turns, and scores above a run
+    that merely timed out; a run that never came near has no such event."""
+    from tests.controllers.pycontrollers import Orbits
+
+    spec = {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 0, "peers_max": 0}}
+    situation = sitgen.generate_situation(spec, seed=1)
+    circled = sitgen.run(situation, controller=Orbits(), time_limit=120)
+    assert circled.outcome == "timeout" and circled.failure is not None
+    assert circled.failure["class"] == "circled_waypoint", circled.failure
+    features = circled.failure["features"]
+    assert features["turns"] >= 2 and 0.8 < features["radius_m"] < 1.6, features
+    assert "circling waypoint 1 at 1.2 m, 2 turns" in circled.events_text
+
+    class Stays:
+        def reset(self, info: dict[str, Any]) -> None:
+            pass
+
+        def act(self, obs: Any) -> tuple[float, float]:
+            return 0.0, 0.0
+
+    stopped = sitgen.run(situation, controller=Stays(), time_limit=120)
+    assert stopped.failure is not None and stopped.failure["class"] != "circled_waypoint"
+    assert not any(e["kind"] == "circling" for e in stopped.events)
+    assert circled.score > stopped.score
+
+
+def test_runs_that_behave_alike_are_one_failure_whatever_their_terrain() -> None:
+    """A hundred timeouts on four terrains are one distinct failure, not four: terrain tells
+    parts of a class apart only beside behaviour that differs."""
+    from sitgen.triage.failures import BROAD_RUNS, split
+
+    terrains = ("open_field", "rocky_desert", "caves", "urban")
+    runs = [
+        {"id": i, "score": 20.0, "terrain": terrains[i % 4], "seconds": 0.0, "start_s": 600.0}
+        for i in range(max(BROAD_RUNS, 100))
+    ]
+    assert [marks for marks, _ in split(runs)] == [[]]

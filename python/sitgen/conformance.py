@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -83,7 +84,7 @@ def check_controller(
         except ControllerError as e:
             checks.append(Check("peers", False, f"the situation's peers: {e}"))
             return checks
-        slowest, beyond, taken = 0.0, 0, 0
+        slowest, beyond, taken, spent = 0.0, 0, 0, 0.0
         for _ in range(steps):
             obs = core.observe_agent()
             began = time.perf_counter()
@@ -92,7 +93,8 @@ def check_controller(
             except ControllerError as e:
                 checks.append(Check("act", False, str(e)))
                 return checks
-            slowest = max(slowest, time.perf_counter() - began)
+            took = time.perf_counter() - began
+            slowest, spent = max(slowest, took), spent + took
             if not (math.isfinite(v) and math.isfinite(omega)):
                 checks.append(
                     Check("act", False, f"returned ({v}, {omega}) at {obs['time']:.1f} s")
@@ -123,6 +125,7 @@ def check_controller(
                 "act", True, f"{taken} finite commands, slowest reply {slowest * 1e3:.1f} ms{how}"
             )
         )
+        checks.append(Check("cost", True, campaign_cost(spent / max(taken, 1), dt_s=info["dt_s"])))
         checks.append(
             Check(
                 "limits",
@@ -143,6 +146,35 @@ def check_controller(
         table = {"name": controller, "params": dict(params or {})}
         checks.append(resets(table, situation, kept_after, steps))
     return checks
+
+
+DEFAULT_RUNS, DEFAULT_LIMIT_S = 500, 600.0
+"""The default campaign's size and time limit (the paper's, ``sitgen campaign``)."""
+SMALL_RUNS, SMALL_LIMIT_S = 50, 120.0
+"""A campaign a slow controller can afford first (docs/your-controller.md)."""
+COPIES_SHARE = 0.25
+"""What robustness copies add to a campaign's cost, at most (``make bench``)."""
+
+
+def campaign_cost(step_s: float, dt_s: float = 0.1, workers: int | None = None) -> str:
+    """What the default campaign costs on this machine for a controller that takes
+    ``step_s`` a decision (every ``dt_s`` simulated), said as a person plans by: an upper
+    bound (every run to its time limit, robustness copies included) on ``workers`` (default
+    every core), and the smaller campaign to start with."""
+    workers = workers or os.cpu_count() or 1
+
+    def hours(runs: int, limit_s: float) -> float:
+        return runs * (limit_s / dt_s) * step_s * (1 + COPIES_SHARE) / workers / 3600
+
+    def said(h: float) -> str:
+        return f"{h:.1f} h" if h >= 1 else f"{max(1.0, h * 60):.0f} min"
+
+    return (
+        f"{step_s * 1e3:.2g} ms a step: the default campaign ({DEFAULT_RUNS} runs of up to "
+        f"{DEFAULT_LIMIT_S:g} s) takes up to ~{said(hours(DEFAULT_RUNS, DEFAULT_LIMIT_S))} on "
+        f"{workers} workers; `--time-limit {SMALL_LIMIT_S:g} --n {SMALL_RUNS}` ~"
+        f"{said(hours(SMALL_RUNS, SMALL_LIMIT_S))}"
+    )
 
 
 def repeats(

@@ -177,3 +177,19 @@ class SaysItsRadius(Forward):
     def act(self, obs: Any) -> tuple[float, float]:
         radius, near = self.info["waypoint_radius_m"], self.info["monitor"]["unsafe_proximity_m"]
         raise ValueError(f"told {radius} m, near miss within {near} m")
+
+
+class Orbits(Forward):
+    """Drives to its first waypoint, then circles it at about a metre and never reaches it: a
+    planner that cannot turn tightly enough."""
+
+    def act(self, obs: Any) -> tuple[float, float]:
+        import math
+
+        x, y, heading = obs.pose
+        gx, gy = self.info["waypoints"][0]
+        distance, bearing = math.hypot(gx - x, gy - y), math.atan2(gy - y, gx - x)
+        # Tangent to the circle of 1 m about the waypoint, pulled back onto it.
+        wanted = bearing if distance > 1.5 else bearing + math.pi / 2 - 0.5 * (distance - 1.0)
+        turn = math.atan2(math.sin(wanted - heading), math.cos(wanted - heading))
+        return 0.3, max(-1.0, min(1.0, 2.0 * turn))

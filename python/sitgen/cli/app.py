@@ -372,7 +372,7 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
 
 def _clock(seconds: float) -> str:
     """``1:02:03`` or ``2:03``."""
-    whole = int(round(seconds))
+    whole = round(seconds)
     hours, rest = divmod(whole, 3600)
     return f"{hours}:{rest // 60:02d}:{rest % 60:02d}" if hours else f"{rest // 60}:{rest % 60:02d}"
 

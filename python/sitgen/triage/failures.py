@@ -260,7 +260,11 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
     x, names = _features(runs)
     step = max(1, math.ceil(len(runs) / MAX_CLUSTERED))
     sample = x[::step]
-    if len(np.unique(sample, axis=0)) < 2:
+    behaviour = [i for i, n in enumerate(names) if not n.startswith("terrain:")]
+    if len(np.unique(sample[:, behaviour], axis=0)) < 2:
+        # Runs that behave alike are one failure wherever they happened: terrain tells parts
+        # of a class apart only beside behaviour that differs (a hundred timeouts are not four
+        # failures because they happened on four terrains).
         return [([], runs)]
     distance = cdist(sample, sample)
     best: tuple[float, np.ndarray] | None = None

@@ -10,7 +10,8 @@
 //! Severity order, and why: contact with a robot (a stand-in for a person) first, the agent's
 //! own doing before being struck, unseen before seen (a perception gap is worse than a control
 //! one: nothing in the controller even tried); then contact with walls; near misses; to-and-fro
-//! turning; being stuck; and last a route merely not completed. `docs/failures.md` gives every
+//! turning; circling a waypoint it cannot reach (a cause a person can act on); being stuck;
+//! and last a route merely not completed. `docs/failures.md` gives every
 //! class with its rule and the run of the paper it stands for.
 //!
 //! Logs from before attribution (no `initiator`, `agent_mean_speed_m_s`) still classify: who
@@ -61,6 +62,8 @@ pub enum FailureClass {
     OscillatedBesideWall,
     /// The agent turned to and fro with nothing near it.
     OscillatedInOpen,
+    /// The agent circled or dithered near a waypoint (or the goal) without reaching it.
+    CircledWaypoint,
     /// The agent made no progress for a long while, without contact.
     StuckWithoutContact,
     /// The agent did not complete its route in the time limit.
@@ -69,7 +72,7 @@ pub enum FailureClass {
 
 impl FailureClass {
     /// Every class, most severe first.
-    pub const ALL: [FailureClass; 17] = [
+    pub const ALL: [FailureClass; 18] = [
         FailureClass::DroveIntoUnseenPeer,
         FailureClass::DroveIntoSeenPeer,
         FailureClass::CollidedWhileOscillating,
@@ -85,6 +88,7 @@ impl FailureClass {
         FailureClass::OscillatedBesidePeer,
         FailureClass::OscillatedBesideWall,
         FailureClass::OscillatedInOpen,
+        FailureClass::CircledWaypoint,
         FailureClass::StuckWithoutContact,
         FailureClass::RouteNotCompleted,
     ];
@@ -107,6 +111,7 @@ impl FailureClass {
             FailureClass::OscillatedBesidePeer => "oscillated_beside_peer",
             FailureClass::OscillatedBesideWall => "oscillated_beside_wall",
             FailureClass::OscillatedInOpen => "oscillated_in_open",
+            FailureClass::CircledWaypoint => "circled_waypoint",
             FailureClass::StuckWithoutContact => "stuck_without_contact",
             FailureClass::RouteNotCompleted => "route_not_completed",
         }
@@ -138,6 +143,7 @@ impl FailureClass {
             FailureClass::OscillatedBesidePeer => "oscillated beside a peer",
             FailureClass::OscillatedBesideWall => "oscillated beside a wall or doorpost",
             FailureClass::OscillatedInOpen => "oscillated with nothing near",
+            FailureClass::CircledWaypoint => "circled or dithered near a waypoint without reaching it",
             FailureClass::StuckWithoutContact => "stuck without contact",
             FailureClass::RouteNotCompleted => "route not completed in time",
         }
@@ -209,6 +215,7 @@ fn agent_class_of(e: &Event, events: &[Event], agent: u32) -> Option<FailureClas
             Some(v) if v.is_u64() => FailureClass::OscillatedBesidePeer,
             _ => FailureClass::OscillatedInOpen,
         }),
+        EventKind::Circling if e.robot == agent => Some(FailureClass::CircledWaypoint),
         EventKind::Loitering if e.robot == agent => Some(FailureClass::StuckWithoutContact),
         EventKind::Timeout => Some(FailureClass::RouteNotCompleted),
         _ => None,
@@ -299,6 +306,8 @@ pub fn classify(events: &[Event], agent: u32) -> Option<Failure> {
         "agent_mean_speed_m_s",
         "closing_speed_m_s",
         "nearest_m",
+        "turns",
+        "radius_m",
     ] {
         if let Some(v) = first.details.get(name).filter(|v| !v.is_null()) {
             features.insert(name.to_string(), v.clone());

@@ -3,7 +3,7 @@
 //!
 //! Each event kind is one file with the same doc template (what it detects, why it matters,
 //! parameters, an example log line): [`collision`], [`unsafe_proximity`], [`loitering`],
-//! [`oscillation`], [`waypoint_reached`], [`route_completed`], [`timeout`]. Events between
+//! [`oscillation`], [`circling`], [`waypoint_reached`], [`route_completed`], [`timeout`]. Events between
 //! the agent and another party carry [`attribution`]: who moved into whom, from which side,
 //! how fast, and whether the agent's laser had seen it. An event has a start, an end (for
 //! lasting ones), the robot, the other party and details. Events are kept for every robot; a
@@ -13,6 +13,7 @@
 //! as 0.3) in the log, so a log is byte-identical wherever it is produced.
 
 pub mod attribution;
+pub mod circling;
 pub mod collision;
 pub mod loitering;
 pub mod oscillation;
@@ -75,6 +76,15 @@ pub struct MonitorSpec {
     /// (0, 3600]. Default 5.
     #[serde(default = "default_oscillation_turn_rate_deg_s")]
     pub oscillation_turn_rate_deg_s: f64,
+    /// Distance from the agent's next waypoint within which, not reaching it, the agent is
+    /// `circling` it (for `loitering_window_s`, or one whole turn), metres, in (0, 100].
+    /// Default 2.
+    #[serde(default = "default_circling_radius_m")]
+    pub circling_radius_m: f64,
+}
+
+fn default_circling_radius_m() -> f64 {
+    2.0
 }
 
 fn default_attribution_window_s() -> f64 {
@@ -126,6 +136,7 @@ impl Default for MonitorSpec {
             oscillation_reversals: default_oscillation_reversals(),
             oscillation_distance_m: default_oscillation_distance_m(),
             oscillation_turn_rate_deg_s: default_oscillation_turn_rate_deg_s(),
+            circling_radius_m: default_circling_radius_m(),
         }
     }
 }
@@ -165,7 +176,8 @@ impl MonitorSpec {
             &p("oscillation_turn_rate_deg_s"),
             self.oscillation_turn_rate_deg_s,
             3600.0,
-        )
+        )?;
+        SpecError::check_positive(&p("circling_radius_m"), self.circling_radius_m, 100.0)
     }
 }
 
@@ -183,6 +195,8 @@ pub enum EventKind {
     Loitering,
     /// Turning to and fro while going nowhere, lasting.
     Oscillation,
+    /// Near the next waypoint without reaching it, lasting (the agent only).
+    Circling,
     /// A waypoint of the route reached, instant.
     WaypointReached,
     /// The whole route driven, instant.
@@ -193,11 +207,12 @@ pub enum EventKind {
 
 impl EventKind {
     /// Every kind, in log order of precedence.
-    pub const ALL: [EventKind; 7] = [
+    pub const ALL: [EventKind; 8] = [
         EventKind::Collision,
         EventKind::UnsafeProximity,
         EventKind::Loitering,
         EventKind::Oscillation,
+        EventKind::Circling,
         EventKind::WaypointReached,
         EventKind::RouteCompleted,
         EventKind::Timeout,
@@ -210,6 +225,7 @@ impl EventKind {
             EventKind::UnsafeProximity => "unsafe_proximity",
             EventKind::Loitering => "loitering",
             EventKind::Oscillation => "oscillation",
+            EventKind::Circling => "circling",
             EventKind::WaypointReached => "waypoint_reached",
             EventKind::RouteCompleted => "route_completed",
             EventKind::Timeout => "timeout",
@@ -302,6 +318,7 @@ impl Event {
             EventKind::UnsafeProximity => unsafe_proximity::describe(self, agent),
             EventKind::Loitering => loitering::describe(self),
             EventKind::Oscillation => oscillation::describe(self, agent),
+            EventKind::Circling => circling::describe(self),
             EventKind::WaypointReached => waypoint_reached::describe(self),
             EventKind::RouteCompleted => route_completed::describe(self),
             EventKind::Timeout => timeout::describe(self),
@@ -484,6 +501,7 @@ pub struct Monitor {
     unsafe_proximity: unsafe_proximity::Detector,
     loitering: loitering::Detector,
     oscillation: oscillation::Detector,
+    circling: circling::Detector,
     waypoints: waypoint_reached::Detector,
     attribution: attribution::Attribution,
 }
@@ -534,6 +552,12 @@ impl Monitor {
                 },
                 dt_s,
             ),
+            circling: circling::Detector::new(
+                agent,
+                spec.circling_radius_m,
+                spec.loitering_window_s,
+                dt_s,
+            ),
             waypoints: waypoint_reached::Detector::new(situation, spec.waypoint_radius_m),
             attribution: attribution::Attribution::new(
                 situation.robots.len(),
@@ -561,6 +585,8 @@ impl Monitor {
             .observe(frame, self.waypoints.done(), &mut self.log);
         self.oscillation
             .observe(frame, self.waypoints.done(), &mut self.log);
+        let next = self.waypoints.next(self.agent as usize);
+        self.circling.observe(frame, next, &mut self.log);
     }
 
     /// How many waypoints of its route robot `id` has reached, in order.
@@ -603,6 +629,7 @@ impl Monitor {
         self.unsafe_proximity.finish(step, &mut self.log);
         self.loitering.finish(step, &mut self.log);
         self.oscillation.finish(step, &mut self.log);
+        self.circling.finish(step, &mut self.log);
         if timed_out {
             timeout::record(
                 &mut self.log,

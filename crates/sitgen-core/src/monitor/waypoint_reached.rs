@@ -87,6 +87,19 @@ impl Detector {
         self.routes[i].remaining()
     }
 
+    /// Robot `i`'s next waypoint on its one pass: (its index, 1 = the first after the start;
+    /// where it is; whether it is the last), None once the pass is complete.
+    pub(super) fn next(&self, i: usize) -> Option<(usize, [f64; 2], bool)> {
+        if self.completed[i] {
+            return None;
+        }
+        let index = self.routes[i].next_index();
+        let of = self.waypoints[i].len();
+        (1..=of)
+            .contains(&index)
+            .then(|| (index, self.waypoints[i][index - 1], index == of))
+    }
+
     pub(super) fn observe(&mut self, frame: &Frame<'_>, log: &mut Log) {
         for r in frame.robots() {
             let i = r.id as usize;

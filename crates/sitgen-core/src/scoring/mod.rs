@@ -14,6 +14,7 @@
 //! | `unsafe_proximity` | 10 | 1 | the paper's own example |
 //! | `loitering` | 5 | 0.1 | a stuck robot is a mission fault and a hazard to others, milder than a near miss |
 //! | `oscillation` | 20 | 1 | to-and-fro turning is unpredictable motion beside whoever it is avoiding and a control fault (the paper's run 219); above a near miss of the same length, below any contact |
+//! | `circling` | 10 | 0.2 | orbiting or dithering beside a waypoint it cannot reach: a mission fault with a cause a person can act on, ranked above a plain timeout, below a near miss of the same length |
 //! | `timeout` | 20 | — | a failed mission, even without an accident |
 //! | `waypoint_reached`, `route_completed` | 0 | 0 | progress, not danger |
 //!
@@ -76,6 +77,7 @@ pub fn default_penalty(kind: EventKind) -> Penalty {
         EventKind::UnsafeProximity => (10.0, 1.0),
         EventKind::Loitering => (5.0, 0.1),
         EventKind::Oscillation => (20.0, 1.0),
+        EventKind::Circling => (10.0, 0.2),
         EventKind::Timeout => (20.0, 0.0),
         EventKind::WaypointReached | EventKind::RouteCompleted => (0.0, 0.0),
     };
