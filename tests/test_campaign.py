@@ -216,3 +216,28 @@ def test_the_ray_backend_gives_the_local_ranking(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert ranking(remote) == ranking(local)
     assert event_logs(remote) == event_logs(local)
+
+
+def test_a_campaign_stopped_early_writes_junit_and_a_summary_marked_partial(
+    tmp_path: Path,
+) -> None:
+    """CI that stops a campaign (Ctrl-C, a job's timeout's SIGINT) still gets its JUnit and
+    summary, and neither looks final: a failed ``partial`` case, ``partial`` in the summary,
+    and exit code 130."""
+    from xml.etree import ElementTree
+
+    spec = write_spec(tmp_path, SMALL.replace("n = 8", "n = 200"))
+    db, junit, summary = tmp_path / "c.db", tmp_path / "c.xml", tmp_path / "c.json"
+    proc = start_command(spec, db, "--workers", "1", "--junit", str(junit), "--summary",
+                         str(summary))  # fmt: skip
+    wait_for_runs(db, 3, proc)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 130, out
+    suite = ElementTree.parse(junit).getroot().find("testsuite")
+    assert suite is not None
+    partial = [c for c in suite.iter("testcase") if c.get("name") == "partial"]
+    assert len(partial) == 1 and partial[0].find("failure") is not None
+    figures = json.loads(summary.read_text())
+    assert figures["partial"] is True and figures["asked"] == 200
+    assert 3 <= figures["stored"] < 200

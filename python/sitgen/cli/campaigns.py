@@ -229,36 +229,59 @@ def campaign(
     )
     if not result.interrupted:
         _measure_robustness(db, reruns, workers)
+    partial = (result.total, total_n) if result.interrupted or result.total < total_n else None
     try:
         _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
     except typer.Exit as e:
-        if e.exit_code == EXIT_FAILED:
-            # Every run erred: CI still gets the report that says why.
-            _write_results(db, junit, summary_json)
+        if e.exit_code in (EXIT_FAILED, 130) and db.exists():
+            # Every run erred, or the campaign stopped early: CI still gets the results, and
+            # partial ones say so.
+            _write_results(db, junit, summary_json, partial)
         raise
     if shrink_top:
         _shrink_top(db, shrink_top, workers)
-    _write_results(db, junit, summary_json)
+    _write_results(db, junit, summary_json, partial)
 
 
-def _write_results(db: Path, junit: Path | None, summary_json: Path | None) -> None:
-    """The campaign's runs as JUnit XML and its summary as JSON, for CI."""
+def _write_results(
+    db: Path,
+    junit: Path | None,
+    summary_json: Path | None,
+    partial: tuple[int, int] | None = None,
+) -> None:
+    """The campaign's runs as JUnit XML and its summary as JSON, for CI; ``partial`` (runs
+    stored, runs asked) marks both as a campaign stopped early: a failed ``partial`` test case,
+    and ``partial``, ``stored`` and ``asked`` in the summary."""
     from sitgen.store import Store
     from sitgen.triage.failures import summary
-    from sitgen.triage.junit import campaign_cases, write_junit
+    from sitgen.triage.junit import Case, campaign_cases, write_junit
 
     if junit is None and summary_json is None:
         return
     with Store(db) as store:
         if junit is not None:
+            cases = campaign_cases(store)
+            if partial is not None:
+                text = (
+                    f"partial: {partial[0]} of {partial[1]} runs stored; the campaign stopped "
+                    "early: run the same command again to finish"
+                )
+                cases = [
+                    *cases,
+                    Case("partial", "sitgen.campaign", failure=("partial", text, text)),
+                ]
             junit.parent.mkdir(parents=True, exist_ok=True)
             with _writing(junit, "the JUnit file"), junit.open("w") as out:
-                write_junit(f"sitgen campaign {db.name}", campaign_cases(store), out)
+                write_junit(f"sitgen campaign {db.name}", cases, out)
             typer.echo(f"wrote {junit}")
         if summary_json is not None:
+            figures = summary(store)
+            figures["partial"] = partial is not None
+            if partial is not None:
+                figures["stored"], figures["asked"] = partial
             summary_json.parent.mkdir(parents=True, exist_ok=True)
             with _writing(summary_json, "the summary"):
-                summary_json.write_text(json.dumps(summary(store), indent=2) + "\n")
+                summary_json.write_text(json.dumps(figures, indent=2) + "\n")
             typer.echo(f"wrote {summary_json}")
 
 
