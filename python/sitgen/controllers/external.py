@@ -46,8 +46,9 @@ without changing what it computes, cannot change a verdict (docs/controller-prot
 "Deadlines")."""
 BACKSTOP_FACTOR = 10.0
 """A controller that waits (a sleep, a lock, input of its own) spends no processor time: the
-wall-clock backstop that ends it is this many step deadlines, and at least
-:data:`LEAST_BACKSTOP_S`."""
+wall-clock backstop that ends it is this many step deadlines, at most :data:`MOST_BACKSTOP_OVER_S`
+past the deadline and at least :data:`LEAST_BACKSTOP_S`."""
+MOST_BACKSTOP_OVER_S = 20.0
 LEAST_BACKSTOP_S = 2.0
 PAUSED_S = 0.25
 """A wait for a program's reply that wakes this much later than it asked was paused with sitgen
@@ -89,8 +90,10 @@ MACHINE_PREFIX = "the machine "
 
 
 def backstop_s(step_timeout_s: float) -> float:
-    """The wall-clock backstop of a call whose processor-time deadline is ``step_timeout_s``."""
-    return max(BACKSTOP_FACTOR * step_timeout_s, LEAST_BACKSTOP_S)
+    """The wall-clock backstop of a call whose processor-time deadline is ``step_timeout_s``
+    (10 s for the default 1 s, 30 s for a reset's 10 s)."""
+    generous = min(BACKSTOP_FACTOR * step_timeout_s, step_timeout_s + MOST_BACKSTOP_OVER_S)
+    return max(generous, LEAST_BACKSTOP_S)
 
 
 def computing_too_long(name: str, cpu_s: float, when: str) -> str:

@@ -87,8 +87,8 @@ pub struct ControllerSpec {
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub keep_alive: bool,
     /// A user controller only: the processor time it may spend deciding one step, seconds of
-    /// CPU, in (0, 600] (its process's, or in process its thread's; a wall-clock backstop of
-    /// ten times this, at least 10 s, ends one that waits instead: docs/controller-protocol.md,
+    /// CPU, in (0, 600] (its process's; a wall-clock backstop of ten times this, at most 20 s
+    /// more and at least 2 s, ends one that waits instead: docs/controller-protocol.md,
     /// "Deadlines"). Default 1 s (10 s for `navground:`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step_timeout_s: Option<f64>,
