@@ -103,7 +103,14 @@ fn pack_result(result: JobResult, (min_score, failures): PackRule, took: (f64, f
         let keep = rec.score.total >= min_score || (failures && rec.failure.is_some());
         let packed = keep.then(|| pack_trajectory(&rec.trajectory));
         let record = serde_json::to_string(&rec).expect("records serialize");
-        (s.to_json(), record, rec.events_jsonl(), packed, rec.robots, took)
+        (
+            s.to_json(),
+            record,
+            rec.events_jsonl(),
+            packed,
+            rec.robots,
+            took,
+        )
     })
 }
 

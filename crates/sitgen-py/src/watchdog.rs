@@ -91,7 +91,9 @@ fn schedstat_ns() -> (u64, u64) {
         let Ok(text) = std::fs::read_to_string(task.path().join("schedstat")) else {
             continue;
         };
-        let mut fields = text.split_whitespace().map(|f| f.parse::<u64>().unwrap_or(0));
+        let mut fields = text
+            .split_whitespace()
+            .map(|f| f.parse::<u64>().unwrap_or(0));
         running += fields.next().unwrap_or(0);
         queued += fields.next().unwrap_or(0);
     }
@@ -151,7 +153,10 @@ fn watch() {
             // SAFETY: pthread_kill on the thread that armed this call; a thread that has since
             // exited is not signalled (the call was disarmed when it returned).
             unsafe {
-                libc::pthread_kill(CALLER.load(Ordering::Acquire) as libc::pthread_t, libc::SIGALRM)
+                libc::pthread_kill(
+                    CALLER.load(Ordering::Acquire) as libc::pthread_t,
+                    libc::SIGALRM,
+                )
             };
         }
         let next = [alarm, kill]

@@ -27,8 +27,8 @@ it always has; what the class started and left behind dies with its run.
 Parameters: ``step_timeout_s`` (seconds of processor time, default :data:`STEP_TIMEOUT_S`,
 1 s) per ``act``, with a wall-clock backstop of ten times that (at most 20 s more, at least
 2 s: :func:`~sitgen.controllers.external.backstop_s`); reset and class loading get
-:data:`START_TIMEOUT_S` (10 s) of processor time and its backstop; in a runner the watchdog kills :data:`KILL_GRACE_S`
-past either limit.
+:data:`START_TIMEOUT_S` (10 s) of processor time and its backstop; in a runner the watchdog
+kills :data:`KILL_GRACE_S` past either limit.
 
 Source: sitgen's controller protocol (docs/controller-protocol.md), whose messages this path
 skips but whose meaning and error reasons it keeps.

@@ -143,7 +143,9 @@ impl FailureClass {
             FailureClass::OscillatedBesidePeer => "oscillated beside a peer",
             FailureClass::OscillatedBesideWall => "oscillated beside a wall or doorpost",
             FailureClass::OscillatedInOpen => "oscillated with nothing near",
-            FailureClass::CircledWaypoint => "circled or dithered near a waypoint without reaching it",
+            FailureClass::CircledWaypoint => {
+                "circled or dithered near a waypoint without reaching it"
+            }
             FailureClass::StuckWithoutContact => "stuck without contact",
             FailureClass::RouteNotCompleted => "route not completed in time",
         }

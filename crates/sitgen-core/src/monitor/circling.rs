@@ -86,8 +86,7 @@ impl Detector {
                 near.steps += 1;
                 near.closest_m = near.closest_m.min(d);
                 let turns = (near.wound.abs() / TAU).floor();
-                let circling =
-                    frame.step - near.since >= self.window_steps || turns >= 1.0;
+                let circling = frame.step - near.since >= self.window_steps || turns >= 1.0;
                 if circling && near.event.is_none() {
                     near.event = Some(log.open(
                         EventKind::Circling,
@@ -101,14 +100,17 @@ impl Detector {
                     log.set(event, "turns", json!(turns));
                     let mean = near.distance_sum / near.steps as f64;
                     log.set(event, "radius_m", json!((mean * 1e3).round() / 1e3));
-                    log.set(event, "closest_m", json!((near.closest_m * 1e3).round() / 1e3));
+                    log.set(
+                        event,
+                        "closest_m",
+                        json!((near.closest_m * 1e3).round() / 1e3),
+                    );
                 }
             }
             (here, _) => {
                 self.finish(frame.step, log);
-                self.near = here
-                    .filter(|&(_, d, _, _)| d <= self.radius_m)
-                    .map(|(waypoint, d, bearing, _)| Near {
+                self.near = here.filter(|&(_, d, _, _)| d <= self.radius_m).map(
+                    |(waypoint, d, bearing, _)| Near {
                         waypoint,
                         since: frame.step,
                         bearing,
@@ -116,7 +118,8 @@ impl Detector {
                         steps: 1,
                         closest_m: d,
                         ..Near::default()
-                    });
+                    },
+                );
             }
         }
     }
