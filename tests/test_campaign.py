@@ -92,7 +92,15 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
         assert out.returncode == 0, out.stderr
         assert sorted(p.name for p in (tmp_path / fmt).iterdir()) == sorted(
             f"{t}.{fmt}"
-            for t in ("campaign", "situations", "runs", "events", "trajectories", "judgements")
+            for t in (
+                "campaign",
+                "situations",
+                "runs",
+                "run_costs",
+                "events",
+                "trajectories",
+                "judgements",
+            )
         )
     import pyarrow.parquet as pq
 
@@ -241,3 +249,18 @@ def test_a_campaign_stopped_early_writes_junit_and_a_summary_marked_partial(
     figures = json.loads(summary.read_text())
     assert figures["partial"] is True and figures["asked"] == 200
     assert 3 <= figures["stored"] < 200
+
+
+def test_a_long_campaign_prints_progress_lines_when_not_on_a_terminal(tmp_path: Path) -> None:
+    """Off a terminal (a CI log) a campaign says how far it is, a line every few percent with
+    its rate and time left (here from the start: ``SITGEN_PROGRESS_AFTER_S=0``)."""
+    spec = write_spec(tmp_path, SMALL.replace("n = 8", "n = 40"))
+    done = subprocess.run(
+        [*sitgen_command(), "campaign", str(spec), "--db", str(tmp_path / "p.db"), "--reruns", "0"],
+        capture_output=True, text=True, timeout=300, check=False,
+        env={**os.environ, "SITGEN_PROGRESS_AFTER_S": "0"},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.startswith("campaign: ")]
+    assert len(lines) >= 10 and lines[-1].startswith("campaign: 40/40 runs (100%)"), lines
+    assert all("runs/s" in line for line in lines)

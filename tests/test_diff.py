@@ -238,3 +238,15 @@ def test_a_diff_over_fewer_situations_than_asked_does_not_pass(tmp_path: Path) -
             store.db.execute("UPDATE campaign SET n = 5 WHERE id = 1")
         report = diff_report(store)
     assert report.partial and report.failed and report.asked == 5
+
+
+def test_b_param_gives_one_side_a_parameter_as_a_json_table_does(tmp_path: Path) -> None:
+    """``--b-param max_speed=0.499995`` is the JSON table of the nudge test, written the short
+    way: the same report; ``--reruns`` below what the test can decide on is refused."""
+    code, by_flag = diff_json(tmp_path / "flag.db", "--b", "snd_follow", "--b-param",
+                              "max_speed=0.499995", "--reruns", "8")  # fmt: skip
+    assert code == 0
+    assert by_flag["b"] == json.loads(NUDGED)
+    too_few = run_cli("diff", "--b", "vo", "--reruns", "3", "--db", str(tmp_path / "few.db"))
+    assert too_few.returncode == 2 and "--reruns: 3 is not in [7, 1000]" in too_few.stderr
+    assert not (tmp_path / "few.db").exists()

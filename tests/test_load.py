@@ -13,6 +13,8 @@ import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import pytest
+
 from tests.conftest import ROOT, run_cli
 
 COSTS_3MS = "python:tests.controllers.careless:Costs3ms"
@@ -72,3 +74,46 @@ def test_a_slow_class_gets_the_same_verdicts_on_a_loaded_machine_as_alone(tmp_pa
     assert loaded == alone
     assert busy.returncode == idle.returncode == 0, busy.stdout + idle.stdout
     assert busy.stdout.splitlines()[0] == idle.stdout.splitlines()[0]
+
+
+def test_a_call_is_starved_only_when_it_was_runnable_but_mostly_not_run() -> None:
+    from sitgen.controllers.external import starved
+
+    assert starved(10.0, 1.0, 6.0)  # waiting on a run queue most of the time
+    assert not starved(10.0, 0.1, 0.2)  # asleep: waiting on something of its own
+    assert not starved(10.0, 8.0, 1.0)  # running: computing
+
+
+def test_a_run_the_machine_fails_is_made_again_and_never_stored_as_the_controllers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A run whose controller the machine starved past its backstop is made again; one the
+    machine fails every time is stored with a reason that says the machine failed it."""
+    import importlib
+
+    import sitgen
+    from sitgen.controllers.external import MACHINE_RETRIES, MachineError
+
+    running = importlib.import_module("sitgen.run")  # the module, not the function
+
+    situation = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=1)
+    made = running._run
+    tries: list[int] = []
+
+    def starved_twice(*args: object) -> sitgen.RunRecord:
+        tries.append(1)
+        if len(tries) <= 2:
+            raise MachineError("the machine starved controller `x` of processor time at 0.3 s")
+        return made(*args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(running, "_run", starved_twice)
+    record = sitgen.run(situation, controller="straight", time_limit=3)
+    assert record.outcome == "timeout" and len(tries) == 3
+
+    def always(*args: object) -> sitgen.RunRecord:
+        raise MachineError("the machine starved controller `x` of processor time at 0.3 s")
+
+    monkeypatch.setattr(running, "_run", always)
+    record = sitgen.run(situation, controller="straight", time_limit=3)
+    assert record.outcome == "error" and record.reason.startswith("the machine "), record.reason
+    assert f"(after {MACHINE_RETRIES + 1} tries)" in record.reason

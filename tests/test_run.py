@@ -152,7 +152,8 @@ def test_check_controller_passes_a_good_one_and_names_what_is_wrong() -> None:
         "check-controller", f"python:{ROOT / 'examples/controllers/cautious.py'}:Cautious"
     )
     assert good.returncode == 0, good.stdout + good.stderr
-    assert good.stdout.count("ok  ") == 6 and "ok   repeats" in good.stdout
+    assert good.stdout.count("ok  ") == 7 and "ok   repeats" in good.stdout
+    assert "ok   cost" in good.stdout and "the default campaign (500 runs" in good.stdout
     bad = run_cli("check-controller", f"{MISBEHAVING} garbage")
     assert bad.returncode == 1
     assert "FAIL act" in bad.stdout and "not JSON: 'hello'" in bad.stdout

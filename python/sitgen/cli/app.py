@@ -304,8 +304,11 @@ class OnProgress(Protocol):
     def __call__(self, done: int, total: int, status: str = "") -> None: ...
 
 
+PROGRESS_AFTER_S = 10.0
+"""Off a terminal, no progress line for work done sooner than this (``SITGEN_PROGRESS_AFTER_S``
+sets it): a quick command's output stays its own..."""
 PROGRESS_STEP = 0.05
-"""Off a terminal, a progress line each time this share of the work is done..."""
+"""...then a line each time this share of the work is done..."""
 PROGRESS_EVERY_S = 60.0
 """...or this many seconds have passed since the last, whichever comes first."""
 
@@ -313,9 +316,9 @@ PROGRESS_EVERY_S = 60.0
 @contextmanager
 def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
     """A progress bar on a terminal (or with SITGEN_PROGRESS set); elsewhere (a CI log, a
-    pipe, nohup) a line to stderr every few percent and at least every minute: work done,
-    rate, time left and what was found so far. Yields the ``on_progress(done, total,
-    status)`` to call."""
+    pipe, nohup), once the work has taken :data:`PROGRESS_AFTER_S`, a line to stderr every few
+    percent and at least every minute: work done, rate, time left and what was found so far.
+    Yields the ``on_progress(done, total, status)`` to call."""
 
     from rich.progress import (
         BarColumn,
@@ -328,6 +331,7 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
 
     started = time.perf_counter()
     bar = sys.stderr.isatty() or "SITGEN_PROGRESS" in os.environ
+    quiet_s = float(os.environ.get("SITGEN_PROGRESS_AFTER_S", PROGRESS_AFTER_S))
     with Progress(
         TextColumn(f"[bold]{label}"),
         BarColumn(),
@@ -353,8 +357,8 @@ def _progress(label: str, total: int, unit: str) -> Iterator[OnProgress]:
                 task, completed=done, total=total, rate=f"{rate:.1f} {unit}/s", status=status
             )
             share = done / total if total else 1.0
-            if bar or not (share >= said[0] + PROGRESS_STEP or now - said[1] >= PROGRESS_EVERY_S
-                           or done == total):  # fmt: skip
+            due = share >= said[0] + PROGRESS_STEP or now - said[1] >= PROGRESS_EVERY_S
+            if bar or elapsed < quiet_s or not (due or done == total):
                 return
             said[:] = [share, now]
             left = (total - done) / rate if rate > 0 else None

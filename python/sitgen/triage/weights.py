@@ -72,6 +72,12 @@ class Weights:
     failure_classes: dict[str, float] = field(default_factory=dict)
     score_peers: bool = False
 
+    def __post_init__(self) -> None:
+        # Kinds a table does not name keep the core's default penalty, as in a run spec (a
+        # table written before a kind existed still scores it as the core does).
+        defaults = {k: (s, p) for k, s, p in _core.default_penalties()}
+        object.__setattr__(self, "penalties", {**defaults, **self.penalties})
+
     @classmethod
     def default(cls) -> Weights:
         return cls({k: (s, p) for k, s, p in _core.default_penalties()})

@@ -2,8 +2,10 @@
 //!
 //! **What it detects.** The agent near the next waypoint of its route (the goal, if that is
 //! the last) without reaching it: within `circling_radius_m` of it (and outside
-//! `waypoint_radius_m`, or it would have reached it) either for `loitering_window_s` in all or
-//! for one whole turn around it. The event starts when the agent came that near and lasts until
+//! `waypoint_radius_m`, or it would have reached it) for one whole turn around it, or for
+//! `loitering_window_s` while moving about over at least half `circling_radius_m` there
+//! (dithering: the box of its positions there has that diagonal; a robot standing near it,
+//! however it jitters or turns on the spot, is stuck, `loitering`, not circling). The event starts when the agent came that near and lasts until
 //! it reaches the waypoint or leaves. Details: `waypoint` (its index, 1 = the first after the
 //! start), `goal` (whether it is the route's last), `turns` (whole turns the agent made around
 //! it, either way), `radius_m` (its mean distance from it while near), `closest_m`.
@@ -41,6 +43,9 @@ struct Near {
     distance_sum: f64,
     steps: u64,
     closest_m: f64,
+    /// The box of its positions while near: x and y, least and most.
+    low: (f64, f64),
+    high: (f64, f64),
     /// The open event, once it is one.
     event: Option<usize>,
 }
@@ -85,8 +90,13 @@ impl Detector {
                 near.distance_sum += d;
                 near.steps += 1;
                 near.closest_m = near.closest_m.min(d);
+                near.low = (near.low.0.min(pose.x_m), near.low.1.min(pose.y_m));
+                near.high = (near.high.0.max(pose.x_m), near.high.1.max(pose.y_m));
+                let (w, h) = (near.high.0 - near.low.0, near.high.1 - near.low.1);
                 let turns = (near.wound.abs() / TAU).floor();
-                let circling = frame.step - near.since >= self.window_steps || turns >= 1.0;
+                let dithering = frame.step - near.since >= self.window_steps
+                    && (w * w + h * h).sqrt() >= 0.5 * self.radius_m;
+                let circling = dithering || turns >= 1.0;
                 if circling && near.event.is_none() {
                     near.event = Some(log.open(
                         EventKind::Circling,
@@ -117,6 +127,8 @@ impl Detector {
                         distance_sum: d,
                         steps: 1,
                         closest_m: d,
+                        low: (pose.x_m, pose.y_m),
+                        high: (pose.x_m, pose.y_m),
                         ..Near::default()
                     },
                 );
