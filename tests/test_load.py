@@ -104,7 +104,8 @@ def test_a_run_the_machine_fails_is_made_again_and_never_stored_as_the_controlle
         tries.append(1)
         if len(tries) <= 2:
             raise MachineError("the machine starved controller `x` of processor time at 0.3 s")
-        return made(*args)  # type: ignore[arg-type]
+        record: sitgen.RunRecord = made(*args)
+        return record
 
     monkeypatch.setattr(running, "_run", starved_twice)
     record = sitgen.run(situation, controller="straight", time_limit=3)
