@@ -50,6 +50,9 @@ wall-clock backstop that ends it is this many step deadlines, at most :data:`MOS
 past the deadline and at least :data:`LEAST_BACKSTOP_S`."""
 MOST_BACKSTOP_OVER_S = 20.0
 LEAST_BACKSTOP_S = 2.0
+CPU_COUNTED_AFTER_S = 0.005
+"""A reply not in this long after the observation (or a tenth of the step timeout, if less)
+has the program's processor time read, to count its deadline from."""
 PAUSED_S = 0.25
 """A wait for a program's reply that wakes this much later than it asked was paused with sitgen
 (SIGSTOP, a suspended machine): the pause is added to the backstop, which measures the
@@ -515,6 +518,10 @@ class ProcessController(UserController):
             self._buffer += chunk or b""
         backstop = start + backstop_s(timeout_s)
         look_at, cpu_start = start + timeout_s, None
+        # Its processor time is read only for a reply not in after a short wait (most come
+        # sooner, and the read costs more than a quick step); what it used before the read is
+        # at most that wait, which the deadline then grants it over.
+        counted_from = start + min(CPU_COUNTED_AFTER_S, timeout_s / 10)
         window: tuple[float, float, float] | None = None
         while b"\n" not in self._buffer:
             if len(self._buffer) > MAX_REPLY_BYTES:
@@ -522,10 +529,10 @@ class ProcessController(UserController):
                     f"controller {self.name} sent a malformed reply {when}: a line longer than "
                     f"{MAX_REPLY_BYTES} bytes"
                 )
-            if cpu_start is None:  # what it used before it was waited for is next to nothing
-                cpu_start = cpu_seconds([proc.pid])
             now = time.monotonic()
-            if now >= look_at:
+            if cpu_start is None and now >= counted_from:
+                cpu_start = cpu_seconds([proc.pid])
+            if now >= look_at and cpu_start is not None:
                 if cpu_seconds([proc.pid]) - cpu_start >= timeout_s:
                     raise ControllerError(
                         self._stuck("", when) or computing_too_long(self.name, timeout_s, when)
@@ -535,7 +542,7 @@ class ProcessController(UserController):
                 look_at = now + CPU_LOOK_S
             if now >= backstop:
                 raise self._overdue(backstop_s(timeout_s), window, when)
-            asked = min(look_at, backstop)
+            asked = min(look_at, backstop) if cpu_start is not None else counted_from
             ready = self._selector.select(max(0.0, asked - now))
             late = time.monotonic() - asked
             if late > PAUSED_S:
