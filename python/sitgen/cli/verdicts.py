@@ -202,6 +202,8 @@ def diff_command(
     way. Exits 1 when B has robust new failures, or fails to run where A ran, or nothing could be
     compared. Ctrl-C stops; the same command resumes."""
     from sitgen.generation.diff import (
+        FIXED,
+        NEW,
         DiffPlan,
         check_copies,
         diff_report,
@@ -263,14 +265,21 @@ def diff_command(
         sys.stdout.write("\n")
     else:
         table = Table(title=f"{db}: distinct failures, A against B")
-        for column in ("class", "verdict", "new in B", "fixed", "unchanged", "not robust"):
-            table.add_column(column, justify="left" if column in ("class", "verdict") else "right")
-        for c in report.classes:
+        columns = ("class", "verdict", "B broke (copies B vs A)", "B fixed (copies A vs B)",
+                   "unchanged", "not robust")  # fmt: skip
+        for column in columns:
+            table.add_column(column, justify="right" if column in columns[4:] else "left")
+        broke = [c for c in report.classes if c.new]
+        fixed = [c for c in report.classes if c.fixed and not c.new]
+        rest = [c for c in report.classes if not c.new and not c.fixed]
+        for c in [*broke, *fixed, *rest]:
+            new = f"{len(c.new)}: {c.recurrence(NEW)}" if c.new else ""
+            gone = f"{len(c.fixed)}: {c.recurrence(FIXED)}" if c.fixed else ""
             table.add_row(
-                c.failure_class, c.verdict, str(len(c.new)), str(len(c.fixed)),
-                str(len(c.unchanged)), str(len(c.not_robust)),
+                c.failure_class, c.verdict, new, gone, str(len(c.unchanged)),
+                str(len(c.not_robust)),
             )  # fmt: skip
-        Console(width=160).print(table)
+        Console(width=200).print(table)
         for line in summary_lines(report):
             typer.echo(line)
     if result.interrupted:

@@ -415,6 +415,17 @@ class ClassDiff:
         d["class"] = d.pop("failure_class")
         return d
 
+    def recurrence(self, verdict: str) -> str:
+        """How often B's (for ``new in B``) or A's (``fixed in B``) copies showed it, against
+        the other side's, on the situations with that verdict: ``8/8 vs 0/8, 7/8 vs 1/8``."""
+        shown = []
+        for p in self.pairs:
+            if p.verdict != verdict or p.a_recurs is None or p.b_recurs is None:
+                continue
+            ours, theirs = (p.b_recurs, p.a_recurs) if verdict == NEW else (p.a_recurs, p.b_recurs)
+            shown.append(f"{ours}/{p.copies} vs {theirs}/{p.copies}")
+        return ", ".join(shown[:3]) + (", …" if len(shown) > 3 else "")
+
 
 @dataclass
 class DiffReport:
