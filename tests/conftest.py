@@ -3,6 +3,7 @@ headless Chromium (Debian's, driven by Playwright; nothing downloads a browser).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -160,6 +161,23 @@ def two_robots(agent: tuple[float, float, float], peer: tuple[float, float, floa
     ]
     empty = np.zeros((200, 200), dtype=bool)
     return Situation(_core.shrunk_situation(base.to_json(), empty, 0.1, json.dumps(robots)))
+
+
+@contextlib.contextmanager
+def spinning(count: int, sessions: bool = True) -> Iterator[None]:
+    """``count`` processes that only spin, for the block: a loaded machine. ``sessions``: each
+    in a session of its own, as other jobs of a loaded machine are (the scheduler shares a
+    core out by session, so a process of sitgen's then gets 1/(count per core + 1) of one)."""
+    loops = [
+        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=sessions)
+        for _ in range(count)
+    ]
+    try:
+        yield
+    finally:
+        for loop in loops:
+            loop.kill()
+            loop.wait()
 
 
 def alive(pid: int) -> bool:

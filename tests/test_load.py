@@ -5,36 +5,15 @@ controller-protocol.md, "Deadlines")."""
 
 from __future__ import annotations
 
-import contextlib
 import os
 import sqlite3
-import subprocess
-import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli, spinning
 
 COSTS_3MS = "python:tests.controllers.careless:Costs3ms"
-
-
-@contextlib.contextmanager
-def _loaded() -> Iterator[None]:
-    """Four loops a core, each in a session of its own (as other jobs of a loaded machine
-    are: the scheduler shares a core out by session): a process of sitgen's gets a fifth of a
-    core or less, and a step of 3 ms of processor time takes several times that of wall time."""
-    burners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
-        for _ in range(4 * (os.cpu_count() or 1))
-    ]
-    try:
-        yield
-    finally:
-        for burner in burners:
-            burner.kill()
-            burner.wait()
 
 
 def _campaign(folder: Path, name: str) -> tuple[list[tuple[object, ...]], list[tuple[object, ...]]]:
@@ -62,7 +41,9 @@ def _campaign(folder: Path, name: str) -> tuple[list[tuple[object, ...]], list[t
 def test_a_slow_class_gets_the_same_verdicts_on_a_loaded_machine_as_alone(tmp_path: Path) -> None:
     alone = _campaign(tmp_path, "alone.db")
     assert all(outcome != "error" for _, outcome, _, _ in alone[0]), alone[0]
-    with _loaded():
+    # Four loops a core, each in a session of its own: a process of sitgen's gets a fifth of
+    # a core or less, and a step of 3 ms of processor time takes several times that of wall time.
+    with spinning(4 * (os.cpu_count() or 1)):
         loaded = _campaign(tmp_path, "loaded.db")
         done = run_cli("export", str(tmp_path / "alone.db"), "--run", "0", "--format",
                        "situation", "-o", str(tmp_path / "repro"), cwd=ROOT)  # fmt: skip

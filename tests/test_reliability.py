@@ -35,7 +35,7 @@ import sitgen
 from sitgen.controllers.proc_tasks import protocol_thread, wait_idle
 from sitgen.execution.jobs import build_job, campaign_from_data, parse_campaign
 from sitgen.store import Store
-from tests.conftest import ROOT, Result, alive, run_cli, sitgen_command
+from tests.conftest import ROOT, Result, alive, run_cli, sitgen_command, spinning
 
 MISBEHAVING = f"cmd:{sys.executable} {ROOT / 'tests' / 'controllers' / 'misbehaving.py'}"
 PY = "python:tests.controllers.pycontrollers"
@@ -200,19 +200,11 @@ def test_a_class_that_loops_is_told_computing_even_when_starved_of_a_core(
     machine are: the scheduler shares a core out by session), the class that loops gets under
     a fifth of a core, but is runnable all the while: computing, not waiting (its run-queue
     time counts)."""
-    burners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
-        for _ in range(4 * (os.cpu_count() or 1))
-    ]
-    try:
+    with spinning(4 * (os.cpu_count() or 1)):
         hangs = sitgen.run(situation, controller=f"{PY}:Hangs", time_limit=10, step_timeout_s=0.3)
         sleeps = sitgen.run(
             situation, controller=f"{PY}:Swallows", time_limit=10, step_timeout_s=0.3
         )
-    finally:
-        for burner in burners:
-            burner.kill()
-            burner.wait()
     assert "it is computing, not waiting for input" in hangs.reason, hangs.reason
     assert "it is waiting, not computing" in sleeps.reason, sleeps.reason
 

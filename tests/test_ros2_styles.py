@@ -16,7 +16,6 @@ import json
 import os
 import shutil
 import sqlite3
-import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,7 +28,7 @@ from sitgen.controllers.ros2.bridge import ros2_available
 from sitgen.run import run
 from sitgen.world.config import preset_spec
 from sitgen.world.situation import generate_situation
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli, spinning
 
 UNAVAILABLE = ros2_available()
 pytestmark = pytest.mark.skipif(UNAVAILABLE is not None, reason=str(UNAVAILABLE))
@@ -47,16 +46,8 @@ def busy_machine() -> Iterator[None]:
     """Every core kept busy by a process that only spins, for the module's tests; in the
     parallel suite (pytest-xdist) the other test processes keep it busy already."""
     alone = "PYTEST_XDIST_WORKER" not in os.environ
-    burners = [
-        subprocess.Popen([sys.executable, "-c", "while True: pass"])
-        for _ in range((os.cpu_count() or 2) if alone else 0)
-    ]
-    try:
+    with spinning((os.cpu_count() or 2) if alone else 0, sessions=False):
         yield
-    finally:
-        for burner in burners:
-            burner.kill()
-            burner.wait()
 
 
 def stored(db: Path) -> list[tuple[Any, ...]]:
