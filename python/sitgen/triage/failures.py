@@ -5,8 +5,9 @@ A run's failure class is computed in the core from its scored events (``docs/fai
 Where one class is broad (at least ``BROAD_RUNS`` runs), it is split by behaviour features of
 its deciding events with agglomerative clustering (SciPy's Ward linkage: deterministic, no
 random start), and each part is named in words by what sets it apart: the side the other
-party came from, the terrain, and whether its failures lasted long or short, were fast or slow
-— so a split always reads as a sentence, never as "cluster 3".
+party came from, whether its failures lasted long or short, were fast or slow, and the terrain
+where most of a part happened (terrain describes a part, never makes one) — so a split always
+reads as a sentence, never as "cluster 3".
 """
 
 from __future__ import annotations
@@ -225,8 +226,8 @@ MIN_SEPARATION = 1.0
 
 def _features(runs: Sequence[dict[str, Any]]) -> tuple[np.ndarray, list[str]]:
     """Behaviour features on fixed, meaningful scales (so a spread of a few tenths of a second
-    never looks like two groups): side one-hot, log duration, agent speed per 0.2 m/s, terrain
-    one-hot."""
+    never looks like two groups): side one-hot, log duration, agent speed per 0.2 m/s; and the
+    terrain one-hot, which describes a part but never finds one (:func:`split`)."""
     names: list[str] = []
     cols: list[list[float]] = []
     sides = [r.get("bearing") for r in runs]
@@ -257,14 +258,14 @@ def split(runs: list[dict[str, Any]]) -> list[tuple[list[Mark], list[dict[str, A
         return [([], runs)]
     from scipy.spatial.distance import cdist
 
-    x, names = _features(runs)
+    features, names = _features(runs)
+    # Parts are found by behaviour alone (side, duration, speed): runs that behave alike are
+    # one failure wherever they happened (a hundred timeouts are not four failures because
+    # they happened on four terrains). Terrain may still describe a part it is found in.
+    x = features[:, [i for i, n in enumerate(names) if not n.startswith("terrain:")]]
     step = max(1, math.ceil(len(runs) / MAX_CLUSTERED))
     sample = x[::step]
-    behaviour = [i for i, n in enumerate(names) if not n.startswith("terrain:")]
-    if len(np.unique(sample[:, behaviour], axis=0)) < 2:
-        # Runs that behave alike are one failure wherever they happened: terrain tells parts
-        # of a class apart only beside behaviour that differs (a hundred timeouts are not four
-        # failures because they happened on four terrains).
+    if len(np.unique(sample, axis=0)) < 2:
         return [([], runs)]
     distance = cdist(sample, sample)
     best: tuple[float, np.ndarray] | None = None
