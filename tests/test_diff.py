@@ -226,7 +226,7 @@ def test_an_a_that_cannot_run_somewhere_is_said_per_side_and_fails_the_gate(
 def test_a_diff_over_fewer_situations_than_asked_does_not_pass(tmp_path: Path) -> None:
     """A store whose diff was asked for more situations than it evaluated (stopped early) reads
     as partial and failed, whatever its differences."""
-    from sitgen.generation.diff import diff_report
+    from sitgen.generation.diff_report import diff_report
     from sitgen.store import Store
 
     db = tmp_path / "d.db"

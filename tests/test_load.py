@@ -58,7 +58,7 @@ def test_a_slow_class_gets_the_same_verdicts_on_a_loaded_machine_as_alone(tmp_pa
 
 
 def test_a_call_is_starved_only_when_it_was_runnable_but_mostly_not_run() -> None:
-    from sitgen.controllers.external import starved
+    from sitgen.controllers.deadlines import starved
 
     assert starved(10.0, 1.0, 6.0)  # waiting on a run queue most of the time
     assert not starved(10.0, 0.1, 0.2)  # asleep: waiting on something of its own
@@ -73,7 +73,7 @@ def test_a_run_the_machine_fails_is_made_again_and_never_stored_as_the_controlle
     import importlib
 
     import sitgen
-    from sitgen.controllers.external import MACHINE_RETRIES, MachineError
+    from sitgen.controllers.deadlines import MACHINE_RETRIES, MachineError
 
     running = importlib.import_module("sitgen.run")  # the module, not the function
 

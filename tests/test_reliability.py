@@ -1100,7 +1100,7 @@ def test_an_output_file_that_is_the_store_or_links_to_it_is_refused_and_the_stor
 def test_a_ros2_controller_s_own_timeouts_are_bounded(params: dict[str, float]) -> None:
     """Every wait of a run has a documented maximum: a node's answer timeout and the answers it
     may miss are refused, naming the parameter, out of their ranges."""
-    from sitgen.controllers.external import ControllerError
+    from sitgen.controllers.deadlines import ControllerError
     from sitgen.controllers.ros2.controller import Ros2Controller
 
     with pytest.raises(ControllerError, match=rf"params\.{next(iter(params))}: .* is not"):

@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 import sitgen
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.ros2 import bridge as ros2_bridge
 from sitgen.controllers.ros2 import native as ros2_native
 from sitgen.controllers.ros2 import tf as ros2_tf

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from sitgen import _core
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
 from sitgen.controllers.ros2.controller import stop_kept_nodes
 from sitgen.controllers.ros2.native import native_problem

@@ -23,11 +23,7 @@ import numpy.typing as npt
 
 from sitgen import _core
 from sitgen.controllers import sandbox
-from sitgen.controllers.external import (
-    MACHINE_RETRIES,
-    ControllerError,
-    MachineError,
-)
+from sitgen.controllers.deadlines import MACHINE_RETRIES, ControllerError, MachineError
 from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller

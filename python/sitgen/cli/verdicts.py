@@ -206,13 +206,12 @@ def diff_command(
         NEW,
         DiffPlan,
         check_copies,
-        diff_report,
         parse_controller,
         run_diff,
-        summary_lines,
         with_params,
     )
-    from sitgen.generation.diff import write_junit as write_diff_junit
+    from sitgen.generation.diff_report import diff_report, summary_lines
+    from sitgen.generation.diff_report import write_junit as write_diff_junit
     from sitgen.store import Store
 
     if format not in ("table", "json"):

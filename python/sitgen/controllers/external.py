@@ -26,30 +26,29 @@ import shlex
 import shutil
 import signal
 import subprocess
-import sys
 import time
-import uuid
 from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
 from sitgen import _core
+from sitgen.controllers.deadlines import (
+    STEP_TIMEOUT_S,
+    WAITING_ON_ITS_OWN,
+    WAITING_ON_OUTPUT,
+    ControllerError,
+    backstop_s,
+    computing_too_long,
+    starved,
+    starved_reason,
+    waiting_too_long,
+)
 from sitgen.controllers.host import MAX_LINE_BYTES
+from sitgen.controllers.marks import die_with_parent_prefix, kill_marked, marked_env, marked_pids
 from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, schedstat_seconds
 from sitgen.world.sim import Observation
 
-STEP_TIMEOUT_S = 1.0
-"""Default processor time (seconds of CPU) a controller may spend answering one observation:
-its step deadline counts its own work, so that a loaded machine, which slows a controller down
-without changing what it computes, cannot change a verdict (docs/controller-protocol.md,
-"Deadlines")."""
-BACKSTOP_FACTOR = 10.0
-"""A controller that waits (a sleep, a lock, input of its own) spends no processor time: the
-wall-clock backstop that ends it is this many step deadlines, at most :data:`MOST_BACKSTOP_OVER_S`
-past the deadline and at least :data:`LEAST_BACKSTOP_S`."""
-MOST_BACKSTOP_OVER_S = 20.0
-LEAST_BACKSTOP_S = 2.0
 CPU_COUNTED_AFTER_S = 0.005
 """A reply not in this long after the observation (or a tenth of the step timeout, if less)
 has the program's processor time read, to count its deadline from."""
@@ -72,67 +71,6 @@ reaches its backstop."""
 STDERR_TAIL_BYTES = 4096
 """What is kept of a controller program's stderr: its tail, read as it comes, so that the
 last line can be quoted when it dies however much it writes."""
-
-
-class ControllerError(Exception):
-    """A controller failed: the message is one line saying how and when."""
-
-
-class MachineError(ControllerError):
-    """The machine, not the controller, failed the run: a controller starved of a core past
-    its backstop, a worker lost. The run is made again; it is never stored as the controller's
-    failure (``sitgen.run`` gives up after :data:`MACHINE_RETRIES` and says so)."""
-
-
-MACHINE_RETRIES = 3
-"""How often a run the machine failed is made again before its error is stored (with a reason
-that says the machine failed it, which triage does not count as the controller's)."""
-
-MACHINE_PREFIX = "the machine "
-"""How the stored reason of a run the machine failed begins (triage leaves such runs out)."""
-
-
-def backstop_s(step_timeout_s: float) -> float:
-    """The wall-clock backstop of a call whose processor-time deadline is ``step_timeout_s``
-    (10 s for the default 1 s, 30 s for a reset's 10 s)."""
-    generous = min(BACKSTOP_FACTOR * step_timeout_s, step_timeout_s + MOST_BACKSTOP_OVER_S)
-    return max(generous, LEAST_BACKSTOP_S)
-
-
-def computing_too_long(name: str, cpu_s: float, when: str) -> str:
-    """Why a controller that used up its processor time failed (the same words on every path)."""
-    return (
-        f"controller {name} did not reply within {cpu_s:g} s of processor time {when}; it is "
-        "computing, not waiting for input: a loop that does not end?"
-    )
-
-
-def waiting_too_long(name: str, wall_s: float, when: str, hint: str) -> str:
-    """Why a controller that waited past its wall-clock backstop failed; ``hint``: on what."""
-    return f"controller {name} did not reply within {wall_s:g} s {when}; it is waiting, not {hint}"
-
-
-WAITING_ON_ITS_OWN = "computing: on a sleep, a lock or input of its own?"
-"""What a class that waits past its backstop waits on (a program's is :data:`WAITING_ON_OUTPUT`)."""
-WAITING_ON_OUTPUT = (
-    "computing: a reply left in its output buffer? (flush after every reply: "
-    "docs/controller-protocol.md)"
-)
-
-
-def starved(wall_s: float, running_s: float, queued_s: float) -> bool:
-    """Whether a call that has not returned after ``wall_s`` was kept from a core by the
-    machine: runnable for a good share of the time (:data:`BUSY_SHARE`), and more of it waiting
-    on a run queue than running."""
-    return (running_s + queued_s) >= BUSY_SHARE * wall_s and queued_s >= running_s
-
-
-def starved_reason(name: str, wall_s: float, when: str) -> MachineError:
-    """The machine's error for a controller starved of a core past its backstop."""
-    return MachineError(
-        f"{MACHINE_PREFIX}starved controller {name} of processor time {when}: runnable but not "
-        f"run for most of {wall_s:g} s (a loaded or paused machine); not the controller's failure"
-    )
 
 
 @runtime_checkable
@@ -241,92 +179,6 @@ def pin_to_one_core(cpu: int | None = None) -> set[int] | None:
     chosen = cpu if cpu in allowed else current_cpu()
     os.sched_setaffinity(0, {chosen if chosen in allowed else min(allowed)})
     return allowed
-
-
-MARK = "SITGEN_CONTROLLER_MARK"
-"""The environment variable each controller process sitgen starts carries, as
-``PROCESS.CONTROLLER``: every process it starts inherits it, even one that leaves its process
-group (``setsid``) or whose parent exits, so :func:`kill_marked` finds them all when the run
-ends, and this process's reaper (:func:`_reaper`) finds them when this process dies, however
-it dies (even SIGKILL, which no handler sees)."""
-
-_PROCESS: dict[str, Any] = {}
-"""This process's part of the mark (``pid``, ``mark``) and its reaper, made the first time a
-controller starts here (again in a forked child, whose pid differs)."""
-
-
-def marked_env(env: Mapping[str, str] | None = None) -> tuple[dict[str, str], str]:
-    """``env`` (default: this process's) with a fresh :data:`MARK`, and the mark; starts this
-    process's reaper the first time."""
-    if _PROCESS.get("pid") != os.getpid():
-        mark = f"{os.getpid()}-{uuid.uuid4().hex}"
-        _PROCESS.update(pid=os.getpid(), mark=mark, reaper=_reaper(mark))
-    mark = f"{_PROCESS['mark']}.{uuid.uuid4().hex}"
-    return {**(os.environ if env is None else env), MARK: mark}, mark
-
-
-def _reaper(process_mark: str) -> subprocess.Popen[bytes]:
-    """A small process that waits until this one is gone (a pidfd of it; where there is none,
-    its stdin, a pipe this process holds, reaching end of file) and then kills every process a
-    controller of this one started: what a run's own end would have killed, had it come."""
-    env = {k: v for k, v in os.environ.items() if k != MARK}
-    # It watches this process itself (a pidfd), not only its pipe: a fork of a controller's
-    # (a double-forked daemon) holds the pipe open and would keep the reaper waiting.
-    code = (
-        "import os, select, sys\n"
-        "try:\n"
-        f"    select.select([os.pidfd_open({os.getpid()})], [], [])\n"
-        "except ProcessLookupError:\n"
-        "    pass\n"
-        "except (OSError, AttributeError):\n"
-        "    sys.stdin.buffer.read()\n"
-        "from sitgen.controllers.external import kill_marked\n"
-        f"kill_marked({process_mark + '.'!r}, whole=False)\n"
-    )
-    return subprocess.Popen(
-        [sys.executable, "-c", code],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-        env=env,
-    )
-
-
-def marked_pids(mark: str, whole: bool = True) -> set[int]:
-    """Every live process that carries ``mark`` (:func:`marked_env`; ``whole=False``: every
-    mark that starts with it), other than this one. Linux's /proc; a process whose
-    environment cannot be read (another user's) is not one sitgen started."""
-    needle = f"\0{MARK}={mark}".encode() + (b"\0" if whole else b"")
-    found = set()
-    for entry in os.scandir("/proc"):
-        if not entry.name.isdigit() or int(entry.name) == os.getpid():
-            continue
-        try:
-            with open(f"/proc/{entry.name}/environ", "rb") as f:
-                if needle in b"\0" + f.read() + b"\0":
-                    found.add(int(entry.name))
-        except OSError:
-            continue
-    return found
-
-
-def kill_marked(mark: str, whole: bool = True) -> int:
-    """SIGKILL every process that carries ``mark`` (:func:`marked_pids`): whatever a
-    controller started, wherever it went. Returns how many were killed."""
-    killed = 0
-    for pid in marked_pids(mark, whole):
-        with contextlib.suppress(OSError):
-            os.kill(pid, signal.SIGKILL)
-            killed += 1
-    return killed
-
-
-def die_with_parent_prefix() -> list[str]:
-    """``setpriv --pdeathsig KILL --`` where util-linux has it: the program is killed if the
-    process that started it dies, even by SIGKILL (setpriv execs the program in its place)."""
-    setpriv = shutil.which("setpriv")
-    return [setpriv, "--pdeathsig", "KILL", "--"] if setpriv else []
 
 
 class ProcessController(UserController):

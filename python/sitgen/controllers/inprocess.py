@@ -26,7 +26,7 @@ it always has; what the class started and left behind dies with its run.
 
 Parameters: ``step_timeout_s`` (seconds of processor time, default :data:`STEP_TIMEOUT_S`,
 1 s) per ``act``, with a wall-clock backstop of ten times that (at most 20 s more, at least
-2 s: :func:`~sitgen.controllers.external.backstop_s`); reset and class loading get
+2 s: :func:`~sitgen.controllers.deadlines.backstop_s`); reset and class loading get
 :data:`START_TIMEOUT_S` (10 s) of processor time and its backstop; in a runner the watchdog
 kills :data:`KILL_GRACE_S` past either limit.
 
@@ -47,19 +47,17 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.controllers import sandbox
-from sitgen.controllers.external import (
-    END_TIMEOUT_S,
-    START_TIMEOUT_S,
+from sitgen.controllers.deadlines import (
     STEP_TIMEOUT_S,
     WAITING_ON_ITS_OWN,
     ControllerError,
-    UserController,
     backstop_s,
     computing_too_long,
     starved,
     starved_reason,
     waiting_too_long,
 )
+from sitgen.controllers.external import END_TIMEOUT_S, START_TIMEOUT_S, UserController
 from sitgen.controllers.host import BadReply, command, exception_line, find_class, instantiate
 from sitgen.world.sim import Observation
 

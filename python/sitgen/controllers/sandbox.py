@@ -5,7 +5,7 @@ What it does: :func:`call` hands a function and its arguments to this thread's *
 process forked from this one, and returns what it returned (pickled through pipes), or
 :class:`Died` when the runner ended without an answer. The runner leads a process group of its
 own, is killed if the thread that forked it ends (PR_SET_PDEATHSIG), carries a controller mark
-(:data:`sitgen.controllers.external.MARK`) under this process's, so that sitgen's reaper finds
+(:data:`sitgen.controllers.marks.MARK`) under this process's, so that sitgen's reaper finds
 what it started should sitgen be killed outright, and is a child subreaper: every orphan of a
 run, a double-forked daemon included, comes back to it, and when a run ends every process the
 run started is killed. The runner then looks at itself: a run that left a thread, a signal
@@ -52,13 +52,9 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 from sitgen import _core
-from sitgen.controllers.external import (
-    MARK,
-    backstop_s,
-    computing_too_long,
-    marked_env,
-    signal_name,
-)
+from sitgen.controllers.deadlines import backstop_s, computing_too_long
+from sitgen.controllers.external import signal_name
+from sitgen.controllers.marks import MARK, marked_env
 
 T = TypeVar("T")
 

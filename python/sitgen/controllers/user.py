@@ -10,9 +10,8 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
+from sitgen.controllers.deadlines import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.external import (
-    STEP_TIMEOUT_S,
-    ControllerError,
     ProcessController,
     UserController,
     command_argv,

@@ -37,7 +37,7 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.conformance import resets
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.user import check_controller_name, is_user_controller
 from sitgen.world.config import load_spec, spec_json
 from sitgen.world.situation import Situation, situation_of

@@ -22,8 +22,9 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from sitgen import _core
-from sitgen.controllers.external import MARK, marked_env, pin_to_one_core
+from sitgen.controllers.external import pin_to_one_core
 from sitgen.controllers.host import die_with_parent
+from sitgen.controllers.marks import MARK, marked_env
 from sitgen.execution.jobs import Job
 from sitgen.run import run
 
@@ -131,7 +132,7 @@ def pool_context() -> multiprocessing.context.BaseContext:
     # The server starts carrying this process's controller mark, and so does every process
     # forked from it or from its workers without exec (a user's daemon): /proc shows a forked
     # process the environment its ancestor was executed with, so this process's reaper finds
-    # them all should it die outright (sitgen.controllers.external.marked_env).
+    # them all should it die outright (sitgen.controllers.marks.marked_env).
     mark = marked_env()[1]
     previous = os.environ.get(MARK)
     os.environ[MARK] = mark

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.generation.diff import DiffReport, diff_report
+from sitgen.generation.diff_report import DiffReport, diff_report
 from sitgen.generation.fault_report import (
     FaultReport,
     evaluation,

@@ -9,8 +9,9 @@ from __future__ import annotations
 import html
 import math
 
-from sitgen.generation.diff import NEW, DiffReport, Pair, controller_label
-from sitgen.generation.diff import summary_lines as diff_summary_lines
+from sitgen.generation.diff import NEW
+from sitgen.generation.diff_report import DiffReport, Pair, controller_label
+from sitgen.generation.diff_report import summary_lines as diff_summary_lines
 from sitgen.generation.fault_report import (
     FaultReport,
     fault_status,

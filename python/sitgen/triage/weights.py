@@ -72,15 +72,13 @@ class Weights:
     failure_classes: dict[str, float] = field(default_factory=dict)
     score_peers: bool = False
 
-    def __post_init__(self) -> None:
-        # Kinds a table does not name keep the core's default penalty, as in a run spec (a
-        # table written before a kind existed still scores it as the core does).
+    def __post_init__(self) -> None:  # kinds not named keep the core's penalty, as in a spec
         defaults = {k: (s, p) for k, s, p in _core.default_penalties()}
         object.__setattr__(self, "penalties", {**defaults, **self.penalties})
 
     @classmethod
     def default(cls) -> Weights:
-        return cls({k: (s, p) for k, s, p in _core.default_penalties()})
+        return cls({})
 
     @classmethod
     def from_table(cls, table: Mapping[str, Any], where: str) -> Weights:
@@ -91,11 +89,11 @@ class Weights:
         except _core.SpecError as e:
             raise JudgementError(f"{where}: {str(e).removeprefix('run.scoring.')}") from None
         scoring = checked["scoring"]
-        penalties = {k: (s, p) for k, s, p in _core.default_penalties()}
-        for kind, p in scoring.get("penalties", {}).items():
-            penalties[kind] = (float(p["start"]), float(p["per_s"]))
         return cls(
-            penalties,
+            {
+                k: (float(p["start"]), float(p["per_s"]))
+                for k, p in scoring.get("penalties", {}).items()
+            },
             {k: float(v) for k, v in scoring.get("failure_classes", {}).items()},
             bool(scoring.get("score_peers", False)),
         )

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.proc_tasks import wait_idle
 from sitgen.controllers.ros2.dds_domain import confine, process_domain, rmw_problem
 from sitgen.controllers.ros2.messages import (

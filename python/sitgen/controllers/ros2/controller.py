@@ -66,20 +66,16 @@ import time
 from collections.abc import Mapping
 from typing import IO, Any
 
+from sitgen.controllers.deadlines import STEP_TIMEOUT_S, ControllerError
 from sitgen.controllers.external import (
     STDERR_TAIL_BYTES,
-    STEP_TIMEOUT_S,
-    ControllerError,
     UserController,
     command_argv,
-    die_with_parent_prefix,
-    kill_marked,
-    marked_env,
-    marked_pids,
     program_path,
     short,
     signal_name,
 )
+from sitgen.controllers.marks import die_with_parent_prefix, kill_marked, marked_env, marked_pids
 from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, task_state, wait_idle
 from sitgen.controllers.ros2.bridge import LIB, Bridge, ros2_available
 from sitgen.controllers.ros2.dds_domain import confine, require_free

@@ -37,7 +37,7 @@ from collections.abc import Iterable, Mapping, MutableMapping
 from pathlib import Path
 from typing import IO
 
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 
 DOMAIN_IDS = range(1, 102)
 """DDS domains sitgen may claim: 0 is left to the user's own ROS system; above 101 the

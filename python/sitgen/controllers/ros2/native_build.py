@@ -33,7 +33,7 @@ import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 
 BUILD_TIMEOUT_S = 300.0
 """Wall seconds a generator or compiler call may take (seconds, on any machine)."""

@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.controllers.external import ControllerError
+from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.ros2.native_build import (
     build_key,
     build_once,
