@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-load bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -125,6 +125,11 @@ bench-ros2-start: install-test
 # 200-run campaign's wall time (benches/fast_path.py; about 40 s on 2 cores).
 bench-fast-path: install-test
 	$(BIN)/python benches/fast_path.py
+
+# A slow controller's steps on a loaded machine, and what robustness copies add to the default
+# campaign on seeds 0-4 (benches/load.py; an idle machine, a few minutes).
+bench-load: install-test
+	$(BIN)/python benches/load.py
 
 # Where a step's time goes: the reference scene without Python under perf (Linux perf needed).
 profile:

@@ -62,23 +62,23 @@ def backstop_s(step_timeout_s: float) -> float:
     return max(generous, LEAST_BACKSTOP_S)
 
 
+def did_not_reply(name: str, within: str, when: str, hint: str) -> str:
+    """Why a controller that did not reply in time failed, the same words on every path:
+    ``within`` (``1 s of processor time``, ``10 s``) and what it was doing (``hint``)."""
+    return f"controller {name} did not reply within {within} {when}; it is {hint}"
+
+
 def computing_too_long(name: str, cpu_s: float, when: str) -> str:
-    """Why a controller that used up its processor time failed (the same words on every path)."""
-    return (
-        f"controller {name} did not reply within {cpu_s:g} s of processor time {when}; it is "
-        "computing, not waiting for input: a loop that does not end?"
-    )
+    """Why a controller that used up its processor time failed."""
+    return did_not_reply(name, f"{cpu_s:g} s of processor time", when, COMPUTING)
 
 
-def waiting_too_long(name: str, wall_s: float, when: str, hint: str) -> str:
-    """Why a controller that waited past its wall-clock backstop failed; ``hint``: on what."""
-    return f"controller {name} did not reply within {wall_s:g} s {when}; it is waiting, not {hint}"
-
-
-WAITING_ON_ITS_OWN = "computing: on a sleep, a lock or input of its own?"
+COMPUTING = "computing, not waiting for input: a loop that does not end?"
+"""What a controller past its deadline that used the time was doing."""
+WAITING_ON_ITS_OWN = "waiting, not computing: on a sleep, a lock or input of its own?"
 """What a class that waits past its backstop waits on (a program's is :data:`WAITING_ON_OUTPUT`)."""
 WAITING_ON_OUTPUT = (
-    "computing: a reply left in its output buffer? (flush after every reply: "
+    "waiting, not computing: a reply left in its output buffer? (flush after every reply: "
     "docs/controller-protocol.md)"
 )
 

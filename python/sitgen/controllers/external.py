@@ -34,15 +34,16 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.controllers.deadlines import (
+    COMPUTING,
     STEP_TIMEOUT_S,
     WAITING_ON_ITS_OWN,
     WAITING_ON_OUTPUT,
     ControllerError,
     backstop_s,
     computing_too_long,
+    did_not_reply,
     starved,
     starved_reason,
-    waiting_too_long,
 )
 from sitgen.controllers.host import MAX_LINE_BYTES
 from sitgen.controllers.marks import die_with_parent_prefix, kill_marked, marked_env, marked_pids
@@ -471,12 +472,9 @@ class ProcessController(UserController):
             if starved(elapsed, used, waited):
                 return starved_reason(self.name, wall_s, when)
             if used >= BUSY_SHARE * elapsed:
-                return ControllerError(
-                    f"controller {self.name} did not reply within {wall_s:g} s {when}; it is "
-                    "computing, not waiting for input: a loop that does not end?"
-                )
+                return ControllerError(did_not_reply(self.name, f"{wall_s:g} s", when, COMPUTING))
         hint = WAITING_ON_ITS_OWN if self._host else WAITING_ON_OUTPUT
-        return ControllerError(waiting_too_long(self.name, wall_s, when, hint))
+        return ControllerError(did_not_reply(self.name, f"{wall_s:g} s", when, hint))
 
     def _died(self, when: str) -> str:
         """Why the program stopped answering: its exit code, or that it closed its output and

@@ -53,9 +53,9 @@ from sitgen.controllers.deadlines import (
     ControllerError,
     backstop_s,
     computing_too_long,
+    did_not_reply,
     starved,
     starved_reason,
-    waiting_too_long,
 )
 from sitgen.controllers.external import END_TIMEOUT_S, START_TIMEOUT_S, UserController
 from sitgen.controllers.host import BadReply, command, exception_line, find_class, instantiate
@@ -269,7 +269,7 @@ class InProcessController(UserController):
         seen = _core.watched_call()
         if seen is not None and starved(*seen):
             return starved_reason(self.name, wall_s, when)
-        return ControllerError(waiting_too_long(self.name, wall_s, when, WAITING_ON_ITS_OWN))
+        return ControllerError(did_not_reply(self.name, f"{wall_s:g} s", when, WAITING_ON_ITS_OWN))
 
     def _call(
         self, call: Callable[[], Any], when: str, timeout_s: float, wall_s: float | None = None
