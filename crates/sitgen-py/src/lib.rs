@@ -3,6 +3,7 @@
 
 mod campaign;
 mod coverage;
+mod cpu_deadline;
 mod crosscheck;
 mod episodes;
 mod failure;
@@ -53,5 +54,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     shrink::register(m)?;
     crosscheck::register(m)?;
     watchdog::register(m)?;
+    cpu_deadline::register(m)?;
     Ok(())
 }

@@ -167,7 +167,7 @@ class InProcessController(UserController):
             if timed:
                 fired[0] = ""
                 armed[0] = True
-                signal.setitimer(signal.ITIMER_PROF, timeout_s)
+                _core.cpu_deadline(timeout_s)
             try:
                 value = target_act(obs)
                 # The common reply, checked inline: a pair of floats is the command as it is.
@@ -188,7 +188,7 @@ class InProcessController(UserController):
             finally:
                 if timed:
                     armed[0] = False
-                    signal.setitimer(signal.ITIMER_PROF, 0)
+                    _core.cpu_deadline(0)
                 if forked[0]:
                     sandbox.returned_in_fork()
             if fired[0]:  # the class caught the timeout and went on: it was late all the same
@@ -369,7 +369,7 @@ def _alarm(timed: bool) -> Iterator[None]:
         yield
     finally:
         _ARMED[0] = False
-        signal.setitimer(signal.ITIMER_PROF, 0)
+        _core.cpu_deadline(0)
         for number, handler in previous.items():
             signal.signal(number, handler)
 
@@ -384,9 +384,9 @@ def _deadline(timeout_s: float) -> Iterator[None]:
         return
     _FIRED[0] = ""
     _ARMED[0] = True
-    signal.setitimer(signal.ITIMER_PROF, timeout_s)
+    _core.cpu_deadline(timeout_s)
     try:
         yield
     finally:
         _ARMED[0] = False
-        signal.setitimer(signal.ITIMER_PROF, 0)
+        _core.cpu_deadline(0)
