@@ -193,8 +193,10 @@ def candidates(failure: DistinctFailure, scores: dict[int, float], most: int) ->
 def measure_robustness(store: Store, reruns: int = RERUNS, workers: int = 1) -> int:
     """Measure the robustness of every distinct failure's candidates for representative: its
     highest-scoring runs, best first, until one is robust (at most ``CANDIDATES``), each
-    round of candidates run as one batch. A run measured before with as many copies is not
-    run again, so a resumed or repeated call costs nothing more. Returns the copies run."""
+    round of candidates run as one batch, each run's copies only until they decide its
+    verdict (6 of 8 recur, or 3 of 8 do not: robustness.decided). A run measured before with
+    as many copies is not run again, so a resumed or repeated call costs nothing more.
+    Returns the copies judged."""
     reruns = check_reruns(reruns)
     scores = dict(store.db.execute("SELECT id, score FROM runs WHERE failure_class IS NOT NULL"))
     groups = [candidates(f, scores, CANDIDATES) for f in distinct_failures(store)]
@@ -212,8 +214,8 @@ def measure_robustness(store: Store, reruns: int = RERUNS, workers: int = 1) -> 
             if not measured_as_now(stored.get(run_id), reruns):
                 wanted.append(run_id)
         if wanted:
-            measure_runs(store, wanted, reruns, workers)
-            ran += len(wanted) * reruns
+            measured = measure_runs(store, wanted, reruns, workers, until_decided=True)
+            ran += sum(len(m.classes) for m in measured)
     return ran
 
 

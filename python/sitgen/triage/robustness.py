@@ -27,7 +27,7 @@ import copy
 import functools
 import json
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -96,13 +96,28 @@ def _resolved_sizes() -> dict[str, float]:
 
 def measured_as_now(stored: dict[str, Any] | None, reruns: int) -> bool:
     """Whether a stored robustness row counts as measured now: as many copies run (those that
-    erred included; its ``reruns`` counts only those judged), perturbed and watched as copies
-    are today (a row from before the horizon is measured again)."""
+    erred included; its ``reruns`` counts only those judged), or its first copies already
+    deciding the verdict of ``reruns`` (:func:`decided`), perturbed and watched as copies are
+    today (a row from before the horizon is measured again)."""
     return (
         stored is not None
-        and len(stored["classes"]) == reruns
+        and (
+            len(stored["classes"]) == reruns
+            or decided(stored["classes"], stored["failure_class"], reruns)
+        )
         and stored.get("perturbation") == perturbation_sizes()
     )
+
+
+def decided(classes: Sequence[str | None], failure_class: str, reruns: int) -> bool:
+    """Whether the first copies' ``classes`` already decide the verdict of ``reruns`` copies,
+    whatever the rest show: enough recur that it is robust (6 of 8), or enough did not that
+    it cannot be (3 of 8). A copy that erred counts as neither. The verdict of these copies
+    alone (:func:`verdict` of their ``recurs`` and ``reruns``) is then the same."""
+    need = math.ceil(ROBUST_SHARE * reruns - 1e-9)
+    recurs = sum(c == failure_class for c in classes)
+    missed = sum(c != failure_class and c != ERROR for c in classes)
+    return len(classes) < reruns and (recurs >= need or missed > reruns - need)
 
 
 def check_reruns(reruns: int) -> int:
@@ -219,33 +234,79 @@ def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
 
 
 def measure(
-    rows: Sequence[dict[str, Any]], reruns: int = RERUNS, workers: int = 1, horizon: bool = True
+    rows: Sequence[dict[str, Any]],
+    reruns: int = RERUNS,
+    workers: int = 1,
+    horizon: bool = True,
+    until_decided: bool = False,
 ) -> list[Robustness]:
     """The robustness of failing stored runs ``rows`` (:meth:`Store.run_row`), all copies run
-    as one batch (``horizon``: see :func:`copy_jobs`). Raises StoreError for a run that has
-    no failure."""
-    jobs: list[Job] = []
+    as one batch (``horizon``: see :func:`copy_jobs`). ``until_decided``: a run's copies stop
+    at the first ``k`` whose classes decide its verdict (:func:`decided`), the copies taken
+    in turns across the runs so that a run's first copies are in before its later ones are
+    started; ``k`` is decided by the copies in order, never by which finished first, so the
+    row is the same whatever the worker count. Raises StoreError for a run that has no
+    failure."""
+    failure_classes: list[str] = []
+    per_row: list[list[Job]] = []
     for i, row in enumerate(rows):
         if row["failure"] is None:
             raise StoreError(f"run {row['id']}: it did not fail; robustness is a failure's")
-        jobs += copy_jobs(row, reruns, i * reruns, horizon)
-    results = copies(jobs, workers)
-    return [
-        Robustness(
-            row["id"],
-            str(row["failure"]["class"]),
-            tuple(copy_class(r) for r in results[i * reruns : (i + 1) * reruns]),
+        failure_classes.append(str(row["failure"]["class"]))
+        per_row.append(copy_jobs(row, reruns, i * reruns, horizon))
+    if not until_decided:
+        results = copies([j for jobs in per_row for j in jobs], workers)
+        return [
+            Robustness(
+                row["id"],
+                failure_classes[i],
+                tuple(copy_class(r) for r in results[i * reruns : (i + 1) * reruns]),
+            )
+            for i, row in enumerate(rows)
+        ]
+    got: list[list[str | None]] = [[] for _ in rows]
+    waiting: dict[int, str | None] = {}
+
+    def first_copies(i: int) -> list[str | None]:
+        """Run ``i``'s classes of its copies 1…k in order, as far as they are in."""
+        while len(got[i]) < reruns and i * reruns + len(got[i]) in waiting:
+            got[i].append(waiting.pop(i * reruns + len(got[i])))
+        return got[i]
+
+    def settled(i: int) -> bool:
+        return decided(first_copies(i), failure_classes[i], reruns)
+
+    def turns() -> Iterator[Job]:
+        for k in range(reruns):
+            for i, jobs in enumerate(per_row):
+                if not settled(i):
+                    yield jobs[k]
+
+    user = any(j.in_python for jobs in per_row for j in jobs)
+    for job, result in Executor(workers, user=user).results(turns()):
+        waiting[job.index] = copy_class(result)
+    measured = []
+    for i, row in enumerate(rows):
+        classes = first_copies(i)
+        k = next(
+            (n for n in range(1, reruns) if decided(classes[:n], failure_classes[i], reruns)),
+            reruns,
         )
-        for i, row in enumerate(rows)
-    ]
+        measured.append(Robustness(row["id"], failure_classes[i], tuple(classes[:k])))
+    return measured
 
 
 def measure_runs(
-    store: Store, run_ids: Sequence[int], reruns: int = RERUNS, workers: int = 1
+    store: Store,
+    run_ids: Sequence[int],
+    reruns: int = RERUNS,
+    workers: int = 1,
+    until_decided: bool = False,
 ) -> list[Robustness]:
-    """Measure and store the robustness of stored runs ``run_ids`` (each must have failed)."""
+    """Measure and store the robustness of stored runs ``run_ids`` (each must have failed;
+    ``until_decided``: see :func:`measure`)."""
     workers = check_workers(workers, "local")
     rows = [stored_run(store, i) for i in run_ids]
-    measured = measure(rows, check_reruns(reruns), workers)
+    measured = measure(rows, check_reruns(reruns), workers, until_decided=until_decided)
     store.record_robustness(r.as_row() for r in measured)
     return measured
