@@ -45,6 +45,9 @@ from sitgen.store import RunRow, Store
 
 PACK_ALL = (-math.inf, False)
 """The pack rule that packs every run's trajectory (see ``_core.run_jobs``)."""
+PACK_NONE = (math.inf, False)
+"""No run's trajectory packed: jobs whose result is read for its record alone (perturbed
+copies)."""
 
 DEFAULT_KEEP = "top:50"
 """What a campaign keeps whole by default: the runs the report's default 50 pages show."""

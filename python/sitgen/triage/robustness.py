@@ -32,11 +32,11 @@ from dataclasses import dataclass
 from typing import Any
 
 from sitgen import _core
-from sitgen.execution.campaign import Executor
+from sitgen.execution.campaign import PACK_NONE, Executor
 from sitgen.execution.jobs import Job, check_workers
 from sitgen.store import Store, StoreError
 from sitgen.triage.kill import outcome_of_copy
-from sitgen.triage.recall import stored_run
+from sitgen.triage.recall import regenerate, stored_run
 
 RERUNS = 8
 """Perturbed copies of a run, by default: enough to tell 8/8 from 4/8, few enough that the
@@ -211,11 +211,14 @@ def copy_jobs(
     each stopped at its horizon (``horizon=False``: run to its time limit, as copies were
     before the horizon), as jobs numbered from ``first_index``."""
     watched = horizon_of(row["failure"]) if horizon else None
+    # Generated once and given whole to every copy: a copy's own generation (terrain
+    # filters, regions, routes) cost more than a short copy's run.
+    whole = json.loads(regenerate(row).to_json()) if reruns > 1 else row["situation_spec"]
     return [
         Job(
             index=first_index + k - 1,
             seed=row["situation_seed"],
-            situation=row["situation_spec"],
+            situation=whole,
             run=perturbed(row["run_spec"], k, watched),
             run_seed=row["run_seed"],
         )
@@ -228,7 +231,8 @@ def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
     order, whatever the worker count."""
     user = any(j.in_python for j in jobs)
     by_index: dict[int, dict[str, Any]] = {}
-    for job, result in Executor(workers, user=user).results(iter(jobs)):
+    # A copy is read for its record alone: no trajectory is packed for it.
+    for job, result in Executor(workers, user=user, pack_rule=lambda: PACK_NONE).results(jobs):
         by_index[job.index] = result
     return [by_index[j.index] for j in jobs]
 
@@ -283,7 +287,8 @@ def measure(
                     yield jobs[k]
 
     user = any(j.in_python for jobs in per_row for j in jobs)
-    for job, result in Executor(workers, user=user).results(turns()):
+    executor = Executor(workers, user=user, pack_rule=lambda: PACK_NONE)
+    for job, result in executor.results(turns()):
         waiting[job.index] = copy_class(result)
     measured = []
     for i, row in enumerate(rows):

@@ -125,15 +125,61 @@ impl ChoiceSource {
         lo + self.below((hi - lo) as u64 + 1) as i64
     }
 
+    /// A standard normal draw (mean 0, sd 1), by rand_distr's ziggurat: about one draw a
+    /// sample and rarely a logarithm, where Box–Muller spends two draws, a logarithm, a root
+    /// and a cosine (a sensor's noise is drawn for every beam of every scan).
+    pub fn normal(&mut self) -> f64 {
+        rand_distr::Distribution::sample(&rand_distr::StandardNormal, self)
+    }
+
     /// True with probability `p`; false when the draw is zero and p < 1.
     pub fn chance(&mut self, p: f64) -> bool {
         self.unit() >= 1.0 - p
     }
 }
 
+/// Draws for rand_distr's samplers, through [`ChoiceSource::draw`] (so they are recorded and
+/// replayed like any other choice).
+impl rand_core::TryRng for ChoiceSource {
+    type Error = core::convert::Infallible;
+
+    fn try_next_u32(&mut self) -> Result<u32, Self::Error> {
+        Ok((self.draw() >> 32) as u32)
+    }
+
+    fn try_next_u64(&mut self) -> Result<u64, Self::Error> {
+        Ok(self.draw())
+    }
+
+    fn try_fill_bytes(&mut self, dst: &mut [u8]) -> Result<(), Self::Error> {
+        for chunk in dst.chunks_mut(8) {
+            chunk.copy_from_slice(&self.draw().to_le_bytes()[..chunk.len()]);
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn normal_draws_are_standard_normal_and_replay() {
+        let mut live = ChoiceSource::stream(7, "normal");
+        live.start_recording();
+        let xs: Vec<f64> = (0..200_000).map(|_| live.normal()).collect();
+        let n = xs.len() as f64;
+        let mean = xs.iter().sum::<f64>() / n;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n;
+        let within_1sd = xs.iter().filter(|x| x.abs() < 1.0).count() as f64 / n;
+        let beyond_3sd = xs.iter().filter(|x| x.abs() > 3.0).count() as f64 / n;
+        assert!(mean.abs() < 0.01, "{mean}");
+        assert!((var - 1.0).abs() < 0.02, "{var}");
+        assert!((within_1sd - 0.6827).abs() < 0.005, "{within_1sd}");
+        assert!((beyond_3sd - 0.0027).abs() < 0.0008, "{beyond_3sd}");
+        let mut replay = ChoiceSource::replay(live.recorded().unwrap().to_vec());
+        assert!(xs.iter().all(|&x| replay.normal() == x));
+    }
 
     #[test]
     fn streams_are_reproducible_and_distinct() {

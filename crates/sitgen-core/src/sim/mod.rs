@@ -850,7 +850,7 @@ impl World {
         });
         for t in &mut ranges {
             if let (Some(noise), true) = (noise.as_mut(), *t < laser.range_m) {
-                *t = (*t + laser.noise_sd_m * gaussian(noise)).clamp(0.0, laser.range_m);
+                *t = (*t + laser.noise_sd_m * noise.normal()).clamp(0.0, laser.range_m);
             }
             *t = laser.quantise(*t);
         }
@@ -962,13 +962,6 @@ impl World {
         }
         ranges
     }
-}
-
-/// A standard normal draw by the Box–Muller transform.
-fn gaussian(choices: &mut ChoiceSource) -> f64 {
-    let u1 = 1.0 - choices.unit();
-    let u2 = choices.unit();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
 #[cfg(test)]
