@@ -23,6 +23,7 @@ so a copy watched to the limit costs several times one watched to the horizon.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import functools
 import json
@@ -213,7 +214,11 @@ def copy_jobs(
     watched = horizon_of(row["failure"]) if horizon else None
     # Generated once and given whole to every copy: a copy's own generation (terrain
     # filters, regions, routes) cost more than a short copy's run.
-    whole = json.loads(regenerate(row).to_json()) if reruns > 1 else row["situation_spec"]
+    whole = row["situation_spec"]
+    # One that cannot be made again is left to each copy, which then errs and is left out.
+    with contextlib.suppress(_core.GenerationFailed, _core.SpecError):
+        if reruns > 1:
+            whole = json.loads(regenerate(row).to_json())
     return [
         Job(
             index=first_index + k - 1,
