@@ -4,6 +4,7 @@ same figures whatever the worker count, and bad input as one-line errors."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import signal
 import sqlite3
@@ -234,15 +235,24 @@ def test_a_measurement_killed_part_way_loses_nothing_and_repeats_to_the_same_fig
 
 
 def test_copies_decide_a_verdict_once_the_rest_cannot_change_it() -> None:
-    x, other, error = "struck_while_moving_seen", "stuck_without_contact", "error"
-    assert decided([x] * 6, x, 8) and not decided([x] * 5, x, 8)
-    assert decided([other, x, other, other], x, 8) and not decided([other, other, x], x, 8)
-    assert not decided([x, error, other, error, other], x, 8)  # errors count as neither
+    """Every sequence of 8 copy classes (recurred, another class, erred): wherever its first
+    copies are decided, their verdict is the verdict of all 8, and 6 recurring or 3 missing
+    decide it."""
+    x, other = "struck_while_moving_seen", "stuck_without_contact"
+    decided_early = 0
+    for classes in itertools.product((x, other, "error"), repeat=8):
+        whole = verdict(sum(c == x for c in classes), sum(c != "error" for c in classes))
+        for k in range(1, 8):
+            first = list(classes[:k])
+            if decided(first, x, 8):
+                decided_early += 1
+                assert (
+                    verdict(sum(c == x for c in first), sum(c != "error" for c in first)) == whole
+                )
+                break
+            assert first.count(x) < 6 and sum(c == other for c in first) < 3
+    assert decided_early > 0
     assert not decided([x] * 8, x, 8)  # all eight in: measured, not decided early
-    for classes in ([x] * 6, [other, x, other, other], [x, x, other, x, x, x, other, other][:3]):
-        if decided(classes, x, 8):  # the verdict of the first copies is that of all eight
-            recurs = sum(c == x for c in classes)
-            assert verdict(recurs, len(classes)) == ("robust" if recurs >= 6 else "knife-edge")
 
 
 def test_copies_watched_to_their_horizon_give_the_verdicts_of_whole_copies_on_the_default_campaign(

@@ -234,12 +234,19 @@ def copy_jobs(
 def copies(jobs: Sequence[Job], workers: int) -> list[dict[str, Any]]:
     """Run ``jobs`` (perturbed copies, any controllers) on ``workers``: their results in job
     order, whatever the worker count."""
-    user = any(j.in_python for j in jobs)
-    by_index: dict[int, dict[str, Any]] = {}
-    # A copy is read for its record alone: no trajectory is packed for it.
-    for job, result in Executor(workers, user=user, pack_rule=lambda: PACK_NONE).results(jobs):
-        by_index[job.index] = result
+    by_index = dict((job.index, result) for job, result in stream(jobs, jobs, workers))
     return [by_index[j.index] for j in jobs]
+
+
+def stream(
+    jobs: Iterable[Job], every: Iterable[Job], workers: int
+) -> Iterator[tuple[Job, dict[str, Any]]]:
+    """Copies ``jobs`` run on ``workers`` (drawn as workers free up, so the iterator may
+    decide what comes next), each (job, result) as it finishes; ``every``: all the jobs it
+    may draw, to tell whether a process pool is needed."""
+    user = any(j.in_python for j in every)
+    # A copy is read for its record alone: no trajectory is packed for it.
+    yield from Executor(workers, user=user, pack_rule=lambda: PACK_NONE).results(jobs)
 
 
 def measure(
@@ -250,12 +257,11 @@ def measure(
     until_decided: bool = False,
 ) -> list[Robustness]:
     """The robustness of failing stored runs ``rows`` (:meth:`Store.run_row`), all copies run
-    as one batch (``horizon``: see :func:`copy_jobs`). ``until_decided``: a run's copies stop
-    at the first ``k`` whose classes decide its verdict (:func:`decided`), the copies taken
-    in turns across the runs so that a run's first copies are in before its later ones are
-    started; ``k`` is decided by the copies in order, never by which finished first, so the
-    row is the same whatever the worker count. Raises StoreError for a run that has no
-    failure."""
+    as one batch, taken in turns across the runs (``horizon``: see :func:`copy_jobs`).
+    ``until_decided``: a run's copies stop at the first ``k`` whose classes decide its verdict
+    (:func:`decided`); the turns have a run's first copies in before its later ones start, and
+    ``k`` is read from the copies in order, never from which finished first, so the row is the
+    same whatever the worker count. Raises StoreError for a run that has no failure."""
     failure_classes: list[str] = []
     per_row: list[list[Job]] = []
     for i, row in enumerate(rows):
@@ -263,16 +269,6 @@ def measure(
             raise StoreError(f"run {row['id']}: it did not fail; robustness is a failure's")
         failure_classes.append(str(row["failure"]["class"]))
         per_row.append(copy_jobs(row, reruns, i * reruns, horizon))
-    if not until_decided:
-        results = copies([j for jobs in per_row for j in jobs], workers)
-        return [
-            Robustness(
-                row["id"],
-                failure_classes[i],
-                tuple(copy_class(r) for r in results[i * reruns : (i + 1) * reruns]),
-            )
-            for i, row in enumerate(rows)
-        ]
     got: list[list[str | None]] = [[] for _ in rows]
     waiting: dict[int, str | None] = {}
 
@@ -283,7 +279,7 @@ def measure(
         return got[i]
 
     def settled(i: int) -> bool:
-        return decided(first_copies(i), failure_classes[i], reruns)
+        return until_decided and decided(first_copies(i), failure_classes[i], reruns)
 
     def turns() -> Iterator[Job]:
         for k in range(reruns):
@@ -291,15 +287,17 @@ def measure(
                 if not settled(i):
                     yield jobs[k]
 
-    user = any(j.in_python for jobs in per_row for j in jobs)
-    executor = Executor(workers, user=user, pack_rule=lambda: PACK_NONE)
-    for job, result in executor.results(turns()):
+    for job, result in stream(turns(), (j for jobs in per_row for j in jobs), workers):
         waiting[job.index] = copy_class(result)
     measured = []
     for i, row in enumerate(rows):
         classes = first_copies(i)
         k = next(
-            (n for n in range(1, reruns) if decided(classes[:n], failure_classes[i], reruns)),
+            (
+                n
+                for n in range(1, reruns)
+                if until_decided and decided(classes[:n], failure_classes[i], reruns)
+            ),
             reruns,
         )
         measured.append(Robustness(row["id"], failure_classes[i], tuple(classes[:k])))
