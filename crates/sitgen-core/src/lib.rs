@@ -10,7 +10,7 @@
 //! grids), [`terrain`] (sources and the filter chain), [`interchange`] (map files in and out),
 //! [`mission`] (placement and routes), [`situation`] (the situation file), [`sim`] (the
 //! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties),
-//! [`failure`] (failure classes), [`coverage`] (situation coverage), [`run`] (one situation
+//! [`failure`] (failure classes), [`requirement`] (the user's requirements in STL), [`coverage`] (situation coverage), [`run`] (one situation
 //! driven to its end) and [`crosscheck`] (the same situation run by Stage, compared).
 
 pub mod control;
@@ -24,6 +24,7 @@ pub mod interchange;
 pub mod mission;
 pub mod monitor;
 pub mod parallel;
+pub mod requirement;
 pub mod rng;
 pub mod run;
 pub mod scoring;

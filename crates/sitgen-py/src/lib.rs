@@ -10,6 +10,7 @@ mod failure;
 mod fault;
 mod interchange;
 mod mission;
+mod requirement;
 mod run;
 mod shrink;
 mod sim;
@@ -46,6 +47,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     situation::register(m)?;
     sim::register(m)?;
     run::register(m)?;
+    requirement::register(m)?;
     episodes::register(m)?;
     campaign::register(m)?;
     failure::register(m)?;

@@ -351,7 +351,8 @@ fn observation_args(
 }
 
 /// A record as a dict: `record` (JSON: outcome, reason, score, events, steps, time_s, robots),
-/// `events_jsonl`, `events_text`, `trajectory` (numpy, steps + 1 × robots × 3).
+/// `events_jsonl`, `events_text`, `trajectory` (numpy, steps + 1 × robots × 3), `signals`
+/// (the requirement signals the run's requirements read: name → numpy, one value a sample).
 fn record_dict(py: Python<'_>, rec: RunRecord, agent: u32) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
     d.set_item(
@@ -360,6 +361,13 @@ fn record_dict(py: Python<'_>, rec: RunRecord, agent: u32) -> PyResult<Bound<'_,
     )?;
     d.set_item("events_jsonl", rec.events_jsonl())?;
     d.set_item("events_text", monitor::to_text(&rec.events, agent))?;
+    let signals = PyDict::new(py);
+    for (name, values) in monitor::signals::NAMES.iter().zip(&rec.signals) {
+        if !values.is_empty() {
+            signals.set_item(*name, PyArray1::from_slice(py, values))?;
+        }
+    }
+    d.set_item("signals", signals)?;
     let rows = rec.trajectory.len() / (3 * rec.robots.max(1));
     let trajectory = PyArray1::from_vec(py, rec.trajectory).reshape([rows, rec.robots, 3])?;
     d.set_item("trajectory", trajectory)?;

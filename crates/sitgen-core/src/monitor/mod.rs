@@ -18,6 +18,7 @@ pub mod collision;
 pub mod loitering;
 pub mod oscillation;
 pub mod route_completed;
+pub mod signals;
 pub mod timeout;
 pub mod unsafe_proximity;
 pub mod waypoint_reached;

@@ -27,7 +27,8 @@ use crate::coverage::{CoverageRecord, Observer};
 use crate::error::SpecError;
 use crate::failure::{self, Failure, FailureClass};
 use crate::mission::Perception;
-use crate::monitor::{self, Event, Frame, Monitor};
+use crate::monitor::{self, signals, Event, Frame, Monitor};
+use crate::requirement::{self, Compiled, Verdict};
 use crate::scoring::{self, Score, ScoringSpec};
 use crate::sim::{Observation, World};
 use crate::situation::Situation;
@@ -47,6 +48,9 @@ pub use spec::{controller_spec, is_external, RunSpec};
 /// Most steps a run may take: 10⁷ (a day at 10 ms steps is 8.6 × 10⁶), so that a tiny `dt_s`
 /// cannot ask for a run that never ends.
 pub const MAX_STEPS: f64 = 1e7;
+
+/// The index of `peer_seen` among the requirement signals.
+const PEER_SEEN: usize = 7;
 
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -87,6 +91,13 @@ pub struct RunRecord {
     /// `[step][robot][3]`.
     #[serde(skip)]
     pub trajectory: Vec<f64>,
+    /// Each of the run spec's requirements' verdict, in order ([`crate::requirement`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub requirements: Vec<Verdict>,
+    /// The requirement signals the requirements read, one value a sample, indexed as
+    /// [`monitor::signals::NAMES`] (those not read are empty).
+    #[serde(skip)]
+    pub signals: Vec<Vec<f64>>,
 }
 
 impl RunRecord {
@@ -118,6 +129,17 @@ pub struct Run {
     worst_read: (u64, Option<FailureClass>),
     trajectory: Vec<f64>,
     ended: Option<(Outcome, String)>,
+    /// The requirements judged at the end, and what they need recorded on the way.
+    requirements: Requirements,
+}
+
+/// A run's requirements and the agent's sightings their signals need (kept only when some
+/// requirement reads `peer_seen`).
+struct Requirements {
+    compiled: Vec<Compiled>,
+    reads: [bool; 8],
+    seen: Vec<Vec<u32>>,
+    goal: (f64, f64),
 }
 
 impl Run {
@@ -196,7 +218,20 @@ impl Run {
             let steps = (horizon_s / spec.sim.dt_s - 1e-9).ceil() as u64;
             (steps < limit_steps).then_some((steps, watch_for))
         });
+        let compiled =
+            requirement::compile_all(&spec.requirement, "run.requirement", spec.sim.dt_s)?;
+        let me = &situation.robots[agent as usize];
+        let requirements = Requirements {
+            reads: requirement::reads(&compiled),
+            compiled,
+            seen: vec![Vec::new()],
+            goal: me
+                .waypoints
+                .last()
+                .map_or((me.start.x_m, me.start.y_m), |w| (w[0], w[1])),
+        };
         let mut run = Self {
+            requirements,
             world,
             monitor: Some(monitor),
             coverage: Some(coverage),
@@ -472,6 +507,9 @@ impl Run {
     fn watch_step(&mut self, seen: &[u32]) -> bool {
         self.agent_scan = None;
         self.record_poses();
+        if self.requirements.reads[PEER_SEEN] {
+            self.requirements.seen.push(seen.to_vec());
+        }
         let monitor = self
             .monitor
             .as_mut()
@@ -561,7 +599,10 @@ impl Run {
             &self.world,
             &self.trajectory,
         );
+        let (requirements, signals) = self.judge_requirements();
         RunRecord {
+            requirements,
+            signals,
             outcome,
             reason,
             score,
@@ -573,6 +614,31 @@ impl Run {
             robots: self.controllers.len(),
             trajectory: self.trajectory,
         }
+    }
+
+    /// The requirements' verdicts on the run as recorded, and the signals they read.
+    fn judge_requirements(&self) -> (Vec<Verdict>, Vec<Vec<f64>>) {
+        let r = &self.requirements;
+        if r.compiled.is_empty() {
+            return (Vec::new(), Vec::new());
+        }
+        let robots = self.world.robots();
+        let recorded = signals::Recorded {
+            trajectory: &self.trajectory,
+            robots: robots.len(),
+            agent: self.agent as usize,
+            bodies: robots.iter().map(|s| s.body.clone()).collect(),
+            goal: r.goal,
+            seen: &r.seen,
+            world: &self.world,
+        };
+        let dt_s = self.world.spec().dt_s;
+        let signals = signals::compute(&recorded, &r.reads, dt_s);
+        let n = self.trajectory.len() / (3 * robots.len().max(1));
+        (
+            requirement::verdicts(&r.compiled, &signals, n, dt_s),
+            signals,
+        )
     }
 
     fn record_poses(&mut self) {

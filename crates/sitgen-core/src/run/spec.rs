@@ -9,6 +9,7 @@ use crate::control;
 use crate::error::{join, SpecError};
 use crate::mission::ControllerSpec;
 use crate::monitor::MonitorSpec;
+use crate::requirement::{self, RequirementSpec};
 use crate::scoring::ScoringSpec;
 use crate::sim::SimSpec;
 use crate::situation::Situation;
@@ -49,6 +50,10 @@ pub struct RunSpec {
     /// asks. Default none: to the time limit.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub watch: Option<Watch>,
+    /// The user's requirements, in STL over the monitor's signals (docs/requirements.md);
+    /// each run's record carries their verdicts. Written `[[requirement]]`. Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub requirement: Vec<RequirementSpec>,
 }
 
 /// How far a run is watched: to `horizon_s` simulated seconds, and past it only until it has
@@ -78,6 +83,7 @@ impl Default for RunSpec {
             scoring: ScoringSpec::default(),
             perturbation: None,
             watch: None,
+            requirement: Vec::new(),
         }
     }
 }
@@ -109,6 +115,7 @@ impl RunSpec {
             SpecError::check_positive(&join(path, "watch.horizon_s"), w.horizon_s, 86_400.0)?;
         }
         self.monitor.validate(&join(path, "monitor"))?;
+        requirement::compile_all(&self.requirement, &join(path, "requirement"), self.sim.dt_s)?;
         self.scoring.validate(&join(path, "scoring"))
     }
 

@@ -149,16 +149,7 @@ impl RobotState {
 
     /// The footprint at `pose`.
     pub fn footprint_at(&self, pose: &Pose) -> Rect {
-        let (s, c) = pose.heading_rad.sin_cos();
-        Rect {
-            centre: (
-                pose.x_m + c * self.body.origin_x_m,
-                pose.y_m + s * self.body.origin_x_m,
-            ),
-            u: (c, s),
-            half_length: self.body.length_m / 2.0,
-            half_width: self.body.width_m / 2.0,
-        }
+        footprint(&self.body, pose)
     }
 
     /// The footprint now.
@@ -284,6 +275,20 @@ pub fn integrate(pose: &Pose, v: f64, w: f64, dt: f64) -> Pose {
         x_m: x,
         y_m: y,
         heading_rad: wrap_angle(heading),
+    }
+}
+
+/// The footprint of `body` at `pose`.
+pub fn footprint(body: &Body, pose: &Pose) -> Rect {
+    let (s, c) = pose.heading_rad.sin_cos();
+    Rect {
+        centre: (
+            pose.x_m + c * body.origin_x_m,
+            pose.y_m + s * body.origin_x_m,
+        ),
+        u: (c, s),
+        half_length: body.length_m / 2.0,
+        half_width: body.width_m / 2.0,
     }
 }
 
@@ -603,18 +608,24 @@ impl World {
     /// measured against the rectangle; the distance field skips robots in the open.
     pub fn wall_clearance(&self, i: usize, within_m: f64) -> Option<f64> {
         let r = &self.robots[i];
-        let rect = r.footprint();
+        self.wall_clearance_at(&r.body, &r.pose, within_m)
+    }
+
+    /// [`World::wall_clearance`] of a robot of `body` at `pose` (the requirement signal
+    /// `obstacle_clearance` asks it of every recorded pose).
+    pub fn wall_clearance_at(&self, body: &Body, pose: &Pose, within_m: f64) -> Option<f64> {
+        let rect = footprint(body, pose);
         let g = &self.map.grid;
         let res = self.map.resolution_m;
         let (w, h) = (g.cols as f64 * res, g.rows as f64 * res);
         let (x0, y0, x1, y1) = rect.bounds();
         let mut best = x0.min(y0).min(w - x1).min(h - y1).max(0.0);
         let mut reach = within_m.min(best);
-        let c = (r.pose.x_m / res) as usize;
-        let from_bottom = (r.pose.y_m / res) as usize;
+        let c = (pose.x_m / res) as usize;
+        let from_bottom = (pose.y_m / res) as usize;
         if c < g.cols && from_bottom < g.rows {
             let clear = f64::from(self.clearance_m[(g.rows - 1 - from_bottom) * g.cols + c]);
-            if clear - res * std::f64::consts::SQRT_2 > r.body.enclosing_radius() + within_m {
+            if clear - res * std::f64::consts::SQRT_2 > body.enclosing_radius() + within_m {
                 return (best <= within_m).then_some(best);
             }
             // The pose lies inside the footprint, within half a cell diagonal of its cell's
