@@ -28,6 +28,7 @@ from sitgen.controllers.inprocess import InProcessController
 from sitgen.controllers.ros2.controller import PREFIX as ROS2_PREFIX
 from sitgen.controllers.user import is_user_controller, load_controller, load_peer_controller
 from sitgen.world.config import spec_json
+from sitgen.world.requirements import verdicts, verdicts_json
 from sitgen.world.situation import Situation
 from sitgen.world.terrain import wall_segments
 
@@ -83,6 +84,12 @@ class RunRecord:
     sensed: Sensed | None = field(default=None, repr=False)
     """What the agent sensed at every step, if the run was asked to keep it (``sensed=True``:
     for a rosbag2 of the run)."""
+    requirements: list[dict[str, Any]] = field(default_factory=list)
+    """Each requirement's verdict, in the run spec's order: ``name``, ``robustness`` (float,
+    ±inf possible; None with ``error``), ``violated``, ``first_violation_s``,
+    ``interval_s``, ``weight`` (docs/requirements.md)."""
+    signals: dict[str, npt.NDArray[np.float64]] = field(default_factory=dict, repr=False)
+    """The requirement signals the requirements read, one value a sample (steps + 1)."""
     cost: tuple[float, float] = field(default=(0.0, 0.0), compare=False)
     """What the run cost the machine: (wall seconds, processor seconds of the process that
     made it and of the controller processes it started and ended). Not part of the run: the
@@ -102,6 +109,7 @@ class RunRecord:
             "failure": self.failure,
             "coverage": self.coverage,
             "events": self.events,
+            **({"requirements": verdicts_json(self.requirements)} if self.requirements else {}),
         }
 
 
@@ -327,6 +335,8 @@ def _record(
         failure=record.get("failure"),
         coverage=record.get("coverage"),
         sensed=None if senses is None else _sensed(senses),
+        requirements=verdicts(record.get("requirements", [])),
+        signals=dict(out["signals"]),
         cost=(time.perf_counter() - started, _cpu_s() - cpu),
     )
 

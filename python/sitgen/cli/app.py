@@ -157,6 +157,26 @@ def parse_params(items: list[str] | None, option: str = "--param") -> dict[str, 
     return params
 
 
+RequireOption = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--require",
+        help="NAME: FORMULA: a requirement in STL (rtamt's syntax) over the requirement "
+        "signals, judged on every run (repeatable; docs/requirements.md).",
+    ),
+]
+
+
+RequirementsOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--requirements",
+        help="A TOML file of [[requirement]] tables (name, formula, weight), judged on every "
+        "run with the spec's own and --require's.",
+    ),
+]
+
+
 TimeLimitOption = Annotated[
     float | None,
     typer.Option("--time-limit", help="Simulated seconds before a timeout (default 600)."),

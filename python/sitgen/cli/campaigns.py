@@ -10,7 +10,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
@@ -19,6 +19,7 @@ from rich.table import Table
 from sitgen import _core
 from sitgen.store import StoreError
 from sitgen.world.config import preset_names, preset_spec
+from sitgen.world.requirements import gathered, with_requirements
 from sitgen.world.situation import generate_situation
 
 if TYPE_CHECKING:
@@ -37,6 +38,8 @@ from sitgen.cli.app import (
     SeedOption,
     StepTimeoutOption,
     T,
+    RequireOption,
+    RequirementsOption,
     TimeLimitOption,
     UsageError,
     WorkersOption,
@@ -59,18 +62,21 @@ def _campaign_spec(
     keep_alive: bool = False,
     step_timeout: float | None = None,
     time_limit: float | None = None,
+    requirements: list[dict[str, Any]] | None = None,
 ) -> CampaignSpec:
     """The campaign spec in file ``spec``, or the paper's, with the agent's controller, its
-    params, perception, keep_alive and step timeout, and the runs' time limit, as
-    ``--controller``, ``--param``, ``--perception``, ``--keep-alive``, ``--step-timeout`` and
-    ``--time-limit`` give them (:func:`_with_controller`)."""
+    params, perception, keep_alive and step timeout, the runs' time limit and requirements,
+    as ``--controller``, ``--param``, ``--perception``, ``--keep-alive``, ``--step-timeout``,
+    ``--time-limit``, ``--require`` and ``--requirements`` give them
+    (:func:`_with_controller`)."""
     from sitgen.execution.jobs import parse_campaign
 
     text = None if spec is None else _read_text(spec, "campaign spec")
     parsed = parse_campaign(text, str(spec) if spec else "paper campaign")
     return _with_controller(
-        parsed, controller, params, perception, keep_alive, step_timeout, time_limit
-    )
+        parsed, controller, params, perception, keep_alive, step_timeout, time_limit,
+        requirements,
+    )  # fmt: skip
 
 
 def _with_controller(
@@ -81,11 +87,12 @@ def _with_controller(
     keep_alive: bool = False,
     step_timeout: float | None = None,
     time_limit: float | None = None,
+    requirements: list[dict[str, Any]] | None = None,
 ) -> CampaignSpec:
     """``parsed`` whose runs give the agent ``controller`` (over the spec's run controller, or
     its mission's) with ``params`` over its own, ``perception``, ``keep_alive`` and
-    ``step_timeout`` (processor seconds a step), and last ``time_limit`` simulated seconds;
-    unchanged without any."""
+    ``step_timeout`` (processor seconds a step), last ``time_limit`` simulated seconds, and
+    judged by ``requirements`` too; unchanged without any."""
     from sitgen.execution.jobs import campaign_from_data
     from sitgen.run import run_spec_with
 
@@ -93,6 +100,10 @@ def _with_controller(
     if time_limit is not None:
         source = copy.deepcopy(parsed.source)
         source["run"] = {**dict(source.get("run") or {}), "time_limit_s": time_limit}
+        parsed = campaign_from_data(source)
+    if requirements:
+        source = copy.deepcopy(parsed.source)
+        source["run"] = with_requirements(source.get("run"), requirements)
         parsed = campaign_from_data(source)
     if not controller and not given and not perception and not keep_alive and not step_timeout:
         return parsed
@@ -149,6 +160,8 @@ def campaign(
     keep_alive: KeepAliveOption = False,
     step_timeout: StepTimeoutOption = None,
     time_limit: TimeLimitOption = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
     n: Annotated[
         int | None, typer.Option("--n", "-n", min=0, help="Runs (default: the spec's, 500).")
     ] = None,
@@ -205,8 +218,9 @@ def campaign(
     check_output(junit, "--junit", db, spec)
     check_output(summary_json, "--summary", db, spec, junit)
     parsed = _campaign_spec(
-        spec, controller, param, perception, keep_alive, step_timeout, time_limit
-    )
+        spec, controller, param, perception, keep_alive, step_timeout, time_limit,
+        gathered(require, requirements),
+    )  # fmt: skip
     total_n = parsed.n if n is None else n
     result = _stored(
         "campaign",

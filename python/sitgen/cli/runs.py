@@ -15,6 +15,7 @@ from rich.table import Table
 from sitgen.controllers.ros2.dds_domain import unconfined
 from sitgen.controllers.user import USER_PREFIXES
 from sitgen.world.config import preset_spec
+from sitgen.world.requirements import gathered, verdicts_text, with_requirements
 from sitgen.world.situation import Situation, generate_situation
 
 if TYPE_CHECKING:
@@ -28,6 +29,8 @@ from sitgen.cli.app import (
     RunSpecOption,
     SensorSeedOption,
     StepTimeoutOption,
+    RequireOption,
+    RequirementsOption,
     TimeLimitOption,
     UsageError,
     _read_run_spec,
@@ -112,6 +115,8 @@ def run_command(
     perception: PerceptionOption = None,
     step_timeout: StepTimeoutOption = None,
     time_limit: TimeLimitOption = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
     seed: SensorSeedOption = 0,
     spec: RunSpecOption = None,
     events: Annotated[
@@ -135,7 +140,7 @@ def run_command(
         raise UsageError(f"--rosbag2: {rosbag2} already exists; a rosbag2 is written anew")
     loaded = Situation.load(situation, allow_edited)
     run_spec = run_spec_with(
-        _read_run_spec(spec),
+        with_requirements(_read_run_spec(spec), gathered(require, requirements)),
         None,
         controller,
         parse_params(param),
@@ -180,6 +185,8 @@ def run_command(
                 )
             Console().print(table)
         typer.echo(record.events_text, nl=False)
+        if record.requirements:
+            typer.echo(verdicts_text(record.requirements), nl=False)
     if record.outcome == "error":
         raise typer.Exit(EXIT_FAILED)
 

@@ -40,10 +40,11 @@ from sitgen.conformance import resets
 from sitgen.controllers.deadlines import ControllerError
 from sitgen.controllers.user import check_controller_name, is_user_controller
 from sitgen.world.config import load_spec, spec_json
+from sitgen.world.requirements import checked_tables, with_requirements
 from sitgen.world.situation import Situation, situation_of
 
 DISTRIBUTIONS = ("choice", "uniform", "int", "scale")
-SECTIONS = ("n", "situation", "run", "vary")
+SECTIONS = ("n", "situation", "run", "vary", "requirement")
 MAX_RUNS = 1_000_000_000
 """Most runs a campaign may ask for (jobs are streamed, so memory does not grow with it)."""
 CHECKED_JOBS = 10_000
@@ -94,6 +95,11 @@ def campaign_from_data(data: dict[str, Any]) -> CampaignSpec:
     for section in ("situation", "run", "vary"):
         if not isinstance(data.get(section, {}), dict):
             raise _core.SpecError(f"{section}: expected a table")
+    if "requirement" in data:
+        # A campaign's [[requirement]] tables are its runs': they travel in the run spec.
+        data = dict(data)
+        tables = checked_tables(data.pop("requirement"), "campaign")
+        data["run"] = with_requirements(data.get("run"), tables)
     vary: dict[str, dict[str, Any]] = data.get("vary", {})
     for path, dist in vary.items():
         where = f"vary.{path!r}"

@@ -43,6 +43,7 @@ from sitgen.store.records import (
 )
 from sitgen.store.schema import (
     COST_SCHEMA,
+    REQUIREMENT_SCHEMA,
     DIFF_SCHEMA,
     FAULT_SCHEMA,
     JUDGEMENT_SCHEMA,
@@ -131,6 +132,7 @@ class Store(Verdicts):
                     + KILL_TEST_SCHEMA
                     + DIFF_SCHEMA
                     + COST_SCHEMA
+                    + REQUIREMENT_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -341,6 +343,39 @@ class Store(Verdicts):
         wanted = None if run_ids is None else set(run_ids)
         return {r: (w, c) for r, w, c in rows if wanted is None or r in wanted}
 
+    def requirement_verdicts(
+        self, name: str | None = None, violated_only: bool = False
+    ) -> list[dict[str, Any]]:
+        """Stored requirement verdicts (all, or requirement ``name``'s), worst robustness
+        first, then by run id."""
+        sql = (
+            "SELECT run_id, name, formula, robustness, violated, first_violation_s, "
+            "interval_start_s, interval_end_s, weight, error FROM requirement_verdicts"
+        )
+        where = []
+        args: list[Any] = []
+        if name is not None:
+            where.append("name = ?")
+            args.append(name)
+        if violated_only:
+            where.append("violated = 1")
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY robustness IS NULL, robustness, run_id"
+        keys = (
+            "run_id",
+            "name",
+            "formula",
+            "robustness",
+            "violated",
+            "first_violation_s",
+            "interval_start_s",
+            "interval_end_s",
+            "weight",
+            "error",
+        )
+        return [dict(zip(keys, r, strict=True)) for r in self.db.execute(sql, args)]
+
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
 
@@ -387,6 +422,12 @@ class Store(Verdicts):
                 "INSERT OR REPLACE INTO run_costs (run_id, wall_s, cpu_s) VALUES (?, ?, ?)",
                 (row.id, *row.cost),
             )
+        self.db.executemany(
+            "INSERT INTO requirement_verdicts (run_id, name, formula, robustness, violated, "
+            "first_violation_s, interval_start_s, interval_end_s, weight, error) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            row.requirement_values(),
+        )
         if not row.whole:
             return
         self.db.executemany(
@@ -568,6 +609,7 @@ class Store(Verdicts):
 
 __all__ = [
     "COST_SCHEMA",
+    "REQUIREMENT_SCHEMA",
     "DIFF_SCHEMA",
     "FAULT_SCHEMA",
     "JUDGEMENT_SCHEMA",

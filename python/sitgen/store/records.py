@@ -179,6 +179,29 @@ class RunRow:
             events_digest(self.events_jsonl),
         )
 
+    def requirement_values(self) -> list[tuple[Any, ...]]:
+        """Its rows of ``requirement_verdicts``, one per requirement of its run spec."""
+        formulas = {r["name"]: r["formula"] for r in self.run_spec.get("requirement", [])}
+        rows = []
+        for v in (self.record or {}).get("requirements", []):
+            rho = v["robustness"]
+            interval = v.get("interval_s") or (None, None)
+            rows.append(
+                (
+                    self.id,
+                    v["name"],
+                    formulas.get(v["name"], ""),
+                    None if rho is None else float(rho),
+                    int(v["violated"]),
+                    v.get("first_violation_s"),
+                    interval[0],
+                    interval[1],
+                    v["weight"],
+                    v.get("error"),
+                )
+            )
+        return rows
+
     def event_values(self) -> list[tuple[Any, ...]]:
         """Its rows of ``events``, one per event in order."""
         return [

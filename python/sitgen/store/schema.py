@@ -8,7 +8,7 @@ import sqlite3
 
 from sitgen import _core
 
-SCHEMA_VERSION = 10
+SCHEMA_VERSION = 11
 
 
 SCHEMA = """
@@ -195,6 +195,28 @@ CREATE TABLE IF NOT EXISTS run_costs (
 machine, under any load, on any worker count."""
 
 
+REQUIREMENT_SCHEMA = """
+CREATE TABLE IF NOT EXISTS requirement_verdicts (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    name TEXT NOT NULL,
+    formula TEXT NOT NULL,
+    robustness REAL,
+    violated INTEGER NOT NULL,
+    first_violation_s REAL,
+    interval_start_s REAL,
+    interval_end_s REAL,
+    weight REAL NOT NULL,
+    error TEXT,
+    PRIMARY KEY (run_id, name)
+);
+CREATE INDEX IF NOT EXISTS requirement_verdicts_by_name
+    ON requirement_verdicts (name, violated, robustness);
+"""
+"""Each run's verdict on each of its requirements (docs/requirements.md): robustness (NULL
+where ``error`` says why there is none; ±inf as SQLite's), whether it was violated, when, and
+the interval that decided it."""
+
+
 DIFF_SCHEMA = """
 CREATE TABLE IF NOT EXISTS diff (
     id INTEGER PRIMARY KEY CHECK (id = 1),
@@ -301,6 +323,10 @@ def upgrade(db: sqlite3.Connection, version: int) -> None:
         # Version 10 adds what each run cost (wall and processor seconds); runs stored
         # before have none.
         db.executescript(COST_SCHEMA)
+    if version < 11:
+        # Version 11 adds each run's requirement verdicts; runs stored before had no
+        # requirements.
+        db.executescript(REQUIREMENT_SCHEMA)
     db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 
