@@ -361,12 +361,15 @@ def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
     (none if 0) and say what it cost."""
     from sitgen.store import Store
     from sitgen.triage.failures import measure_robustness
+    from sitgen.triage.requirements import measure_requirements
 
     if reruns == 0:
         return
     started = time.perf_counter()
     with Store(db) as store:
         ran = measure_robustness(store, reruns, workers or os.cpu_count() or 1)
+        # A violated requirement's worst run, copied as a distinct failure's representative.
+        ran += reruns * len(measure_requirements(store, reruns, workers or os.cpu_count() or 1))
     if ran:
         typer.echo(
             f"robustness: {ran} perturbed copies of distinct failures' runs in "

@@ -268,9 +268,11 @@ def failures(
 ) -> None:
     """One row per distinct failure of a campaign, the most dangerous (best score) first: its
     class, sentence, runs, share of runs, best score, representative run, median duration,
-    median processor seconds a run cost, and robustness."""
+    median processor seconds a run cost, and robustness; then one per violated requirement
+    (class requirement:NAME, its worst-robustness run as representative)."""
     from sitgen.store import Store
     from sitgen.triage.failures import distinct_failures, write_failures
+    from sitgen.triage.requirements import requirement_failures
 
     if format not in ("table", "csv", "json"):
         raise UsageError(f"--format: `{format}` is not one of table, json, csv")
@@ -279,7 +281,9 @@ def failures(
     with Store(db) as store:
         if learned is not None:
             store.rescore(learned)
-        found = distinct_failures(store)
+        # sitgen's own distinct failures, then each violated requirement's (class
+        # requirement:NAME, its runs by robustness, worst first).
+        found = distinct_failures(store) + requirement_failures(store)
     if format != "table":
         write_failures(found, format, sys.stdout)
         return

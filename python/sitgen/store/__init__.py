@@ -343,39 +343,6 @@ class Store(Verdicts):
         wanted = None if run_ids is None else set(run_ids)
         return {r: (w, c) for r, w, c in rows if wanted is None or r in wanted}
 
-    def requirement_verdicts(
-        self, name: str | None = None, violated_only: bool = False
-    ) -> list[dict[str, Any]]:
-        """Stored requirement verdicts (all, or requirement ``name``'s), worst robustness
-        first, then by run id."""
-        sql = (
-            "SELECT run_id, name, formula, robustness, violated, first_violation_s, "
-            "interval_start_s, interval_end_s, weight, error FROM requirement_verdicts"
-        )
-        where = []
-        args: list[Any] = []
-        if name is not None:
-            where.append("name = ?")
-            args.append(name)
-        if violated_only:
-            where.append("violated = 1")
-        if where:
-            sql += " WHERE " + " AND ".join(where)
-        sql += " ORDER BY robustness IS NULL, robustness, run_id"
-        keys = (
-            "run_id",
-            "name",
-            "formula",
-            "robustness",
-            "violated",
-            "first_violation_s",
-            "interval_start_s",
-            "interval_end_s",
-            "weight",
-            "error",
-        )
-        return [dict(zip(keys, r, strict=True)) for r in self.db.execute(sql, args)]
-
     def done_ids(self) -> set[int]:
         return {r[0] for r in self.db.execute("SELECT id FROM runs")}
 

@@ -211,10 +211,20 @@ CREATE TABLE IF NOT EXISTS requirement_verdicts (
 );
 CREATE INDEX IF NOT EXISTS requirement_verdicts_by_name
     ON requirement_verdicts (name, violated, robustness);
+CREATE TABLE IF NOT EXISTS requirement_robustness (
+    run_id INTEGER NOT NULL REFERENCES runs (id),
+    name TEXT NOT NULL,
+    reruns INTEGER NOT NULL,
+    recurs INTEGER NOT NULL,
+    copies TEXT NOT NULL,
+    sitgen_version TEXT NOT NULL,
+    PRIMARY KEY (run_id, name)
+);
 """
 """Each run's verdict on each of its requirements (docs/requirements.md): robustness (NULL
 where ``error`` says why there is none; ±inf as SQLite's), whether it was violated, when, and
-the interval that decided it."""
+the interval that decided it; and how often a violating run's violation recurred in its
+perturbed copies."""
 
 
 DIFF_SCHEMA = """

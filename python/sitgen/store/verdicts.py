@@ -181,3 +181,61 @@ class Verdicts:
                 "SELECT a, b, worse, who, at FROM judgements ORDER BY id"
             )
         ]
+
+    def requirement_verdicts(
+        self, name: str | None = None, violated_only: bool = False
+    ) -> list[dict[str, Any]]:
+        """Stored requirement verdicts (all, or requirement ``name``'s), worst robustness
+        first, then by run id."""
+        sql = (
+            "SELECT run_id, name, formula, robustness, violated, first_violation_s, "
+            "interval_start_s, interval_end_s, weight, error FROM requirement_verdicts"
+        )
+        where = []
+        args: list[Any] = []
+        if name is not None:
+            where.append("name = ?")
+            args.append(name)
+        if violated_only:
+            where.append("violated = 1")
+        if where:
+            sql += " WHERE " + " AND ".join(where)
+        sql += " ORDER BY robustness IS NULL, robustness, run_id"
+        keys = (
+            "run_id",
+            "name",
+            "formula",
+            "robustness",
+            "violated",
+            "first_violation_s",
+            "interval_start_s",
+            "interval_end_s",
+            "weight",
+            "error",
+        )
+        return [dict(zip(keys, r, strict=True)) for r in self.db.execute(sql, args)]
+
+    def record_requirement_robustness(self, rows: Iterable[dict[str, Any]]) -> None:
+        """Store how often requirement violations recurred in perturbed copies: each row's
+        ``run_id``, ``name``, ``reruns`` (copies that ran), ``recurs`` and ``copies`` (each
+        copy's verdict: ``violated``, ``satisfied`` or ``error``) and ``sitgen_version``."""
+        with self.db:
+            self.db.executemany(
+                "INSERT OR REPLACE INTO requirement_robustness (run_id, name, reruns, recurs, "
+                "copies, sitgen_version) VALUES (?, ?, ?, ?, ?, ?)",
+                [
+                    (r["run_id"], r["name"], r["reruns"], r["recurs"],
+                     json.dumps(r["copies"]), r["sitgen_version"])
+                    for r in rows
+                ],
+            )  # fmt: skip
+
+    def requirement_robustness(self) -> dict[tuple[int, str], dict[str, Any]]:
+        """Stored requirement robustness by (run id, requirement name)."""
+        rows = self.db.execute(
+            "SELECT run_id, name, reruns, recurs, copies FROM requirement_robustness"
+        )
+        return {
+            (r, n): {"reruns": k, "recurs": m, "copies": json.loads(c)}
+            for r, n, k, m, c in rows
+        }
