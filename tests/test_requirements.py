@@ -89,7 +89,10 @@ def formula(draw: st.DrawFn, depth: int = 0) -> str:
         op = draw(st.sampled_from(["<", "<=", ">", ">=", "==", "!=="]))
         return f"({draw(term())} {op} {draw(term())})"
     kind = draw(st.integers(0, 17))
-    sub = lambda: draw(formula(depth + 1))  # noqa: E731
+
+    def sub() -> str:
+        return draw(formula(depth + 1))
+
     match kind:
         case 0:
             return f"(not {sub()})"
@@ -187,7 +190,10 @@ def test_precedence_and_associativity_are_rtamts(text: str) -> None:
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("always (speed < )", "formula: column 17: expected a signal, a number, '(' or an operator"),
+        (
+            "always (speed < )",
+            "formula: column 17: expected a signal, a number, '(' or an operator",
+        ),
         ("always (sped < 1)", "unknown signal 'sped'; the signals are speed, turn_rate,"),
         ("speed/2 > 1", "unknown signal 'speed/2' (rtamt reads '/' and '.' inside a name"),
         ("always[0:0.25] speed < 1", "the bound 0.25 s is not a whole number of steps of 0.1 s"),
@@ -210,3 +216,156 @@ def test_a_formula_that_does_not_read_is_one_line_naming_the_column(
 def test_a_formula_thousands_of_operators_long_is_evaluated() -> None:
     text = " and ".join(f"speed < {i}" for i in range(1, 5001))
     assert _core.requirement_robustness(text, {"speed": [0.5, 0.2]}, DT_S)[0] == 0.5
+
+
+# A run's verdicts, its signals, and the commands that take requirements.
+
+import json  # noqa: E402
+import sqlite3  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import sitgen  # noqa: E402
+from tests.conftest import run_cli  # noqa: E402
+
+FIVE = {
+    "keep_away": "always (peer_clearance > 0.3)",
+    "slow_near_peer": "always (peer_distance < 1.5 implies speed < 0.3)",
+    "reach_goal": "eventually[0:25] goal_distance < 0.5",
+    "brake_when_close": "always (peer_distance < 1 implies eventually[0:1.5] speed < 0.1)",
+    "gentle_by_walls": "always (obstacle_clearance < 0.3 implies abs(turn_rate) < 1.05)",
+}
+
+
+def _five() -> list[dict[str, str]]:
+    return [{"name": k, "formula": f} for k, f in FIVE.items()]
+
+
+def test_a_runs_verdicts_equal_rtamts_on_its_own_signals(situation: sitgen.Situation) -> None:
+    rec = sitgen.run(situation, time_limit=30, spec={"requirement": _five()})
+    assert [v["name"] for v in rec.requirements] == list(FIVE)
+    n = rec.steps + 1
+    for v in rec.requirements:
+        used = {s: rec.signals[s].tolist() for s in rec.signals if s in FIVE[v["name"]]}
+        assert all(len(x) == n for x in used.values())
+        theirs = oracle(FIVE[v["name"]], used)[0]
+        assert same(v["robustness"], theirs), v
+        assert v["violated"] == (theirs < 0)
+
+
+def test_signals_recompute_from_the_stored_trajectory(situation: sitgen.Situation) -> None:
+    every = " and ".join(f"{s} > -1000000" for s in _core.requirement_signals())
+    rec = sitgen.run(
+        situation, time_limit=20, spec={"requirement": [{"name": "all", "formula": every}]}
+    )
+    traj, dt = rec.trajectory, 0.1
+    agent, peers = traj[:, 0, :], traj[:, 1:, :]
+    step = np.diff(agent[:, :2], axis=0)
+    turn = np.angle(np.exp(1j * np.diff(agent[:, 2])))
+    mid = agent[:-1, 2] + turn / 2
+    sign = np.where(step[:, 0] * np.cos(mid) + step[:, 1] * np.sin(mid) < 0, -1.0, 1.0)
+    np.testing.assert_allclose(rec.signals["speed"][1:], sign * np.hypot(*step.T) / dt, atol=1e-9)
+    np.testing.assert_allclose(rec.signals["turn_rate"][1:], turn / dt, atol=1e-9)
+    d = np.hypot(*(peers[:, :, :2] - agent[:, None, :2]).transpose(2, 0, 1))
+    np.testing.assert_allclose(rec.signals["peer_distance"], d.min(axis=1), atol=1e-12)
+    goal = situation.agent.waypoints[-1]
+    np.testing.assert_allclose(
+        rec.signals["goal_distance"], np.hypot(agent[:, 0] - goal[0], agent[:, 1] - goal[1])
+    )
+    nearest = d.argmin(axis=1)
+    closing = (d[:-1, :][np.arange(len(d) - 1), nearest[1:]] - d.min(axis=1)[1:]) / dt
+    np.testing.assert_allclose(rec.signals["closing_speed"][1:], closing, atol=1e-9)
+    assert set(np.unique(rec.signals["peer_seen"])) <= {0.0, 1.0}
+    assert (rec.signals["peer_clearance"] <= rec.signals["peer_distance"]).all()
+    assert (rec.signals["obstacle_clearance"] >= 0).all()
+    assert (rec.signals["obstacle_clearance"] <= 5.0).all()
+
+
+def test_an_undefined_value_is_a_verdict_with_its_reason_not_a_crash(
+    situation: sitgen.Situation,
+) -> None:
+    rec = sitgen.run(
+        situation, time_limit=5,
+        spec={"requirement": [{"name": "nan", "formula": "sqrt(speed - 10) > 0"}]},
+    )  # fmt: skip
+    (v,) = rec.requirements
+    assert v["robustness"] is None and not v["violated"]
+    assert "undefined (NaN)" in v["error"]
+
+
+def test_sitgen_run_prints_each_verdict(situation_file: Path) -> None:
+    done = run_cli(
+        "run", str(situation_file), "--time-limit", "20",
+        "--require", "reach_goal: eventually[0:5] goal_distance < 0.5",
+        "--require", "keep_away: always (peer_clearance > 0.3)",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "requirement reach_goal: VIOLATED, robustness" in done.stdout
+    assert "(from 5.0 s; decided over 0.0-5.0 s)" in done.stdout
+    assert "requirement keep_away: " in done.stdout
+
+
+def test_a_campaign_stores_verdicts_and_failures_lists_violations(tmp_path: Path) -> None:
+    spec = tmp_path / "campaign.toml"
+    spec.write_text(
+        'n = 12\n[situation.terrain]\npreset = "open_field"\n'
+        "[situation.mission]\npeers_min = 3\npeers_max = 3\n[run]\ntime_limit_s = 40.0\n"
+        + "".join(f'[[requirement]]\nname = "{k}"\nformula = "{f}"\n' for k, f in FIVE.items())
+    )
+    db = tmp_path / "c.db"
+    done = run_cli("campaign", str(spec), "--db", str(db), "--reruns", "2")
+    assert done.returncode == 0, done.stderr
+    with sqlite3.connect(db) as c:
+        rows = c.execute(
+            "SELECT name, count(*), sum(violated) FROM requirement_verdicts GROUP BY name"
+        ).fetchall()
+    assert {r[0] for r in rows} == set(FIVE)
+    assert all(r[1] == 12 for r in rows)
+    violated = {r[0] for r in rows if r[2]}
+    assert "reach_goal" in violated  # 25 s is too short for most routes
+    listed = json.loads(run_cli("failures", str(db), "--format", "json").stdout)
+    keys = {f["key"]: f for f in listed}
+    for name in violated:
+        f = keys[f"requirement:{name}"]
+        robustness = {r[0]: r[1] for r in sqlite3.connect(db).execute(
+            "SELECT run_id, robustness FROM requirement_verdicts WHERE name = ? AND violated",
+            (name,),
+        )}  # fmt: skip
+        # Its runs, worst robustness first; its worst run measured in perturbed copies.
+        assert f["run_ids"] == sorted(robustness, key=lambda r: (robustness[r], r))
+        assert f["robustness"] != "unmeasured"
+
+
+@pytest.mark.parametrize(
+    ("requirement", "message"),
+    [
+        ('name = "collision"\nformula = "speed < 1"', "one of sitgen's own classes"),
+        ('name = "a"\nformula = "always (speed <)"', "run.requirement[0].formula: column 16"),
+        ('name = "a"\nformula = "speed < 1"\ncolour = "red"', "requirement[0].colour: unknown"),
+        ('name = "a b"\nformula = "speed < 1"', "is not a requirement name"),
+    ],
+)
+def test_a_bad_requirement_stops_a_campaign_before_any_run(
+    tmp_path: Path, requirement: str, message: str
+) -> None:
+    spec = tmp_path / "campaign.toml"
+    spec.write_text(
+        f'n = 3\n[situation.terrain]\npreset = "open_field"\n[[requirement]]\n{requirement}\n'
+    )
+    db = tmp_path / "c.db"
+    done = run_cli("campaign", str(spec), "--db", str(db), "--reruns", "0")
+    assert done.returncode != 0
+    assert message in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert (
+        not db.exists()
+        or not sqlite3.connect(db)
+        .execute("SELECT count(*) FROM sqlite_master WHERE name = 'runs'")
+        .fetchone()[0]
+        or not sqlite3.connect(db).execute("SELECT count(*) FROM runs").fetchone()[0]
+    )
+
+
+def test_require_needs_a_name_and_a_formula(situation_file: Path) -> None:
+    done = run_cli("run", str(situation_file), "--require", "always speed < 1")
+    assert done.returncode != 0
+    assert "--require: `always speed < 1` is not NAME: FORMULA" in done.stderr

@@ -43,7 +43,6 @@ from sitgen.store.records import (
 )
 from sitgen.store.schema import (
     COST_SCHEMA,
-    REQUIREMENT_SCHEMA,
     DIFF_SCHEMA,
     FAULT_SCHEMA,
     JUDGEMENT_SCHEMA,
@@ -51,6 +50,7 @@ from sitgen.store.schema import (
     KILL_TEST_SCHEMA,
     KINDS,
     PLAN_PARTS,
+    REQUIREMENT_SCHEMA,
     ROBUSTNESS_SCHEMA,
     SCHEMA,
     SCHEMA_VERSION,
@@ -576,7 +576,6 @@ class Store(Verdicts):
 
 __all__ = [
     "COST_SCHEMA",
-    "REQUIREMENT_SCHEMA",
     "DIFF_SCHEMA",
     "FAULT_SCHEMA",
     "JUDGEMENT_SCHEMA",
@@ -585,6 +584,7 @@ __all__ = [
     "KINDS",
     "MAX_RUN_ID",
     "PLAN_PARTS",
+    "REQUIREMENT_SCHEMA",
     "ROBUSTNESS_SCHEMA",
     "SCHEMA",
     "SCHEMA_VERSION",

@@ -236,6 +236,5 @@ class Verdicts:
             "SELECT run_id, name, reruns, recurs, copies FROM requirement_robustness"
         )
         return {
-            (r, n): {"reruns": k, "recurs": m, "copies": json.loads(c)}
-            for r, n, k, m, c in rows
+            (r, n): {"reruns": k, "recurs": m, "copies": json.loads(c)} for r, n, k, m, c in rows
         }

@@ -61,7 +61,9 @@ def gathered(require: list[str] | None, file: Path | None) -> list[dict[str, Any
     return tables + [parse_require(item) for item in require or []]
 
 
-def with_requirements(run_spec: Mapping[str, Any] | None, tables: list[dict[str, Any]]) -> dict[str, Any]:
+def with_requirements(
+    run_spec: Mapping[str, Any] | None, tables: list[dict[str, Any]]
+) -> dict[str, Any]:
     """``run_spec`` with ``tables`` after its own requirements; one of the same name as one of
     its own replaces it (the command line speaks last)."""
     spec = dict(run_spec or {})
@@ -104,6 +106,7 @@ def verdicts_text(given: list[dict[str, Any]]) -> str:
 def verdicts_json(given: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Verdicts as JSON carries them: ±∞ robustness as ``"inf"``/``"-inf"``, as the core
     writes it (JSON has no infinity)."""
+
     def number(x: float | None) -> float | str | None:
         return x if x is None or abs(x) != float("inf") else ("inf" if x > 0 else "-inf")
 
