@@ -369,3 +369,40 @@ def test_require_needs_a_name_and_a_formula(situation_file: Path) -> None:
     done = run_cli("run", str(situation_file), "--require", "always speed < 1")
     assert done.returncode != 0
     assert "--require: `always speed < 1` is not NAME: FORMULA" in done.stderr
+
+
+def test_every_command_of_the_guide_runs_as_written(tmp_path: Path) -> None:
+    """docs/requirements.md's ``sh`` blocks, in order, from a folder that sees the examples as
+    the repository root does; and what it says the campaign found."""
+    import re
+    import shlex
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    guide = (ROOT / "docs" / "requirements.md").read_text()
+    (tmp_path / "examples").symlink_to(ROOT / "examples")
+    bin_dir = Path(sys.executable).parent
+    lines = "\n".join(re.findall(r"```sh\n(.*?)```", guide, flags=re.DOTALL)).splitlines()
+    commands = [shlex.split(line) for line in lines if line.strip()]
+    assert {c[1] for c in commands} >= {"run", "campaign", "failures"}
+    for argv in commands:
+        done = subprocess.run(
+            [str(bin_dir / "sitgen"), *argv[1:]],
+            cwd=tmp_path, capture_output=True, text=True, timeout=600, check=False,
+        )  # fmt: skip
+        assert done.returncode == 0, f"{shlex.join(argv)}\n{done.stdout}\n{done.stderr}"
+        if argv[1] == "run" and "--requirements" in argv:
+            assert "requirement reach_goal_in_time: VIOLATED, robustness -37.04" in done.stdout
+    with sqlite3.connect(tmp_path / "pioneer.db") as c:
+        worst = c.execute(
+            "SELECT run_id, robustness, first_violation_s FROM requirement_verdicts "
+            "WHERE name = 'slow_near_peers' AND violated ORDER BY robustness"
+        ).fetchone()
+        assert worst[0] == 2 and worst[2] == 71.6
+        assert round(worst[1], 2) == -0.15
+        copies = c.execute(
+            "SELECT copies FROM requirement_robustness WHERE name = 'slow_near_peers'"
+        ).fetchone()
+        assert json.loads(copies[0]) == ["violated", "violated"]

@@ -168,11 +168,11 @@ RequireOption = Annotated[
 
 
 RequirementsOption = Annotated[
-    Path | None,
+    list[Path] | None,
     typer.Option(
         "--requirements",
         help="A TOML file of [[requirement]] tables (name, formula, weight), judged on every "
-        "run with the spec's own and --require's.",
+        "run with the spec's own and --require's (repeatable).",
     ),
 ]
 

@@ -55,9 +55,9 @@ def checked_tables(tables: Any, where: str) -> list[dict[str, Any]]:
     return [dict(t) for t in tables]
 
 
-def gathered(require: list[str] | None, file: Path | None) -> list[dict[str, Any]]:
-    """The requirements of ``--requirements FILE`` then of each ``--require``."""
-    tables = read_requirements(file) if file is not None else []
+def gathered(require: list[str] | None, files: list[Path] | None) -> list[dict[str, Any]]:
+    """The requirements of each ``--requirements FILE`` then of each ``--require``."""
+    tables = [t for f in files or [] for t in read_requirements(f)]
     return tables + [parse_require(item) for item in require or []]
 
 
