@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-load bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-load bench-requirements bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -130,6 +130,11 @@ bench-fast-path: install-test
 # campaign on seeds 0-4 (benches/load.py; an idle machine, a few minutes).
 bench-load: install-test
 	$(BIN)/python benches/load.py
+
+# What judging five requirements adds to the default campaign's processor time (two pairs,
+# one worker; docs/requirements.md).
+bench-requirements: install-test
+	$(BIN)/python benches/requirement_cost.py
 
 # Where a step's time goes: the reference scene without Python under perf (Linux perf needed).
 profile:

@@ -24,6 +24,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+from requirement_cost import bench_requirements
+
 import sitgen
 from sitgen import _core
 from sitgen.world.config import preset_spec
@@ -541,6 +543,7 @@ def main() -> None:
     if os.environ.get("SITGEN_BENCH_CAMPAIGN_N", "500") != "0":
         results["campaign"] = bench_campaign(rows)
         results["robustness"] = bench_robustness(rows)
+        results["requirements"] = bench_requirements(rows)
 
     scen = SHARED / "movingai" / "scenarios" / (ASTAR_MAP + ".scen")
     if scen.is_file():
