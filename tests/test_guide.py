@@ -17,9 +17,9 @@ from tests.conftest import ROOT
 GUIDE = ROOT / "docs" / "your-controller.md"
 
 
-def guide_commands() -> list[tuple[list[str], str]]:
-    """Each command of the guide's ``sh`` blocks with its comment."""
-    blocks = re.findall(r"```sh\n(.*?)```", GUIDE.read_text(), flags=re.DOTALL)
+def guide_commands(guide: Path = GUIDE) -> list[tuple[list[str], str]]:
+    """Each command of a guide's ``sh`` blocks with its comment."""
+    blocks = re.findall(r"```sh\n(.*?)```", guide.read_text(), flags=re.DOTALL)
     commands = []
     for line in "\n".join(blocks).splitlines():
         text, _, comment = line.partition("  # ")

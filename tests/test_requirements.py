@@ -4,8 +4,14 @@ precedence; a run's verdicts and signals come back with its record."""
 
 from __future__ import annotations
 
+import json
 import math
+import shlex
+import sqlite3
+import subprocess
+import sys
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -13,7 +19,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import sitgen
 from sitgen import _core
+from tests.conftest import ROOT, run_cli
+from tests.test_guide import guide_commands
 
 rtamt = pytest.importorskip("rtamt", reason="rtamt (the STL oracle) is in the test extra")
 
@@ -220,13 +229,6 @@ def test_a_formula_thousands_of_operators_long_is_evaluated() -> None:
 
 # A run's verdicts, its signals, and the commands that take requirements.
 
-import json  # noqa: E402
-import sqlite3  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import sitgen  # noqa: E402
-from tests.conftest import run_cli  # noqa: E402
-
 FIVE = {
     "keep_away": "always (peer_clearance > 0.3)",
     "slow_near_peer": "always (peer_distance < 1.5 implies speed < 0.3)",
@@ -374,18 +376,9 @@ def test_require_needs_a_name_and_a_formula(situation_file: Path) -> None:
 def test_every_command_of_the_guide_runs_as_written(tmp_path: Path) -> None:
     """docs/requirements.md's ``sh`` blocks, in order, from a folder that sees the examples as
     the repository root does; and what it says the campaign found."""
-    import re
-    import shlex
-    import subprocess
-    import sys
-
-    from tests.conftest import ROOT
-
-    guide = (ROOT / "docs" / "requirements.md").read_text()
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     bin_dir = Path(sys.executable).parent
-    lines = "\n".join(re.findall(r"```sh\n(.*?)```", guide, flags=re.DOTALL)).splitlines()
-    commands = [shlex.split(line) for line in lines if line.strip()]
+    commands = [argv for argv, _ in guide_commands(ROOT / "docs" / "requirements.md")]
     assert {c[1] for c in commands} >= {"run", "campaign", "failures"}
     for argv in commands:
         done = subprocess.run(

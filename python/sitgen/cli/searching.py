@@ -22,6 +22,8 @@ from sitgen.cli.app import (
     OnProgress,
     ParamOption,
     PerceptionOption,
+    RequirementsOption,
+    RequireOption,
     RerunsOption,
     StepTimeoutOption,
     TimeLimitOption,
@@ -39,6 +41,7 @@ from sitgen.cli.campaigns import (
     _stored,
     _with_controller,
 )
+from sitgen.world.requirements import gathered
 
 
 @app.command()
@@ -55,6 +58,8 @@ def search(
     keep_alive: KeepAliveOption = False,
     step_timeout: StepTimeoutOption = None,
     time_limit: TimeLimitOption = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -137,8 +142,9 @@ def search(
         parsed = campaign_from_data(source)
     # Last: a directed search varies the run it starts from, driven by this controller.
     parsed = _with_controller(
-        parsed, controller, param, perception, keep_alive, step_timeout, time_limit
-    )
+        parsed, controller, param, perception, keep_alive, step_timeout, time_limit,
+        gathered(require, requirements),
+    )  # fmt: skip
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
         plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)

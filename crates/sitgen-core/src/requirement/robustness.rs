@@ -181,34 +181,10 @@ pub fn evaluate(code: &[Instr], signals: &[&[f64]], n: usize) -> (Vec<f64>, Opti
             Instr::Implies => zip(&mut stack, &mut spare, |l, r| max(-l, r)),
             Instr::Iff => zip(&mut stack, &mut spare, |l, r| -(l - r).abs()),
             Instr::Xor => zip(&mut stack, &mut spare, |l, r| (l - r).abs()),
-            Instr::Always(w) => {
-                let top = stack.last_mut().expect("an operand");
-                match w {
-                    None => suffix(top, f64::INFINITY, min),
-                    Some(w) => *top = ahead(top, w, true),
-                }
-            }
-            Instr::Eventually(w) => {
-                let top = stack.last_mut().expect("an operand");
-                match w {
-                    None => suffix(top, f64::NEG_INFINITY, max),
-                    Some(w) => *top = ahead(top, w, false),
-                }
-            }
-            Instr::Historically(w) => {
-                let top = stack.last_mut().expect("an operand");
-                match w {
-                    None => prefix(top, f64::INFINITY, min),
-                    Some(w) => *top = behind(top, w, true),
-                }
-            }
-            Instr::Once(w) => {
-                let top = stack.last_mut().expect("an operand");
-                match w {
-                    None => prefix(top, f64::NEG_INFINITY, max),
-                    Some(w) => *top = behind(top, w, false),
-                }
-            }
+            Instr::Always(w) => temporal(&mut stack, w, true, true),
+            Instr::Eventually(w) => temporal(&mut stack, w, true, false),
+            Instr::Historically(w) => temporal(&mut stack, w, false, true),
+            Instr::Once(w) => temporal(&mut stack, w, false, false),
             Instr::Prev | Instr::StrongPrev => {
                 let fill = if *instr == Instr::Prev {
                     f64::INFINITY
@@ -305,6 +281,23 @@ fn zip(stack: &mut Vec<Vec<f64>>, spare: &mut Vec<Vec<f64>>, f: impl Fn(f64, f64
         *l = f(*l, *r);
     }
     spare.push(rhs);
+}
+
+/// `always` (`future`, `minimum`), `eventually` (`future`), `historically` (`minimum`) or
+/// `once` over the top of the stack, in place, bounded by `w` or not.
+fn temporal(stack: &mut [Vec<f64>], w: Option<Window>, future: bool, minimum: bool) {
+    let top = stack.last_mut().expect("an operand");
+    let (init, op): (f64, fn(f64, f64) -> f64) = if minimum {
+        (f64::INFINITY, min)
+    } else {
+        (f64::NEG_INFINITY, max)
+    };
+    match (w, future) {
+        (None, true) => suffix(top, init, op),
+        (None, false) => prefix(top, init, op),
+        (Some(w), true) => *top = ahead(top, w, minimum),
+        (Some(w), false) => *top = behind(top, w, minimum),
+    }
 }
 
 /// Untimed future operator: each sample becomes `op` over itself and everything after.
