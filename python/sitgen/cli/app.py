@@ -171,7 +171,7 @@ RequirementsOption = Annotated[
     list[Path] | None,
     typer.Option(
         "--requirements",
-        help="A TOML file of [[requirement]] tables (name, formula, weight), judged on every "
+        help="A TOML file of \\[\\[requirement]] tables (name, formula, weight), judged on every "
         "run with the spec's own and --require's (repeatable).",
     ),
 ]
