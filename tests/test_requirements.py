@@ -279,7 +279,7 @@ def test_signals_recompute_from_the_stored_trajectory(situation: sitgen.Situatio
     assert set(np.unique(rec.signals["peer_seen"])) <= {0.0, 1.0}
     assert (rec.signals["peer_clearance"] <= rec.signals["peer_distance"]).all()
     assert (rec.signals["obstacle_clearance"] >= 0).all()
-    assert (rec.signals["obstacle_clearance"] <= 1.0).all()
+    assert (rec.signals["obstacle_clearance"] <= 2.0).all()
 
 
 def test_an_undefined_value_is_a_verdict_with_its_reason_not_a_crash(

@@ -221,6 +221,17 @@ pub struct World {
     seed: u64,
 }
 
+/// What a caller of [`World::wall_clearance_at`] that asks it of pose after pose knows: the
+/// map's [`World::edge_cells_before`], and an upper bound on the clearance (the last pose's
+/// clearance plus how far any point of the footprint has moved since), if it has one.
+#[derive(Debug, Clone, Copy)]
+pub struct Aid<'a> {
+    /// [`World::edge_cells_before`].
+    pub edge_cells_before: &'a [u32],
+    /// The clearance is at most this, metres.
+    pub at_most_m: Option<f64>,
+}
+
 /// Each robot's last [`WallScan`], by robot index (a lock, uncontended, so that a world can be
 /// shared with threads that only read it).
 #[derive(Debug)]
@@ -608,19 +619,61 @@ impl World {
     /// measured against the rectangle; the distance field skips robots in the open.
     pub fn wall_clearance(&self, i: usize, within_m: f64) -> Option<f64> {
         let r = &self.robots[i];
-        self.wall_clearance_at(&r.body, &r.pose, within_m)
+        self.wall_clearance_at(&r.body, &r.pose, within_m, None)
+    }
+
+    /// Each row's count of edge cells before each column, `cols + 1` a row, top row first: an
+    /// edge cell is an occupied cell with a free cell (or nothing) beside it, the only cells a
+    /// footprint outside the walls can be nearest to (one overlapping the walls overlaps an
+    /// edge cell: a robot never lies wholly inside them). What lets
+    /// [`World::wall_clearance_at`] skip a row's stretch without one, and an inner cell.
+    pub fn edge_cells_before(&self) -> Vec<u32> {
+        let g = &self.map.grid;
+        let occupied = |r: usize, c: usize| g.cells[r * g.cols + c];
+        let mut out = Vec::with_capacity(g.rows * (g.cols + 1));
+        for r in 0..g.rows {
+            let mut n = 0u32;
+            out.push(0);
+            for c in 0..g.cols {
+                let edge = occupied(r, c)
+                    && (r == 0
+                        || c == 0
+                        || r + 1 == g.rows
+                        || c + 1 == g.cols
+                        || !occupied(r - 1, c)
+                        || !occupied(r + 1, c)
+                        || !occupied(r, c - 1)
+                        || !occupied(r, c + 1));
+                n += u32::from(edge);
+                out.push(n);
+            }
+        }
+        out
     }
 
     /// [`World::wall_clearance`] of a robot of `body` at `pose` (the requirement signal
-    /// `obstacle_clearance` asks it of every recorded pose).
-    pub fn wall_clearance_at(&self, body: &Body, pose: &Pose, within_m: f64) -> Option<f64> {
+    /// `obstacle_clearance` asks it of every recorded pose, with an [`Aid`]: the same value,
+    /// found looking at fewer cells).
+    pub fn wall_clearance_at(
+        &self,
+        body: &Body,
+        pose: &Pose,
+        within_m: f64,
+        aid: Option<Aid<'_>>,
+    ) -> Option<f64> {
         let rect = footprint(body, pose);
         let g = &self.map.grid;
         let res = self.map.resolution_m;
         let (w, h) = (g.cols as f64 * res, g.rows as f64 * res);
         let (x0, y0, x1, y1) = rect.bounds();
         let mut best = x0.min(y0).min(w - x1).min(h - y1).max(0.0);
-        let mut reach = within_m.min(best);
+        // No cell beyond the caller's bound can be the nearest (the margin keeps a cell at
+        // exactly the bound).
+        let bound = aid
+            .and_then(|a| a.at_most_m)
+            .map_or(f64::INFINITY, |b| b + 1e-6);
+        let mut edge_cells_before = aid.map(|a| a.edge_cells_before);
+        let mut reach = within_m.min(best).min(bound);
         let c = (pose.x_m / res) as usize;
         let from_bottom = (pose.y_m / res) as usize;
         if c < g.cols && from_bottom < g.rows {
@@ -631,6 +684,11 @@ impl World {
             // The pose lies inside the footprint, within half a cell diagonal of its cell's
             // centre: no cell nearer the footprint can lie farther out than this.
             reach = reach.min(clear + res);
+            if clear == 0.0 {
+                // A footprint about an occupied cell may lie wholly inside the walls, beside
+                // no edge cell: every occupied cell is looked at.
+                edge_cells_before = None;
+            }
         }
         let cells = |lo: f64, hi: f64, n: usize| {
             (
@@ -642,8 +700,16 @@ impl World {
         let (w0, w1) = cells(y0, y1, g.rows);
         for wr in w0..w1 {
             let row = g.rows - 1 - wr;
+            let at = row * (g.cols + 1);
+            if edge_cells_before.is_some_and(|before| before[at + c1] == before[at + c0]) {
+                continue;
+            }
             for col in c0..c1 {
-                if !g.cells[row * g.cols + col] {
+                let looked_at = match edge_cells_before {
+                    Some(before) => before[at + col + 1] != before[at + col],
+                    None => g.cells[row * g.cols + col],
+                };
+                if !looked_at {
                     continue;
                 }
                 let centre = ((col as f64 + 0.5) * res, (wr as f64 + 0.5) * res);
@@ -651,10 +717,11 @@ impl World {
                 // cells that cannot beat the best without the exact test.
                 let half_diagonal = res * std::f64::consts::FRAC_1_SQRT_2;
                 let (along, across) = rect.point_offsets(centre);
+                let beat = best.min(bound);
                 let cannot_beat = crate::geometry::beyond_by_squares(
                     along * along + across * across,
-                    (best + half_diagonal).powi(2),
-                    || rect.point_distance(centre) - half_diagonal >= best,
+                    (beat + half_diagonal).powi(2),
+                    || rect.point_distance(centre) - half_diagonal >= beat,
                 );
                 if cannot_beat {
                     continue;

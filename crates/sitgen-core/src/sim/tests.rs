@@ -592,3 +592,29 @@ fn beams_tested_only_within_each_robot_s_window_see_what_every_beam_would() {
     // The scenes are crowded enough that windows matter.
     assert!(sightings > 1000, "{sightings}");
 }
+
+proptest! {
+    /// The requirement signal's aided search (edge cells only, bounded by an upper bound on the
+    /// clearance) finds exactly the clearance the monitor's full search finds.
+    #[test]
+    fn an_aided_wall_clearance_is_the_same_value(
+        x in 0.5f64..9.5, y in 0.5f64..9.5, heading in -3.2f64..3.2, slack in 0.0f64..0.5,
+    ) {
+        let mut occupied = test_data::block(100, (3.0, 4.5), (2.0, 7.0));
+        occupied.extend(test_data::block(100, (6.0, 6.4), (5.0, 9.0)));
+        occupied.extend(test_data::block(100, (0.0, 10.0), (0.0, 0.3)));
+        let w = world(100, &occupied, vec![robot(0, 1.0, 1.0, 0.0)]);
+        let body = Body::default();
+        let pose = Pose { x_m: x, y_m: y, heading_rad: heading };
+        let full = w.wall_clearance_at(&body, &pose, 1.0, None);
+        let edges = w.edge_cells_before();
+        let aided = |at_most_m| {
+            w.wall_clearance_at(&body, &pose, 1.0, Some(Aid { edge_cells_before: &edges, at_most_m }))
+        };
+        prop_assert_eq!(aided(None), full);
+        if let Some(d) = full {
+            prop_assert_eq!(aided(Some(d)), full);
+            prop_assert_eq!(aided(Some(d + slack)), full);
+        }
+    }
+}
