@@ -68,7 +68,8 @@ fn shrink_leg_margin(original: &str) -> PyResult<Option<f64>> {
 /// Probe every candidate (situation JSON) with the run spec `run_json` and sensor seed
 /// `seed` on `threads` threads. One dict per candidate, in order: `ok`; then `problem` (why
 /// it was skipped), or `class` (key or None), `first_s` ([key, seconds] for every class its
-/// events show, most severe first), `time_s`, `outcome`.
+/// events show, most severe first, then `requirement:NAME` for each requirement violated),
+/// `time_s`, `outcome`.
 #[pyfunction]
 #[pyo3(signature = (candidates, run_json, seed, leg_margin_m, threads))]
 fn shrink_probes<'py>(
@@ -95,7 +96,13 @@ fn probe_dict(py: Python<'_>, probe: Result<Probe, String>) -> PyResult<Bound<'_
         Ok(p) => {
             d.set_item("ok", true)?;
             d.set_item("class", p.class.map(|c| c.key()))?;
-            let first: Vec<(&str, f64)> = p.first_s.iter().map(|(c, s)| (c.key(), *s)).collect();
+            // A violated requirement shows as its class, `requirement:NAME`, after sitgen's own.
+            let first: Vec<(String, f64)> = p
+                .first_s
+                .iter()
+                .map(|(c, s)| (c.key().to_string(), *s))
+                .chain(p.violated.iter().map(|(n, s)| (format!("requirement:{n}"), *s)))
+                .collect();
             d.set_item("first_s", first)?;
             d.set_item("time_s", p.time_s)?;
             let outcome = serde_json::to_value(&p.outcome).expect("outcomes serialize");

@@ -60,6 +60,15 @@ def search(
     time_limit: TimeLimitOption = None,
     require: RequireOption = None,
     requirements: RequirementsOption = None,
+    requirement: Annotated[
+        str | None,
+        typer.Option(
+            "--requirement",
+            help="Falsify this requirement (one of the spec's, --require's or "
+            "--requirements's): the search keeps and varies the runs that came nearest to "
+            "violating it, by its robustness (docs/requirements.md).",
+        ),
+    ] = None,
     budget: Annotated[int, typer.Option("--budget", "-n", min=1, help="Runs to make.")] = 500,
     seed: CampaignSeedOption = 0,
     db: Annotated[Path, typer.Option("--db", help="Search store (SQLite).")] = Path("search.db"),
@@ -147,7 +156,9 @@ def search(
     )  # fmt: skip
     names = tuple(m.strip() for m in measures.split(",") if m.strip())
     try:
-        plan = plan_search(parsed, strategy, names, objective, threshold, target_class, liked)
+        plan = plan_search(
+            parsed, strategy, names, objective, threshold, target_class, liked, requirement
+        )
     except FailureFilterError as e:
         raise UsageError(str(e)) from None
 

@@ -12,6 +12,7 @@ from rich.console import Console
 from rich.table import Table
 
 from sitgen.store import StoreError, require_store
+from sitgen.world.requirements import gathered, with_requirements
 from sitgen.world.situation import Situation
 
 if TYPE_CHECKING:
@@ -21,6 +22,8 @@ from sitgen.cli.app import (
     AllowEditedOption,
     ControllerOption,
     ParamOption,
+    RequirementsOption,
+    RequireOption,
     RunSpecOption,
     SensorSeedOption,
     TimeLimitOption,
@@ -99,6 +102,16 @@ def shrink(
             "class).",
         ),
     ] = None,
+    requirement: Annotated[
+        str | None,
+        typer.Option(
+            "--requirement",
+            help="Keep this requirement violated (one of the run's; for a situation file, of "
+            "--spec's, --require's or --requirements's) instead of a failure class.",
+        ),
+    ] = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
     time_limit: TimeLimitOption = None,
     spec: RunSpecOption = None,
     seed: SensorSeedOption = 0,
@@ -127,17 +140,21 @@ def shrink(
             check_class(failure_class)
         except FailureFilterError as e:
             raise UsageError(str(e)) from None
+    if requirement is not None:
+        if failure_class is not None:
+            raise UsageError("--requirement and --class: keep one or the other")
+        failure_class = f"requirement:{requirement}"
     is_store = _is_store(source)
     with _progress("shrink", max_probes, "probes") as on_progress:
         try:
             if is_store:
                 if run_id is None:
                     raise UsageError(f"{source}: give the run to shrink: sitgen shrink DB RUN")
-                if controller or param or spec is not None:
+                if controller or param or spec is not None or require or requirements:
                     raise UsageError(
-                        "--controller, --param and --spec are for a situation file; a stored "
-                        "run is shrunk with its own controller and run spec (--time-limit caps "
-                        "its time limit)"
+                        "--controller, --param, --spec and --require(ments) are for a situation "
+                        "file; a stored run is shrunk with its own controller, run spec and "
+                        "requirements (--time-limit caps its time limit)"
                     )
                 require_store(source)
                 result = shrink_run(
@@ -150,7 +167,7 @@ def shrink(
                 result = shrink_situation(
                     loaded,
                     run_spec_with(
-                        _read_run_spec(spec),
+                        with_requirements(_read_run_spec(spec), gathered(require, requirements)),
                         time_limit,
                         controller,
                         parse_params(param),

@@ -238,3 +238,21 @@ class Verdicts:
         return {
             (r, n): {"reruns": k, "recurs": m, "copies": json.loads(c)} for r, n, k, m, c in rows
         }
+
+    def requirement_robustness_of(
+        self, run_ids: Iterable[int]
+    ) -> dict[int, dict[str, float | None]]:
+        """Each of runs ``run_ids``'s robustness of each of its requirements, by run id then
+        name (None where a verdict has none)."""
+        wanted = list(run_ids)
+        out: dict[int, dict[str, float | None]] = {}
+        for i in range(0, len(wanted), 500):
+            chunk = wanted[i : i + 500]
+            rows = self.db.execute(
+                "SELECT run_id, name, robustness FROM requirement_verdicts "
+                f"WHERE run_id IN ({', '.join('?' for _ in chunk)})",
+                chunk,
+            )
+            for run_id, name, rho in rows:
+                out.setdefault(run_id, {})[name] = rho
+        return out

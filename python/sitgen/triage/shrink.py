@@ -60,6 +60,7 @@ from sitgen.triage.candidate import Candidate, Measure, ShrinkResult, Target
 from sitgen.triage.ddmin import ddmin
 from sitgen.triage.failures import distinct_failures
 from sitgen.triage.recall import stored_run, whole_run
+from sitgen.triage.requirements import PREFIX as REQUIREMENT
 from sitgen.triage.robustness import HORIZON_AFTER_S, MOST_HORIZON_S, horizon_of
 from sitgen.world.config import spec_json
 from sitgen.world.figure import draw_situation
@@ -127,10 +128,16 @@ def _probe(result: dict[str, Any]) -> dict[str, Any]:
     record = json.loads(result["record"])
     if record["outcome"] == "error":
         return {"ok": False, "problem": f"the controller failed: {record['reason']}"}
+    # A violated requirement shows as its class, from when the violation began.
+    violated = [
+        (REQUIREMENT + v["name"], float(v["first_violation_s"]))
+        for v in record.get("requirements", [])
+        if v["violated"]
+    ]
     return {
         "ok": True,
         "class": None if record["failure"] is None else record["failure"]["class"],
-        "first_s": _core.first_seen(result["events_jsonl"], 0),
+        "first_s": [*_core.first_seen(result["events_jsonl"], 0), *violated],
         "time_s": record["time_s"],
         "outcome": record["outcome"],
     }
@@ -406,13 +413,19 @@ class Shrinker:
         probe = self.probe(self.start)
         if not probe["ok"]:
             raise ShrinkError(f"the situation cannot be run: {probe['problem']}")
-        if probe["class"] is None:
+        requirement = failure_class is not None and failure_class.startswith(REQUIREMENT)
+        if probe["class"] is None and not requirement:
             raise ShrinkError(NOTHING_TO_SHRINK)
         if failure_class is None:
             return Target(probe["class"])
         target = Target(failure_class, shown=True)
         if not target.met(probe):
             shown = ", ".join(k for k, _ in probe["first_s"])
+            if requirement:
+                raise ShrinkError(
+                    f"--requirement: the run does not violate {failure_class[len(REQUIREMENT) :]}"
+                    f" (it shows {shown or 'nothing'})"
+                )
             raise ShrinkError(
                 f"--class: the run fails as {probe['class']}, and its events show {shown}, "
                 f"not {failure_class}"
@@ -451,12 +464,15 @@ def _first_failing(
     return next((c for c, f in zip(candidates, fails(candidates), strict=True) if f), None)
 
 
-def watch_of(target: Target, first_s: float) -> dict[str, Any]:
+def watch_of(target: Target, first_s: float) -> dict[str, Any] | None:
     """How a probe of a shrink toward ``target``, whose original showed it first at
     ``first_s``, is watched: as a robustness copy is (:data:`HORIZON_AFTER_S` past that, and
     on until it has shown the class or a worse one), so that a probe of a run that sat stuck
     until a long time limit costs what its failure took. A class merely shown (``--class``) is
-    watched to the horizon."""
+    watched to the horizon; a requirement's violation, to the time limit."""
+    if target.failure_class.startswith(REQUIREMENT):
+        # A run cut short could violate an `eventually` its whole run satisfies.
+        return None
     horizon_s = min(first_s + HORIZON_AFTER_S, MOST_HORIZON_S)
     return {"horizon_s": horizon_s} | ({} if target.shown else {"watch_for": target.failure_class})
 
@@ -545,7 +561,7 @@ def shrink_run(
 
     with Store(db) as store:
         row = stored_run(store, run_id)
-        if row["failure"] is None:
+        if row["failure"] is None and not (failure_class or "").startswith(REQUIREMENT):
             raise ShrinkError(NOTHING_TO_SHRINK)
         whole = whole_run(store, row)
     if whole is None:

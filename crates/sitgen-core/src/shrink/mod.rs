@@ -31,6 +31,8 @@ pub struct Probe {
     pub time_s: f64,
     /// How it ended.
     pub outcome: Outcome,
+    /// The run spec's requirements it violated, with when each violation began (seconds).
+    pub violated: Vec<(String, f64)>,
 }
 
 /// The margin peer legs of candidates shrunk from `original` must keep: the mission's
@@ -69,6 +71,12 @@ pub fn probe(
         first_s: failure::first_seen(&record.events, 0),
         time_s: record.time_s,
         outcome: record.outcome,
+        violated: record
+            .requirements
+            .iter()
+            .filter(|v| v.violated)
+            .map(|v| (v.name.clone(), v.first_violation_s.unwrap_or(0.0)))
+            .collect(),
     })
 }
 

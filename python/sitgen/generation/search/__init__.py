@@ -103,6 +103,9 @@ def _view(store: Store, spec: CampaignSpec, ids: Sequence[int]) -> list[dict[str
                 "peers": peers,
             }
         )
+    robustness = store.requirement_robustness_of([v["id"] for v in out])
+    for v in out:
+        v["robustness"] = robustness.get(v["id"], {})
     return out
 
 
@@ -157,6 +160,7 @@ def run_search(
         plan.threshold,
         plan.target_class,
         plan.like,
+        plan.requirement,
     )
     workers = check_workers(workers, backend)
     started = time.perf_counter()

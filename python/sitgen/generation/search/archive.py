@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import json
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -143,7 +144,13 @@ class Archive:
         variant's run rerun in perturbed copies by the yardstick's rule, so that the search is
         rewarded for robust failures and varies them rather than knife-edge ones."""
 
-    def objective(self, score: float) -> float:
+    def objective(self, run: dict[str, Any]) -> float:
+        """What the search maximises of a run: with ``--requirement`` how near to violating
+        the requirement it came or how far past (:func:`falsification`), else its score (or
+        the paper's threshold of it)."""
+        if self.plan.requirement is not None:
+            return falsification(run["robustness"].get(self.plan.requirement))
+        score = float(run["score"])
         if self.plan.objective == "threshold":
             return min(score, self.plan.threshold) / self.plan.threshold
         return score
@@ -176,7 +183,7 @@ class Archive:
             return
         self.grid.add(
             [self.cells(r) for r in placed],
-            [Elite(self.objective(r["score"]), int(r["id"])) for r in placed],
+            [Elite(self.objective(r), int(r["id"])) for r in placed],
         )
 
     def elites(self) -> list[int]:
@@ -479,3 +486,15 @@ def elite_grid(archive: Archive) -> list[list[dict[str, Any] | None]]:
         row, col = cell[0], cell[1] if cols > 1 else 0
         grid[row][col] = {"run": elite.run_id, "objective": elite.objective}
     return grid
+
+
+def falsification(robustness: float | None) -> float:
+    """A requirement's robustness as a falsifying search's objective: larger the nearer a run
+    came to violating it, and past 1 by how far it went (1 / (1 + ρ) for ρ ≥ 0, 1 − ρ below),
+    never negative (the elites' QD score sums objectives from 0); a run without a verdict
+    scores 0."""
+    if robustness is None or math.isnan(robustness):
+        return 0.0
+    if robustness >= 0:
+        return 1.0 / (1.0 + robustness)
+    return 1.0 + min(-robustness, 1e6)

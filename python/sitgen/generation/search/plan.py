@@ -254,6 +254,9 @@ class SearchPlan:
     one), toward more variants of it."""
     like: Like | None = None
     """``--like``: the mutation strategy starts from this run and varies its descendants."""
+    requirement: str | None = None
+    """``--requirement``: falsify this requirement: the objective is how near to violating it
+    (or how far past) each run came, from its robustness (docs/requirements.md)."""
 
     @staticmethod
     def from_dict(data: dict[str, Any]) -> SearchPlan:
@@ -266,6 +269,7 @@ class SearchPlan:
             data["threshold"],
             data.get("target_class"),
             None if like is None else Like(**like),
+            data.get("requirement"),
         )
 
     def as_dict(self) -> dict[str, Any]:
@@ -274,6 +278,8 @@ class SearchPlan:
             "measures": list(self.measures),
             "objective": self.objective,
             "threshold": self.threshold,
+            # Only where given, so that the plan of a search without one reads as before.
+            **({"requirement": self.requirement} if self.requirement is not None else {}),
             "initial": INITIAL,
             "batch": BATCH,
             "fresh_share": FRESH_SHARE,
@@ -319,8 +325,16 @@ def plan_search(
     threshold: float = LOW_SCORE_POINTS,
     target_class: str | None = None,
     like: Like | None = None,
+    requirement: str | None = None,
 ) -> SearchPlan:
     """Check a search's options against its spec. Raises SpecError naming the option."""
+    if requirement is not None:
+        names = [r.get("name") for r in spec.run.get("requirement", [])]
+        if requirement not in names:
+            given = ", ".join(str(n) for n in names) or "none (give one with --require)"
+            raise _core.SpecError(
+                f"--requirement: no requirement called {requirement!r}; the spec's are {given}"
+            )
     if strategy not in STRATEGIES:
         raise _core.SpecError(f"--strategy: `{strategy}` is not one of {', '.join(STRATEGIES)}")
     if (target_class is not None or like is not None) and strategy != "mutation":
@@ -339,7 +353,9 @@ def plan_search(
     measures_for(spec, measures)
     if like is not None and target_class is None:
         target_class = like.failure_class
-    return SearchPlan(strategy, tuple(measures), objective, float(threshold), target_class, like)
+    return SearchPlan(
+        strategy, tuple(measures), objective, float(threshold), target_class, like, requirement
+    )
 
 
 def generation_of(index: int) -> int:
