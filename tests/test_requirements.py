@@ -399,3 +399,57 @@ def test_every_command_of_the_guide_runs_as_written(tmp_path: Path) -> None:
             "SELECT copies FROM requirement_robustness WHERE name = 'slow_near_peers'"
         ).fetchone()
         assert json.loads(copies[0]) == ["violated", "violated"]
+
+
+@pytest.fixture(scope="module")
+def pioneer_db(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The guide's campaign: 40 runs of paper120.toml judged by the Pioneer's requirements."""
+    db = tmp_path_factory.mktemp("pioneer") / "pioneer.db"
+    done = run_cli(
+        "campaign", str(ROOT / "examples" / "campaigns" / "paper120.toml"), "--n", "40",
+        "--reruns", "0", "--db", str(db),
+        "--requirements", str(ROOT / "examples" / "requirements" / "pioneer.toml"),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return db
+
+
+def test_shrink_keeps_a_requirement_violated(pioneer_db: Path, tmp_path: Path) -> None:
+    out = tmp_path / "min.json"
+    done = run_cli(
+        "shrink", str(pioneer_db), "2", "--requirement", "slow_near_peers", "-o", str(out)
+    )
+    assert done.returncode == 0, done.stderr
+    seed = done.stdout.split("--seed ")[-1].split()[0]
+    again = run_cli("run", str(out), "--spec", str(tmp_path / "min.run.json"), "--seed", seed)
+    assert "requirement slow_near_peers: VIOLATED" in again.stdout
+    minimal = json.loads(out.read_text())
+    assert len(minimal["robots"]) < 5
+    # A run that does not violate it is refused in one line.
+    done = run_cli("shrink", str(pioneer_db), "0", "--requirement", "slow_near_peers")
+    assert done.returncode == 2
+    assert "--requirement: the run does not violate slow_near_peers" in done.stderr
+
+
+def test_search_falsifies_a_requirement_by_its_robustness(tmp_path: Path) -> None:
+    req = tmp_path / "r.toml"
+    req.write_text(
+        '[[requirement]]\nname = "turn_near_walls"\n'
+        'formula = "always (obstacle_clearance < 0.15 implies abs(turn_rate) < 1.0)"\n'
+    )
+    spec = str(ROOT / "examples" / "campaigns" / "paper120.toml")
+    db = tmp_path / "s.db"
+    done = run_cli(
+        "search", spec, "--budget", "40", "--db", str(db), "--requirements", str(req),
+        "--requirement", "turn_near_walls", "--reruns", "0",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    with sqlite3.connect(db) as c:
+        plan = json.loads(c.execute("SELECT plan FROM search").fetchone()[0])
+        judged = c.execute("SELECT count(*) FROM requirement_verdicts").fetchone()[0]
+    assert plan["requirement"] == "turn_near_walls"
+    assert judged == 40
+    done = run_cli("search", spec, "--budget", "4", "--db", str(tmp_path / "x.db"),
+                   "--requirement", "nope")  # fmt: skip
+    assert done.returncode == 2
+    assert "--requirement: no requirement called 'nope'" in done.stderr

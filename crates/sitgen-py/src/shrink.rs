@@ -101,7 +101,11 @@ fn probe_dict(py: Python<'_>, probe: Result<Probe, String>) -> PyResult<Bound<'_
                 .first_s
                 .iter()
                 .map(|(c, s)| (c.key().to_string(), *s))
-                .chain(p.violated.iter().map(|(n, s)| (format!("requirement:{n}"), *s)))
+                .chain(
+                    p.violated
+                        .iter()
+                        .map(|(n, s)| (format!("requirement:{n}"), *s)),
+                )
                 .collect();
             d.set_item("first_s", first)?;
             d.set_item("time_s", p.time_s)?;
