@@ -13,6 +13,7 @@ import sys
 import warnings
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -379,7 +380,7 @@ def test_every_command_of_the_guide_runs_as_written(tmp_path: Path) -> None:
     (tmp_path / "examples").symlink_to(ROOT / "examples")
     bin_dir = Path(sys.executable).parent
     commands = [argv for argv, _ in guide_commands(ROOT / "docs" / "requirements.md")]
-    assert {c[1] for c in commands} >= {"run", "campaign", "failures"}
+    assert {c[1] for c in commands} >= {"run", "campaign", "failures", "shrink", "search"}
     for argv in commands:
         done = subprocess.run(
             [str(bin_dir / "sitgen"), *argv[1:]],
@@ -453,3 +454,42 @@ def test_search_falsifies_a_requirement_by_its_robustness(tmp_path: Path) -> Non
                    "--requirement", "nope")  # fmt: skip
     assert done.returncode == 2
     assert "--requirement: no requirement called 'nope'" in done.stderr
+
+
+def test_diff_judges_each_requirement_and_fails_on_a_robust_new_violation(
+    tmp_path: Path,
+) -> None:
+    """B drives faster than A may: a requirement A never violates is robustly violated by B,
+    a new failure of class requirement:NAME, its own JUnit case, and diff exits 1."""
+    junit = tmp_path / "diff.xml"
+    done = run_cli(
+        "diff", "--n", "3", "--seed", "1", "--db", str(tmp_path / "d.db"), "--format", "json",
+        "--a", "snd_follow", "--a-param", "max_speed=0.4", "--b", "snd_follow",
+        "--time-limit", "60", "--require", "slow: always (abs(speed) <= 0.45)",
+        "--junit", str(junit),
+    )  # fmt: skip
+    assert done.returncode == 1, done.stderr
+    report = json.loads(done.stdout)
+    mine = [c for c in report["classes"] if c["class"] == "requirement:slow"]
+    assert mine and mine[0]["new"], report["classes"]
+    assert report["robust_new"] >= 1
+    xml = junit.read_text()
+    assert "requirement:slow" in xml
+
+
+def test_campaign_junit_has_a_case_per_requirement(tmp_path: Path) -> None:
+    junit = tmp_path / "c.xml"
+    done = run_cli(
+        "campaign", str(ROOT / "examples" / "campaigns" / "paper120.toml"), "--n", "12",
+        "--reruns", "0", "--db", str(tmp_path / "c.db"), "--junit", str(junit),
+        "--require", "keep_away: always (peer_clearance > 0.3)",
+        "--require", "never_fast: always (abs(speed) <= 5)",
+    )  # fmt: skip
+    assert done.returncode in (0, 1), done.stderr
+    suite = ElementTree.parse(junit).getroot()[0]
+    cases = {c.get("name"): c for c in suite.iter("testcase")}
+    assert cases["never_fast"].find("failure") is None
+    assert "least robustness" in (cases["never_fast"].findtext("system-out") or "")
+    keep = cases["keep_away"].find("failure")
+    assert keep is not None and keep.get("type") == "requirement:keep_away"
+    assert "violated in" in (keep.get("message") or "")

@@ -18,6 +18,8 @@ from sitgen.cli.app import (
     AddressOption,
     BackendOption,
     CampaignSeedOption,
+    RequirementsOption,
+    RequireOption,
     StepTimeoutOption,
     TimeLimitOption,
     UsageError,
@@ -28,6 +30,7 @@ from sitgen.cli.app import (
 )
 from sitgen.cli.campaigns import _campaign_spec, _stored
 from sitgen.store import require_store
+from sitgen.world.requirements import gathered
 
 
 @app.command()
@@ -179,6 +182,8 @@ def diff_command(
     ] = 8,
     time_limit: TimeLimitOption = None,
     step_timeout: StepTimeoutOption = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
     n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
     seed: CampaignSeedOption = 0,
     situations: Annotated[
@@ -236,7 +241,9 @@ def diff_command(
         str(situations) if situations else None,
         check_copies(reruns),
     )
-    parsed = _campaign_spec(spec, time_limit=time_limit)
+    parsed = _campaign_spec(
+        spec, time_limit=time_limit, requirements=gathered(require, requirements)
+    )
     result = _stored(
         "diff",
         n,

@@ -49,6 +49,7 @@ from sitgen.store import Store
 from sitgen.triage.kill import (
     ALPHA,
     COPIES,
+    REQUIREMENT,
     STAGES,
     Outcome,
     outcome_of_copy,
@@ -220,10 +221,17 @@ def _differences(store: Store, chunk: range) -> tuple[list[Difference], list[tup
         if a.failure_class == b.failure_class:
             if a.failure_class is not None:
                 alike.append((i, a.failure_class))
-            continue
-        shown = {a.failure_class, b.failure_class}
-        for c in sorted(x for x in shown if x is not None):
-            judge.append(Difference(i, c))
+        else:
+            shown = {a.failure_class, b.failure_class}
+            for c in sorted(x for x in shown if x is not None):
+                judge.append(Difference(i, c))
+        # Each requirement is judged on its own: violated on one side only is a difference.
+        for name in sorted(a.violated | b.violated):
+            key = REQUIREMENT + name
+            if name in a.violated and name in b.violated:
+                alike.append((i, key))
+            else:
+                judge.append(Difference(i, key))
     return judge, alike
 
 
@@ -281,8 +289,8 @@ def _judge(
                 if a.error or b.error:
                     j.erred += 1
                     continue
-                j.a_recurs += a.failure_class == j.failure_class
-                j.b_recurs += b.failure_class == j.failure_class
+                j.a_recurs += a.shows(j.failure_class)
+                j.b_recurs += b.shows(j.failure_class)
             j.copies = target
             j.settle()
         done = target

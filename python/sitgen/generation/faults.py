@@ -144,7 +144,10 @@ def outcome_of(store: Store, run_id: int) -> Outcome | None:
         return None
     outcome, score, events, failure_class = row
     classes = frozenset(_core.event_classes(events, 0)) if events else frozenset()
-    return Outcome(failure_class, classes, score, outcome == "error")
+    violated = frozenset(
+        v["name"] for v in store.requirement_verdicts(violated_only=True, run_id=run_id)
+    )
+    return Outcome(failure_class, classes, score, outcome == "error", violated)
 
 
 @dataclass(frozen=True)

@@ -183,7 +183,7 @@ class Verdicts:
         ]
 
     def requirement_verdicts(
-        self, name: str | None = None, violated_only: bool = False
+        self, name: str | None = None, violated_only: bool = False, run_id: int | None = None
     ) -> list[dict[str, Any]]:
         """Stored requirement verdicts (all, or requirement ``name``'s), worst robustness
         first, then by run id."""
@@ -198,6 +198,9 @@ class Verdicts:
             args.append(name)
         if violated_only:
             where.append("violated = 1")
+        if run_id is not None:
+            where.append("run_id = ?")
+            args.append(run_id)
         if where:
             sql += " WHERE " + " AND ".join(where)
         sql += " ORDER BY robustness IS NULL, robustness, run_id"

@@ -18,6 +18,7 @@ from xml.etree import ElementTree
 
 from sitgen.store import Store, unpack_json
 from sitgen.triage.failures import distinct_failures
+from sitgen.triage.requirements import PREFIX, requirement_failures
 from sitgen.triage.robustness import label, verdict
 
 
@@ -106,6 +107,45 @@ def campaign_cases(store: Store) -> list[Case]:
             cases.append(Case(name, classname, error=("error", reason)))
         else:
             cases.append(Case(name, classname, output=said))
+    return cases + requirement_cases(store)
+
+
+def requirement_cases(store: Store) -> list[Case]:
+    """A test case per requirement the campaign's runs were judged by: failed where some run
+    violated it (``type`` its class ``requirement:NAME``; the message says in how many runs
+    and the worst; the text its formula, the worst runs and its robustness under
+    perturbation), passed otherwise with its least robustness."""
+    verdicts = store.requirement_verdicts()
+    names = sorted({v["name"] for v in verdicts})
+    failed = {f.key[len(PREFIX) :]: f for f in requirement_failures(store)}
+    cases = []
+    for name in names:
+        mine = [v for v in verdicts if v["name"] == name]
+        judged = [v for v in mine if v["robustness"] is not None]
+        formula = mine[0]["formula"]
+        classname = "sitgen.requirement"
+        if name in failed:
+            f = failed[name]
+            worst = min(judged, key=lambda v: (v["robustness"], v["run_id"]))
+            message = (
+                f"violated in {f.runs} of {len(mine)} runs; worst run {worst['run_id']}, "
+                f"robustness {worst['robustness']:.4g}"
+            )
+            text = (
+                f"{formula}\nruns, worst first: {', '.join(map(str, f.run_ids[:20]))}\n"
+                f"robustness under perturbation: {f.robustness}"
+            )
+            cases.append(Case(name, classname, failure=(f.key, message, text)))
+        elif not judged:
+            cases.append(Case(name, classname, error=("no verdict", mine[0]["error"] or "")))
+        else:
+            least = min(judged, key=lambda v: (v["robustness"], v["run_id"]))
+            cases.append(
+                Case(name, classname, output=(
+                    f"{formula}\nsatisfied in every run judged ({len(judged)} of {len(mine)}); "
+                    f"least robustness {least['robustness']:.4g} (run {least['run_id']})"
+                ))
+            )  # fmt: skip
     return cases
 
 

@@ -30,6 +30,9 @@ from typing import Any
 
 import numpy as np
 
+REQUIREMENT = "requirement:"
+"""A violated requirement's class is its name after this (:mod:`sitgen.triage.requirements`)."""
+
 KILL_MARGIN_POINTS = 100.0
 """A faulty run that shows no new failure class passes the screen only if it scores worse than
 the correct run by more than this many points (one collision's start penalty)…"""
@@ -58,6 +61,15 @@ class Outcome:
     score: float
     error: bool = False
     """The run could not be made or its controller failed."""
+    violated: frozenset[str] = frozenset()
+    """The run spec's requirements it violated, by name (docs/requirements.md)."""
+
+    def shows(self, key: str) -> bool:
+        """Whether it fails as ``key``: its failure class, or a violated requirement's class
+        (``requirement:NAME``)."""
+        if key.startswith(REQUIREMENT):
+            return key[len(REQUIREMENT) :] in self.violated
+        return self.failure_class == key
 
 
 @dataclass(frozen=True)
@@ -179,6 +191,7 @@ def outcome_of_copy(result: Mapping[str, Any]) -> Outcome:
         frozenset(),
         float(record["score"]["total"]),
         record.get("outcome") == "error",
+        frozenset(v["name"] for v in record.get("requirements", []) if v["violated"]),
     )
 
 

@@ -13,10 +13,11 @@ from typing import Any
 from sitgen import _core
 from sitgen.store import Store
 from sitgen.triage.failures import DistinctFailure
+from sitgen.triage.kill import REQUIREMENT
 from sitgen.triage.recall import stored_run
 from sitgen.triage.robustness import RERUNS, check_reruns, copies, copy_jobs
 
-PREFIX = "requirement:"
+PREFIX = REQUIREMENT
 """A requirement's failure class is its name after this."""
 
 
