@@ -22,6 +22,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from sitgen.generation.search.plan import generation_of, generation_runs
+
 SEEDS = [25089, 43852, 104246, 274588, 334391]
 BUDGET = int(os.environ.get("SITGEN_BENCH_BUDGET", "500"))
 SPEC = Path(__file__).resolve().parent.parent / "examples" / "campaigns" / "paper120.toml"
@@ -52,13 +54,15 @@ def findings(db: Path, name: str) -> dict[str, Any]:
         ]
         # Runs are numbered in the order they were asked for: run i is the (i + 1)th run.
         first = violated[0][0] + 1 if violated else BUDGET
-        # The perturbed copies a search's screen ran of runs before the first violation (a
-        # generation's runs are screened before the next is asked for), and in all: they are
-        # evaluations too (none for random generation).
+        # The perturbed copies a search's screen ran before the first violation (a
+        # generation's runs are screened once it is complete, before the next is asked for:
+        # copies of runs of earlier generations than the violating run's), and in all: they
+        # are evaluations too (none for random generation).
+        before = generation_runs(generation_of(first - 1)).start
         copies_before, copies = c.execute(
             "SELECT coalesce(sum(CASE WHEN run_id < ? THEN reruns END), 0), "
             "coalesce(sum(reruns), 0) FROM robustness",
-            (first - 1,),
+            (before,),
         ).fetchone()
     return {
         "first": first,

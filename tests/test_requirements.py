@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 import sitgen
 from sitgen import _core
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, open_page, run_cli
 from tests.test_guide import guide_commands
 
 rtamt = pytest.importorskip("rtamt", reason="rtamt (the STL oracle) is in the test extra")
@@ -493,3 +493,53 @@ def test_campaign_junit_has_a_case_per_requirement(tmp_path: Path) -> None:
     keep = cases["keep_away"].find("failure")
     assert keep is not None and keep.get("type") == "requirement:keep_away"
     assert "violated in" in (keep.get("message") or "")
+
+
+def test_export_writes_every_judged_runs_signals_and_they_give_the_stored_verdicts(
+    pioneer_db: Path, tmp_path: Path
+) -> None:
+    pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow is in the test extra")
+    out = tmp_path / "tables"
+    done = run_cli("export", str(pioneer_db), "-o", str(out), "--format", "parquet")
+    assert done.returncode == 0, done.stderr
+    signals = pq.read_table(out / "signals.parquet").to_pydict()
+    verdicts = pq.read_table(out / "requirement_verdicts.parquet").to_pylist()
+    with sqlite3.connect(pioneer_db) as c:
+        steps = dict(c.execute("SELECT id, steps FROM runs").fetchall())
+    assert len(signals["run_id"]) == sum(s + 1 for s in steps.values())
+    assert set(signals) >= {"run_id", "step", "time_s", *_core.requirement_signals()}
+    runs = np.asarray(signals["run_id"])
+    # An outside tool (rtamt) gives each stored verdict from the exported signals alone.
+    for v in verdicts[::7]:
+        mine = runs == v["run_id"]
+        used = {
+            s: np.asarray(signals[s])[mine].tolist()
+            for s in _core.requirement_signals()
+            if s in v["formula"]
+        }
+        assert same(v["robustness"], oracle(v["formula"], used)[0]), v
+
+
+def test_a_run_page_plots_each_requirements_signals_and_marks_the_violation(
+    pioneer_db: Path, tmp_path: Path, browser: Any
+) -> None:
+    out = tmp_path / "report"
+    done = run_cli("report", str(pioneer_db), "-o", str(out))
+    assert done.returncode == 0, done.stderr
+    page, errors = open_page(browser, out / "run-2.html")
+    plots = page.eval_on_selector_all(
+        "svg.requirement", "ss => ss.map(s => [s.dataset.requirement, s.getBBox().width])"
+    )
+    assert {name for name, _ in plots} == {
+        "slow_near_peers",
+        "brake_for_peers",
+        "reach_goal_in_time",
+    }
+    assert all(width > 0 for _, width in plots)
+    slow = "svg[data-requirement='slow_near_peers']"
+    assert page.eval_on_selector_all(f"{slow} polyline.signal", "ls => ls.length") >= 2
+    assert page.eval_on_selector_all(f"{slow} line.threshold", "ls => ls.length") == 2
+    shaded = page.eval_on_selector(f"{slow} rect.violating", "r => r.getBBox().width")
+    assert shaded > 0
+    assert "violated" in page.inner_text("#requirement-slow_near_peers + p")
+    assert errors == []

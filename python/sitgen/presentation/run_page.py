@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from sitgen.presentation.page import _page
+from sitgen.presentation.requirement_plot import requirements_section
 from sitgen.run import run
 from sitgen.store import Store, main_events
 from sitgen.triage.failures import DistinctFailure
@@ -272,6 +273,7 @@ def run_page(
         body.append(_run_robustness(store.robustness([run_id]).get(run_id)))
     if not blind:
         body.append(_why_this_rank(breakdown, row["score"]))
+    body.append(requirements_section(store, row))
     body.append("<h2>Replay</h2><p class='controls'><button id='play'>play</button>")
     body.append("speed <select id='speed'>")
     body += [

@@ -12,7 +12,7 @@ from sitgen import _core
 from sitgen.run import run
 from sitgen.store import Store, events_digest
 from sitgen.triage.failures import check_class, distinct_failures
-from sitgen.triage.recall import regenerate, stored_run
+from sitgen.triage.recall import regenerate, resimulate_checked, stored_run
 from sitgen.triage.robustness import verdict
 from sitgen.triage.rows import write_rows
 from sitgen.triage.weights import Weights
@@ -46,6 +46,8 @@ TABLES = (
     "events",
     "trajectories",
     "judgements",
+    "requirement_verdicts",
+    "requirement_robustness",
 )
 
 
@@ -125,6 +127,42 @@ def export_tables(db: str | Path, directory: Path, format: str) -> list[Path]:
                 pq.write_table(pa.table(arrays), path)
             written.append(path)
     return written
+
+
+def export_signals(db: str | Path, directory: Path, format: str) -> Path | None:
+    """Every run judged by requirements, its requirement signals one row per sample
+    (``run_id``, ``step``, ``time_s``, then each signal of docs/requirements.md), written as
+    ``signals.parquet`` or ``.csv`` in ``directory``, so that an outside tool can check a
+    verdict. The signals are not stored: each run is made again (a run is deterministic) and
+    checked to be the run stored. None where no run was judged by a requirement."""
+    names = _core.requirement_signals()
+    columns: dict[str, list[Any]] = {c: [] for c in ("run_id", "step", "time_s", *names)}
+    with Store(db) as store:
+        judged = sorted({v["run_id"] for v in store.requirement_verdicts()})
+        if not judged:
+            return None
+        for run_id in judged:
+            row = stored_run(store, run_id)
+            _, record = resimulate_checked(store, row, signals=True)
+            dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
+            n = record.steps + 1
+            columns["run_id"] += [run_id] * n
+            columns["step"] += range(n)
+            columns["time_s"] += [round(k * dt_s, 9) for k in range(n)]
+            for name in names:
+                columns[name] += record.signals[name].tolist()
+    path = directory / f"signals.{format}"
+    if format == "csv":
+        with path.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(columns)
+            writer.writerows(zip(*columns.values(), strict=True))
+    else:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        pq.write_table(pa.table(columns), path)
+    return path
 
 
 @dataclass(frozen=True)

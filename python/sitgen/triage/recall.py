@@ -60,21 +60,25 @@ def regenerate(row: dict[str, Any]) -> Situation:
     return situation_of(row["situation_spec"], row["situation_seed"])
 
 
-def resimulate(row: dict[str, Any], sensed: bool = False) -> tuple[Situation, RunRecord]:
+def resimulate(
+    row: dict[str, Any], sensed: bool = False, signals: bool = False
+) -> tuple[Situation, RunRecord]:
     """Stored run ``row`` generated and run again, as it was run (``sensed``: keeping what
-    the agent sensed, :class:`sitgen.run.Sensed`)."""
+    the agent sensed, :class:`sitgen.run.Sensed`; ``signals``: every requirement signal in
+    its record, which changes nothing of the run)."""
     situation = regenerate(row)
     # The stored run spec names the controller if the campaign gave one (with its parameters
     # and any seeded fault); otherwise the situation's own drives, as it did.
+    spec = {**row["run_spec"], "signals": True} if signals else row["run_spec"]
     try:
-        record = run(situation, seed=row["run_seed"], spec=row["run_spec"], sensed=sensed)
+        record = run(situation, seed=row["run_seed"], spec=spec, sensed=sensed)
     except _core.SpecError as e:
         raise StoreError(f"run {row['id']}: its stored run spec does not load ({e})") from None
     return situation, record
 
 
 def resimulate_checked(
-    store: Store, row: dict[str, Any], sensed: bool = False
+    store: Store, row: dict[str, Any], sensed: bool = False, signals: bool = False
 ) -> tuple[Situation, RunRecord]:
     """:func:`resimulate`, checked to give back the run that was stored: its situation's
     content hash, its event log's digest and its score. Raises StoreError if it does not
@@ -82,7 +86,7 @@ def resimulate_checked(
     longer generates."""
     run_id = row["id"]
     try:
-        situation, record = resimulate(row, sensed)
+        situation, record = resimulate(row, sensed, signals)
     except _core.GenerationFailed as e:
         raise StoreError(
             f"{store.path}: run {run_id}: its situation no longer generates: {e}"

@@ -54,6 +54,10 @@ pub struct RunSpec {
     /// each run's record carries their verdicts. Written `[[requirement]]`. Default none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub requirement: Vec<RequirementSpec>,
+    /// Record every requirement signal of the run in its record, not only those its
+    /// requirements read (what `sitgen export` asks of a run made again). Default false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub signals: bool,
 }
 
 /// How far a run is watched: to `horizon_s` simulated seconds, and past it only until it has
@@ -84,6 +88,7 @@ impl Default for RunSpec {
             perturbation: None,
             watch: None,
             requirement: Vec::new(),
+            signals: false,
         }
     }
 }
