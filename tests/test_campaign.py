@@ -100,6 +100,8 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
                 "events",
                 "trajectories",
                 "judgements",
+                "requirement_verdicts",
+                "requirement_robustness",
             )
         )
     import pyarrow.parquet as pq

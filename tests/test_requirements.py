@@ -543,3 +543,30 @@ def test_a_run_page_plots_each_requirements_signals_and_marks_the_violation(
     assert shaded > 0
     assert "violated" in page.inner_text("#requirement-slow_near_peers + p")
     assert errors == []
+
+
+def test_a_run_that_ended_early_decides_eventually_over_what_was_recorded(
+    situation: sitgen.Situation,
+) -> None:
+    """The documented value: a run stopped at its 5 s time limit short of its goal violates
+    `eventually goal_distance < 0.5`, decided over the whole recorded run."""
+    rec = sitgen.run(
+        situation, time_limit=5,
+        spec={"requirement": [{"name": "goal", "formula": "eventually (goal_distance < 0.5)"}]},
+    )  # fmt: skip
+    (v,) = rec.requirements
+    assert v["violated"] and v["first_violation_s"] == 5.0
+    assert v["interval_s"] == [0.0, 5.0]
+    assert same(v["robustness"], 0.5 - float(rec.signals["goal_distance"].min()))
+
+
+def test_a_signal_without_a_subject_reads_infinity_and_its_verdict_says_so() -> None:
+    alone = sitgen.generate_situation(
+        {"terrain": {"preset": "open_field"}, "mission": {"peers_min": 0, "peers_max": 0}}, seed=2
+    )
+    spec = {"requirement": [{"name": "apart", "formula": "always (peer_distance > 1)"}]}
+    rec = sitgen.run(alone, time_limit=5, spec=spec)
+    assert rec.requirements[0]["robustness"] == float("inf")
+    assert not rec.requirements[0]["violated"]
+    assert rec.to_dict()["requirements"][0]["robustness"] == "inf"  # JSON has no infinity
+    assert (rec.signals["peer_distance"] == float("inf")).all()
