@@ -42,3 +42,17 @@ def _page(title: str, body: str, scripts: str = "") -> str:
         f"<title>{html.escape(title)}</title><style>{STYLE}</style></head>"
         f"<body>{body}{scripts}</body></html>\n"
     )
+
+
+def time_axis(left: float, right: float, y: float, span: float, scale: float) -> list[str]:
+    """An SVG time axis from ``left`` to ``right`` pixels at height ``y``, six ticks labelled
+    in seconds over ``span`` seconds at ``scale`` pixels a second (a run page's timeline and
+    its requirements' plots)."""
+    parts = [f"<line x1='{left}' y1='{y}' x2='{right}' y2='{y}' stroke='#999'/>"]
+    for k in range(6):
+        t = span * k / 5
+        parts.append(
+            f"<text x='{left + t * scale:.1f}' y='{y + 11}' font-size='10' "
+            f"text-anchor='middle'>{t:.0f} s</text>"
+        )
+    return parts

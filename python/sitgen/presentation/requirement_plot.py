@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sitgen import _core
+from sitgen.presentation.page import time_axis
 from sitgen.store import Store
 from sitgen.triage.recall import resimulate
 
@@ -94,14 +95,7 @@ def _plot(v: dict[str, Any], signals: dict[str, npt.NDArray[np.float64]], dt_s: 
     limits = thresholds(v["formula"], list(signals))
     for j, (signal, values) in enumerate(signals.items()):
         parts += _lane(j * LANE, signal, values, limits.get(signal, []), scale, dt_s)
-    axis_y = height - 18
-    parts.append(f"<line x1='{LEFT}' y1='{axis_y}' x2='{WIDTH - 10}' y2='{axis_y}' stroke='#999'/>")
-    for k in range(6):
-        t = span * k / 5
-        parts.append(
-            f"<text x='{LEFT + t * scale:.1f}' y='{axis_y + 12}' font-size='10' "
-            f"text-anchor='middle'>{t:.0f} s</text>"
-        )
+    parts += time_axis(LEFT, WIDTH - 10, height - 18, span, scale)
     parts.append("</svg>")
     return "".join(parts)
 

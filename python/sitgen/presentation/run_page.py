@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from sitgen.presentation.page import _page
+from sitgen.presentation.page import _page, time_axis
 from sitgen.presentation.requirement_plot import requirements_section
 from sitgen.run import run
 from sitgen.store import Store, main_events
@@ -186,14 +186,7 @@ def _timeline_svg(
                 f"opacity='{opacity}' data-seek='{e['start_s']}' data-event='{i}'{outline}>"
                 f"<title>{tip}</title></rect>"
             )
-    axis_y = height - 12
-    parts.append(f"<line x1='{left}' y1='{axis_y}' x2='{width - 10}' y2='{axis_y}' stroke='#999'/>")
-    for k in range(6):
-        t = span * k / 5
-        parts.append(
-            f"<text x='{left + t * scale:.1f}' y='{axis_y + 11}' font-size='10' "
-            f"text-anchor='middle'>{t:.0f} s</text>"
-        )
+    parts += time_axis(left, width - 10, height - 12, span, scale)
     parts.append("</svg>")
     return "".join(parts)
 
