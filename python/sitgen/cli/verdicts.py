@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -18,6 +19,7 @@ from sitgen.cli.app import (
     AddressOption,
     BackendOption,
     CampaignSeedOption,
+    OnProgress,
     RequirementsOption,
     RequireOption,
     StepTimeoutOption,
@@ -347,3 +349,150 @@ def robustness(
             verdict(r["recurs"], r["reruns"]), tally(r["classes"]),
         )  # fmt: skip
     Console(width=200).print(table)
+
+
+@app.command("compare")
+def compare_command(
+    spec: Annotated[
+        Path | None,
+        typer.Argument(help="Campaign spec (TOML) whose situations to use. Omit for the paper's."),
+    ] = None,
+    controllers: Annotated[
+        str,
+        typer.Option(
+            "--controllers",
+            help="The controllers, comma-separated: names (snd_follow, vo, python:m:C, "
+            "navground:ORCA, snd_follow+FAULT), or a JSON list of controller tables.",
+        ),
+    ] = "",
+    param: Annotated[
+        list[str] | None,
+        typer.Option("--param", help="NAME=VALUE for every controller (repeatable)."),
+    ] = None,
+    controller_param: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--controller-param",
+            help="K:NAME=VALUE for the K-th controller of --controllers, from 1 (repeatable).",
+        ),
+    ] = None,
+    n: Annotated[int, typer.Option("--n", "-n", min=1, help="Situations.")] = 100,
+    seed: CampaignSeedOption = 0,
+    folder: Annotated[
+        Path, typer.Option("--dir", help="Where each controller's campaign store is written.")
+    ] = Path("compare"),
+    reruns: Annotated[
+        int,
+        typer.Option(
+            "--reruns", min=0, help="Perturbed copies of each distinct failure (0: none)."
+        ),
+    ] = 0,
+    time_limit: TimeLimitOption = None,
+    require: RequireOption = None,
+    requirements: RequirementsOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table, json or csv.")] = "table",
+    workers: WorkersOption = None,
+) -> None:
+    """Controllers compared on the same situations (docs/failures.md, "Comparing
+    controllers"): each runs the campaign's first N jobs into DIR/LABEL.db; per controller
+    the failure rate with an exact 95 % interval, distinct failures (robust ones with
+    --reruns), median time to goal and path efficiency; per pair the exact McNemar test;
+    the distinct failures only one controller shows."""
+    import copy
+    import csv
+
+    from sitgen.cli.campaigns import _check_reruns, _measure_robustness
+    from sitgen.execution.campaign import CampaignResult, run_campaign
+    from sitgen.execution.jobs import CampaignSpec, campaign_from_data
+    from sitgen.generation.compare import comparison, labels_of
+    from sitgen.generation.diff import parse_controller
+
+    if format not in ("table", "json", "csv"):
+        raise UsageError(f"--format: `{format}` is not one of table, json, csv")
+    text = controllers.strip()
+    items = json.loads(text) if text.startswith("[") else [t for t in text.split(",") if t.strip()]
+    if len(items) < 2:
+        raise UsageError("--controllers: give two or more controllers, comma-separated")
+    tables = [
+        parse_controller(c if isinstance(c, str) else json.dumps(c), f"--controllers[{k + 1}]")
+        for k, c in enumerate(items)
+    ]
+    shared = parse_params(param)
+    for item in controller_param or []:
+        k, sep, given = item.partition(":")
+        if not sep or not k.isdigit() or not 1 <= int(k) <= len(tables):
+            raise UsageError(
+                f"--controller-param: `{item}` is not K:NAME=VALUE, K in 1…{len(tables)}"
+            )
+        tables[int(k) - 1] = {
+            **tables[int(k) - 1],
+            "params": {**tables[int(k) - 1].get("params", {}), **parse_params([given])},
+        }
+    tables = [{**t, "params": {**shared, **t.get("params", {})}} for t in tables]
+    if reruns:
+        _check_reruns(reruns)
+    labels = labels_of(tables)
+    folder.mkdir(parents=True, exist_ok=True)
+    base = _campaign_spec(spec, time_limit=time_limit, requirements=gathered(require, requirements))
+    for label, table in zip(labels, tables, strict=True):
+        source = copy.deepcopy(base.source)
+        # The situations are generated as for every other controller; only the run's differs.
+        source["run"] = {**dict(source.get("run") or {}), "controller": table}
+        parsed = campaign_from_data(source)
+        db = folder / f"{label}.db"
+
+        def work(
+            on_progress: OnProgress,
+            stop: Callable[[], bool],
+            parsed: CampaignSpec = parsed,
+            db: Path = db,
+        ) -> CampaignResult:
+            return run_campaign(
+                parsed, db, seed=seed, n=n, workers=workers, on_progress=on_progress,
+                stop=stop, keep_trajectories="all",
+            )  # fmt: skip
+
+        _stored(f"compare {label}", n, "runs", work)
+        _measure_robustness(db, reruns, workers)
+    result = comparison(labels, tables, folder)
+    if format == "json":
+        typer.echo(json.dumps(result, indent=2))
+        return
+    if format == "csv":
+        writer = csv.writer(sys.stdout)
+        writer.writerow(
+            ["controller", "runs", "failed", "failure_rate", "low", "high", "distinct",
+             "robust", "median_time_to_goal_s", "median_path_efficiency", "only"]
+        )  # fmt: skip
+        for s in result["controllers"]:
+            writer.writerow(
+                [s["label"], s["runs"], s["failed"], s["failure_rate"], *s["interval"],
+                 len(s["distinct"]), len(s["robust"]), s["median_time_to_goal_s"],
+                 s["median_path_efficiency"], " ".join(s["only"])]
+            )  # fmt: skip
+        return
+    shown = Table(title=f"{len(labels)} controllers on the same {n} situations")
+    for column in ("controller", "failure rate (95 %)", "distinct (robust)", "time to goal",
+                   "path efficiency", "only it shows"):  # fmt: skip
+        shown.add_column(column)
+    for s in result["controllers"]:
+        low, high = s["interval"]
+        goal, eff = s["median_time_to_goal_s"], s["median_path_efficiency"]
+        shown.add_row(
+            s["label"],
+            f"{100 * s['failure_rate']:.1f}% ({100 * low:.1f}–{100 * high:.1f}%)",
+            f"{len(s['distinct'])} ({len(s['robust'])})",
+            "" if goal is None else f"{goal:.1f} s",
+            "" if eff is None else f"{eff:.2f}",
+            ", ".join(s["only"]),
+        )
+    Console(width=200).print(shown)
+    pairs = Table(title="pairwise: exact McNemar on the situations both ran")
+    for column in ("A", "B", "situations", "A fails, B not", "B fails, A not", "p", "verdict"):
+        pairs.add_column(column)
+    for p in result["pairs"]:
+        pairs.add_row(
+            p["a"], p["b"], str(p["situations"]), str(p["a_only"]), str(p["b_only"]),
+            f"{p['p_value']:.3g}", p["verdict"],
+        )  # fmt: skip
+    Console(width=200).print(pairs)
