@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from sitgen.generation.compare import NO_DIFFERENCE, exact_interval, labels_of, mcnemar_exact
+from sitgen.generation.compare import NO_DIFFERENCE, labels_of
+from sitgen.triage.stats import exact_interval, mcnemar_exact
 from tests.conftest import ROOT, run_cli
 
 SPEC = str(ROOT / "examples" / "campaigns" / "paper120.toml")

@@ -395,3 +395,50 @@ def rerun(
         typer.echo(line)
     if not check.identical:
         raise typer.Exit(EXIT_FAILED)
+
+
+@app.command("explain")
+def explain_command(
+    db: Annotated[Path, typer.Argument(help="Campaign store (SQLite).")],
+    failure_class: Annotated[
+        str | None,
+        typer.Option(
+            "--class", help="Explain this failure class (`collision`: any collision class)."
+        ),
+    ] = None,
+    outcome: Annotated[
+        str | None, typer.Option("--outcome", help="Explain this outcome (e.g. timeout).")
+    ] = None,
+    requirement: Annotated[
+        str | None, typer.Option("--requirement", help="Explain this requirement's violations.")
+    ] = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Which situation descriptors (computed before any run: docs/explain.md) separate the
+    runs that failed the given way from the others: a few rules, each with its support and an
+    exact 95 % interval, and the model's cross-validated balanced accuracy (0.5: no better
+    than the base rate)."""
+    from sitgen.store import Store
+    from sitgen.triage.explain import explain
+
+    given = [x for x in (failure_class, outcome, requirement) if x is not None]
+    if len(given) != 1:
+        raise UsageError("explain: give one of --class, --outcome, --requirement")
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    require_store(db)
+    try:
+        with Store(db) as store:
+            result = explain(store, failure_class, outcome, requirement)
+    except StoreError as e:
+        raise UsageError(str(e)) from None
+    if format == "json":
+        typer.echo(json.dumps(result, indent=2))
+        return
+    typer.echo(
+        f"{db}: {result['failed']} of {result['runs']} runs are {given[0]} "
+        f"({100 * result['base_rate']:.1f} %); the rules' cross-validated balanced accuracy "
+        f"{result['balanced_accuracy']:.2f} (0.50 is the base rate's)"
+    )
+    for rule in result["rules"]:
+        typer.echo(f"  - {rule['text']}")

@@ -27,13 +27,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from scipy import stats
-
 from sitgen.store import Store
 from sitgen.triage.failures import distinct_failures
-
-ALPHA = 0.05
-"""The level of the pairwise tests and of the intervals (95 %)."""
+from sitgen.triage.stats import ALPHA, exact_interval, mcnemar_exact
 
 NO_DIFFERENCE = "no difference"
 
@@ -75,22 +71,6 @@ class Pair:
     b_only: int
     p_value: float
     verdict: str
-
-
-def exact_interval(k: int, n: int) -> tuple[float, float]:
-    """The exact (Clopper–Pearson) 95 % interval of ``k`` successes in ``n`` trials."""
-    if n == 0:
-        return (0.0, 1.0)
-    ci = stats.binomtest(k, n).proportion_ci(confidence_level=1 - ALPHA, method="exact")
-    return (float(ci.low), float(ci.high))
-
-
-def mcnemar_exact(a_only: int, b_only: int) -> float:
-    """The exact McNemar p-value of discordant counts ``a_only`` and ``b_only`` (two-sided
-    binomial test at 1/2); 1 without discordant pairs."""
-    if a_only + b_only == 0:
-        return 1.0
-    return float(stats.binomtest(a_only, a_only + b_only, 0.5).pvalue)
 
 
 def _route_length(situation_json: str | None) -> float | None:
