@@ -1,0 +1,73 @@
+"""Situation descriptors, recomputed from a situation file by what docs/explain.md says, and
+`sitgen explain` end to end: rules with supports and exact intervals, a cross-validated
+balanced accuracy, and one-line errors."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sitgen
+from sitgen.triage.descriptors import describe
+from sitgen.triage.stats import exact_interval
+from tests.conftest import ROOT, run_cli
+
+
+def test_descriptors_recompute_from_the_situation_file_as_the_docs_define_them() -> None:
+    s = sitgen.generate_situation(
+        {"terrain": {"preset": "rocky_desert"}, "mission": {"peers_min": 3, "peers_max": 3}},
+        seed=4,
+    )
+    data = json.loads(s.to_json())
+    agent, peers = data["robots"][0], data["robots"][1:]
+    route = [(agent["start"]["x_m"], agent["start"]["y_m"]), *map(tuple, agent["waypoints"])]
+    d = describe(s)
+    legs = list(itertools.pairwise(route))
+    assert d["route_length_m"] == pytest.approx(sum(math.dist(a, b) for a, b in legs))
+    assert d["peers"] == len(peers)
+    occupied = np.asarray(s.grid.occupied, dtype=bool)
+    assert d["obstacle_share"] == pytest.approx(occupied.mean())
+    # route_clearance_m: brute force over occupied cell centres at each sample.
+    res, rows = s.grid.resolution, occupied.shape[0]
+    r, c = np.nonzero(occupied)
+    centres = np.stack([(c + 0.5) * res, (rows - 1 - r + 0.5) * res], axis=1)
+    least = math.inf
+    for a, b in legs:
+        k = max(1, int(math.dist(a, b) / res))
+        for t in np.linspace(0, 1, k + 1):
+            x, y = a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])
+            cell = np.array([(int(x / res) + 0.5) * res, (int(y / res) + 0.5) * res])
+            least = min(least, float(np.min(np.hypot(*(centres - cell).T))) - res / 2)
+    assert d["route_clearance_m"] == pytest.approx(least, abs=1e-9)
+    assert 0 <= d["crossing_angle_deg"] <= 180
+    assert d["crossing_peers"] <= d["peers"]
+
+
+def test_explain_gives_rules_with_supports_and_exact_intervals(tmp_path: Path) -> None:
+    db = tmp_path / "c.db"
+    spec = str(ROOT / "examples" / "campaigns" / "paper120.toml")
+    assert run_cli("campaign", spec, "--n", "120", "--db", str(db), "--reruns", "0").returncode == 0
+    done = run_cli("explain", str(db), "--class", "collision", "--format", "json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["runs"] == 120 and 0 < result["failed"] < 120
+    assert 0.0 <= result["balanced_accuracy"] <= 1.0
+    assert len(result["balanced_accuracy_folds"]) == 5
+    assert result["rules"], "a rule where failures are commoner"
+    for rule in result["rules"]:
+        assert 0 < rule["failed"] <= rule["runs"]
+        assert tuple(rule["interval"]) == pytest.approx(
+            exact_interval(rule["failed"], rule["runs"])
+        )
+        assert rule["rate"] > rule["elsewhere"]
+    text = run_cli("explain", str(db), "--class", "collision").stdout
+    assert "cross-validated balanced accuracy" in text and " runs fail, " in text
+    done = run_cli("explain", str(db))
+    assert done.returncode == 2 and "give one of --class, --outcome, --requirement" in done.stderr
+    done = run_cli("explain", str(db), "--class", "no_such_class")
+    assert done.returncode == 2 and "too few of one kind" in done.stderr
