@@ -412,14 +412,28 @@ def explain_command(
     requirement: Annotated[
         str | None, typer.Option("--requirement", help="Explain this requirement's violations.")
     ] = None,
+    confirm: Annotated[
+        int,
+        typer.Option(
+            "--confirm",
+            min=0,
+            help="Test each rule on N fresh situations generated inside its region and N "
+            "outside (docs/explain.md); 0: do not.",
+        ),
+    ] = 0,
+    confirm_dir: Annotated[
+        Path, typer.Option("--confirm-dir", help="Where the confirming campaigns are stored.")
+    ] = Path("confirm"),
+    workers: WorkersOption = None,
     format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
 ) -> None:
     """Which situation descriptors (computed before any run: docs/explain.md) separate the
     runs that failed the given way from the others: a few rules, each with its support and an
     exact 95 % interval, and the model's cross-validated balanced accuracy (0.5: no better
     than the base rate)."""
+    from sitgen.generation.region import confirm as confirm_rules
     from sitgen.store import Store
-    from sitgen.triage.explain import explain
+    from sitgen.triage.explain import explain, target_of
 
     given = [x for x in (failure_class, outcome, requirement) if x is not None]
     if len(given) != 1:
@@ -430,6 +444,12 @@ def explain_command(
     try:
         with Store(db) as store:
             result = explain(store, failure_class, outcome, requirement)
+            if confirm:
+                confirm_dir.mkdir(parents=True, exist_ok=True)
+                result["confirmed"] = confirm_rules(
+                    store, result["rules"][:3], confirm, confirm_dir,
+                    lambda fresh: target_of(fresh, failure_class, outcome, requirement), workers,
+                )  # fmt: skip
     except StoreError as e:
         raise UsageError(str(e)) from None
     if format == "json":
@@ -442,3 +462,12 @@ def explain_command(
     )
     for rule in result["rules"]:
         typer.echo(f"  - {rule['text']}")
+    for c in result.get("confirmed", []):
+        inside, outside = c["inside"], c["outside"]
+        said = "confirmed" if c["confirmed"] else "NOT confirmed"
+        typer.echo(
+            f"{said}: {c['where']}: fresh inside {inside['failed']} of {inside['runs']} "
+            f"({100 * inside['rate']:.0f} %, {100 * inside['interval'][0]:.0f}–"
+            f"{100 * inside['interval'][1]:.0f} %), outside {outside['failed']} of "
+            f"{outside['runs']} ({100 * outside['rate']:.0f} %)"
+        )

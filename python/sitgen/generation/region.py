@@ -1,0 +1,238 @@
+"""Campaigns inside a region of situations: ``sitgen campaign --where 'EXPR'`` generates the
+campaign's jobs in order and keeps only the situations whose descriptors
+(:mod:`sitgen.triage.descriptors`) satisfy EXPR, by rejection, up to :data:`MOST_TRIED` tries
+a situation kept; and ``sitgen explain --confirm`` tests each rule so on fresh situations.
+
+EXPR is a Python-like boolean expression over the descriptors' names: comparisons (``<``,
+``<=``, ``>``, ``>=``, ``==``, ``!=``, chained), ``and``, ``or``, ``not``, numbers, and
+``terrain == 'caves'``; nothing else is evaluated. A rule of ``explain`` reads the same way
+(``x ≤ 1.5`` is written ``x <= 1.5``)."""
+
+from __future__ import annotations
+
+import ast
+import json
+import operator
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sitgen import _core
+from sitgen.execution.campaign import Executor, run_chunk, started_at
+from sitgen.execution.jobs import CampaignSpec, Job, build_job, campaign_from_data, check_workers
+from sitgen.store import Store
+from sitgen.triage.descriptors import NUMERIC, describe
+from sitgen.triage.stats import exact_interval
+from sitgen.world.situation import situation_of
+
+MOST_TRIED = 200
+"""Situations generated a situation kept, at most: a region rarer than 1 in 200 is refused in
+one line rather than generated for ever."""
+
+CHUNK = 64
+"""Runs stored in one transaction."""
+
+_COMPARE = {
+    ast.Lt: operator.lt,
+    ast.LtE: operator.le,
+    ast.Gt: operator.gt,
+    ast.GtE: operator.ge,
+    ast.Eq: operator.eq,
+    ast.NotEq: operator.ne,
+}
+
+
+def check_where(text: str) -> ast.Expression:
+    """``text`` parsed, every name a descriptor and every node one of those allowed; SpecError
+    naming ``--where`` and what is wrong."""
+    try:
+        tree = ast.parse(text.replace("≤", "<=").replace("≥", ">="), mode="eval")
+    except SyntaxError as e:
+        raise _core.SpecError(f"--where: column {e.offset}: not an expression: {e.msg}") from None
+    known = (*NUMERIC, "terrain")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id not in known:
+            raise _core.SpecError(
+                f"--where: unknown descriptor {node.id!r}; the descriptors are {', '.join(known)}"
+            )
+        allowed = (
+            ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.USub,
+            ast.Compare, ast.Name, ast.Load, ast.Constant, *_COMPARE,
+        )  # fmt: skip
+        if not isinstance(node, allowed):
+            raise _core.SpecError(
+                f"--where: {type(node).__name__} is not allowed; use comparisons of "
+                "descriptors with numbers, and, or, not"
+            )
+    return tree
+
+
+def holds(tree: ast.Expression, values: dict[str, Any]) -> bool:
+    """Whether ``values`` (a situation's descriptors) satisfy the checked expression."""
+
+    def value(node: ast.AST) -> Any:
+        if isinstance(node, ast.Expression):
+            return value(node.body)
+        if isinstance(node, ast.BoolOp):
+            parts = [value(v) for v in node.values]
+            return all(parts) if isinstance(node.op, ast.And) else any(parts)
+        if isinstance(node, ast.UnaryOp):
+            inner = value(node.operand)
+            return (not inner) if isinstance(node.op, ast.Not) else -inner
+        if isinstance(node, ast.Compare):
+            left = value(node.left)
+            for op, right_node in zip(node.ops, node.comparators, strict=True):
+                right = value(right_node)
+                if not _COMPARE[type(op)](left, right):
+                    return False
+                left = right
+            return True
+        if isinstance(node, ast.Name):
+            return values[node.id]
+        if isinstance(node, ast.Constant):
+            return node.value
+        raise AssertionError(f"checked: {type(node).__name__}")
+
+    return bool(value(tree))
+
+
+@dataclass(frozen=True)
+class RegionResult:
+    """What a campaign inside a region did."""
+
+    kept: int
+    tried: int
+    """Situations generated to keep ``kept``."""
+    ran: int
+    interrupted: bool
+    wall_s: float
+
+
+def region_jobs(
+    spec: CampaignSpec, seed: int, n: int, where: str, first: int = 0
+) -> tuple[list[Job], int]:
+    """The first ``n`` jobs from job ``first`` on whose situations lie in the region, each
+    given its situation whole (numbered 0…n−1), and how many were generated; SpecError when
+    the region is too rare to reach."""
+    tree = check_where(where)
+    kept: list[Job] = []
+    tried = 0
+    index = first
+    while len(kept) < n:
+        if tried >= MOST_TRIED * n:
+            raise _core.SpecError(
+                f"--where: {len(kept)} of {tried} situations generated lie in {where!r}; a "
+                f"region rarer than 1 in {MOST_TRIED} is not generated by rejection"
+            )
+        job = build_job(spec, seed, index)
+        index += 1
+        tried += 1
+        if job.error is not None:
+            continue
+        try:
+            situation = situation_of(job.situation, job.seed)
+        except (_core.GenerationFailed, _core.SpecError):
+            continue
+        if holds(tree, describe(situation)):
+            whole = json.loads(situation.to_json())
+            kept.append(Job(len(kept), job.seed, whole, job.run))
+    return kept, tried
+
+
+def run_region(
+    spec: CampaignSpec,
+    db: str | Path,
+    where: str,
+    seed: int = 0,
+    n: int = 100,
+    workers: int | None = None,
+    on_progress: Callable[[int, int], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> RegionResult:
+    """A campaign of ``n`` runs inside the region ``where`` into store ``db`` (every run kept
+    whole: its situation is not its job's)."""
+    workers = check_workers(workers, "local")
+    started = time.perf_counter()
+    jobs, tried = region_jobs(spec, seed, n, where)
+    with Store(db, create=True) as store:
+        store.lock_for_writing()
+        store.start_campaign(spec.source, seed, n, _core.__version__, started_at())
+        done = store.done_ids()
+        executor = Executor(workers, user=any(j.in_python for j in jobs))
+        ran, interrupted = 0, False
+        for first in range(0, n, CHUNK):
+            chunk = [j for j in jobs[first : first + CHUNK] if j.index not in done]
+            stored, complete = run_chunk(executor, store, chunk, stop)
+            ran += len(stored)
+            if on_progress is not None:
+                on_progress(min(first + CHUNK, n), n)
+            if not complete or (stop is not None and stop()):
+                interrupted = first + CHUNK < n or not complete
+                break
+    return RegionResult(n, tried, ran, interrupted, time.perf_counter() - started)
+
+
+def as_expression(conditions: list[str]) -> str:
+    """A rule of ``explain`` (its conditions) as a ``--where`` expression."""
+    out = []
+    for c in conditions:
+        if c.startswith("terrain is not "):
+            out.append(f"terrain != {c.removeprefix('terrain is not ')!r}")
+        elif c.startswith("terrain is "):
+            out.append(f"terrain == {c.removeprefix('terrain is ')!r}")
+        else:
+            out.append(c.replace("≤", "<="))
+    return " and ".join(out) or "True"
+
+
+def confirm(
+    store: Store,
+    rules: list[dict[str, Any]],
+    n: int,
+    folder: Path,
+    fails_in: Callable[[Store], Callable[[int], bool]],
+    workers: int | None = None,
+) -> list[dict[str, Any]]:
+    """Each rule tested on fresh situations: ``n`` runs generated inside its region and ``n``
+    outside, from the campaign's spec with a seed its runs did not use, stored in ``folder``;
+    the failure rate of each with its exact interval (``fails_in(store)`` says which runs of a
+    store failed the way explained). *Confirmed* when the fresh rate inside lies in the rule's
+    own interval."""
+    campaign = store.campaign()
+    if campaign is None:
+        raise _core.SpecError(f"{store.path}: no campaign is stored: nothing to generate from")
+    spec = campaign_from_data(campaign["spec"])
+    # Fresh: a seed whose jobs are none of the stored campaign's.
+    fresh_seed = int(campaign["seed"]) + 1_000_003
+    out = []
+    for k, rule in enumerate(rules):
+        inside = as_expression(rule["conditions"])
+        rates = {}
+        for side, where in (("inside", inside), ("outside", f"not ({inside})")):
+            db = folder / f"rule-{k + 1}-{side}.db"
+            run_region(spec, db, where, seed=fresh_seed, n=n, workers=workers)
+            with Store(db) as fresh:
+                fails = fails_in(fresh)
+                ids = [
+                    i for (i,) in fresh.db.execute("SELECT id FROM runs WHERE outcome != 'error'")
+                ]
+            failed = sum(fails(i) for i in ids)
+            rates[side] = {
+                "runs": len(ids),
+                "failed": failed,
+                "rate": failed / len(ids) if ids else 0.0,
+                "interval": exact_interval(failed, len(ids)),
+            }
+        low, high = rule["interval"]
+        out.append(
+            {
+                "rule": rule["text"],
+                "where": inside,
+                "inside": rates["inside"],
+                "outside": rates["outside"],
+                "confirmed": low <= rates["inside"]["rate"] <= high,
+            }
+        )
+    return out
