@@ -7,12 +7,14 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import sqlite3
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import sitgen
+from sitgen.generation.region import check_where, holds
 from sitgen.triage.descriptors import describe
 from sitgen.triage.stats import exact_interval
 from tests.conftest import ROOT, run_cli
@@ -71,3 +73,44 @@ def test_explain_gives_rules_with_supports_and_exact_intervals(tmp_path: Path) -
     assert done.returncode == 2 and "give one of --class, --outcome, --requirement" in done.stderr
     done = run_cli("explain", str(db), "--class", "no_such_class")
     assert done.returncode == 2 and "too few of one kind" in done.stderr
+
+
+def test_where_generates_only_situations_in_the_region(tmp_path: Path) -> None:
+    spec = str(ROOT / "examples" / "campaigns" / "paper120.toml")
+    db = tmp_path / "w.db"
+    where = "crossing_peers >= 1 and route_length_m < 40"
+    done = run_cli("campaign", spec, "--n", "12", "--db", str(db), "--reruns", "0",
+                   "--where", where)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "situations generated to keep 12" in done.stdout
+    tree = check_where(where)
+    with sqlite3.connect(db) as c:
+        kept = [s for (s,) in c.execute("SELECT situation FROM situations ORDER BY id")]
+    assert len(kept) == 12
+    assert all(holds(tree, describe(sitgen.Situation(s, check_start=False))) for s in kept)
+    for bad, said in (
+        ("nope > 1", "--where: unknown descriptor 'nope'"),
+        ("peers > 100", "a region rarer than 1 in 200"),
+        ("__import__('os')", "--where: Call is not allowed"),
+    ):
+        done = run_cli("campaign", spec, "--n", "2", "--db", str(tmp_path / "x.db"),
+                       "--where", bad)  # fmt: skip
+        assert done.returncode == 2 and said in done.stderr, done.stderr
+        assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_confirm_tests_each_rule_on_fresh_situations(tmp_path: Path) -> None:
+    db = tmp_path / "c.db"
+    spec = str(ROOT / "examples" / "campaigns" / "paper120.toml")
+    assert run_cli("campaign", spec, "--n", "120", "--db", str(db), "--reruns", "0").returncode == 0
+    done = run_cli(
+        "explain", str(db), "--class", "collision", "--confirm", "10",
+        "--confirm-dir", str(tmp_path / "confirm"), "--format", "json",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert len(result["confirmed"]) == min(3, len(result["rules"]))
+    for c, rule in zip(result["confirmed"], result["rules"], strict=False):
+        assert c["inside"]["runs"] == 10 and c["outside"]["runs"] == 10
+        low, high = rule["interval"]
+        assert c["confirmed"] == (low <= c["inside"]["rate"] <= high)
