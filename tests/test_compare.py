@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from sitgen.generation.compare import NO_DIFFERENCE, labels_of
-from sitgen.triage.stats import exact_interval, mcnemar_exact
+from sitgen.triage.stats import exact_interval, fisher_greater, mcnemar_exact
 from tests.conftest import ROOT, run_cli
 
 SPEC = str(ROOT / "examples" / "campaigns" / "paper120.toml")
@@ -38,6 +38,14 @@ def test_the_failure_rates_interval_is_clopper_pearsons(
 def test_the_pairwise_test_is_the_exact_mcnemar(a_only: int, b_only: int, p: float) -> None:
     # Two-sided: twice the smaller binomial tail at 1/2 of the discordant pairs (at most 1).
     assert mcnemar_exact(a_only, b_only) == pytest.approx(p, rel=1e-12)
+
+
+def test_the_fisher_test_is_scipys_one_sided_exact() -> None:
+    # 8 of 10 against 2 of 10: hypergeometric tail P(X >= 8) with 10 failures among 20.
+    from math import comb
+
+    tail = sum(comb(10, k) * comb(10, 10 - k) for k in range(8, 11)) / comb(20, 10)
+    assert fisher_greater(8, 10, 2, 10) == pytest.approx(tail, rel=1e-12)
 
 
 def test_repeated_controllers_get_their_own_stores() -> None:

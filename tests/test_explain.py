@@ -114,3 +114,4 @@ def test_confirm_tests_each_rule_on_fresh_situations(tmp_path: Path) -> None:
         assert c["inside"]["runs"] == 10 and c["outside"]["runs"] == 10
         low, high = rule["interval"]
         assert c["confirmed"] == (low <= c["inside"]["rate"] <= high)
+        assert c["separates"] == (c["p_value"] < 0.05)

@@ -469,5 +469,7 @@ def explain_command(
             f"{said}: {c['where']}: fresh inside {inside['failed']} of {inside['runs']} "
             f"({100 * inside['rate']:.0f} %, {100 * inside['interval'][0]:.0f}–"
             f"{100 * inside['interval'][1]:.0f} %), outside {outside['failed']} of "
-            f"{outside['runs']} ({100 * outside['rate']:.0f} %)"
+            f"{outside['runs']} ({100 * outside['rate']:.0f} %); "
+            + ("separates" if c["separates"] else "does not separate")
+            + f" (Fisher p = {c['p_value']:.2g})"
         )

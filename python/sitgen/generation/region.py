@@ -24,7 +24,7 @@ from sitgen.execution.campaign import Executor, run_chunk, started_at
 from sitgen.execution.jobs import CampaignSpec, Job, build_job, campaign_from_data, check_workers
 from sitgen.store import Store
 from sitgen.triage.descriptors import NUMERIC, describe
-from sitgen.triage.stats import exact_interval
+from sitgen.triage.stats import ALPHA, exact_interval, fisher_greater
 from sitgen.world.situation import situation_of
 
 MOST_TRIED = 200
@@ -199,7 +199,8 @@ def confirm(
     outside, from the campaign's spec with a seed its runs did not use, stored in ``folder``;
     the failure rate of each with its exact interval (``fails_in(store)`` says which runs of a
     store failed the way explained). *Confirmed* when the fresh rate inside lies in the rule's
-    own interval."""
+    own interval; *separates* when it is higher inside than outside (one-sided Fisher exact
+    test at the 5 % level)."""
     campaign = store.campaign()
     if campaign is None:
         raise _core.SpecError(f"{store.path}: no campaign is stored: nothing to generate from")
@@ -209,7 +210,7 @@ def confirm(
     out = []
     for k, rule in enumerate(rules):
         inside = as_expression(rule["conditions"])
-        rates = {}
+        rates: dict[str, dict[str, Any]] = {}
         for side, where in (("inside", inside), ("outside", f"not ({inside})")):
             db = folder / f"rule-{k + 1}-{side}.db"
             run_region(spec, db, where, seed=fresh_seed, n=n, workers=workers)
@@ -226,13 +227,19 @@ def confirm(
                 "interval": exact_interval(failed, len(ids)),
             }
         low, high = rule["interval"]
+        a, b = rates["inside"], rates["outside"]
+        p = fisher_greater(a["failed"], a["runs"], b["failed"], b["runs"])
         out.append(
             {
                 "rule": rule["text"],
                 "where": inside,
-                "inside": rates["inside"],
-                "outside": rates["outside"],
-                "confirmed": low <= rates["inside"]["rate"] <= high,
+                "inside": a,
+                "outside": b,
+                "confirmed": low <= a["rate"] <= high,
+                # A rule can be confirmed and still explain nothing: its fresh rate no higher
+                # inside than outside.
+                "separates": p < ALPHA,
+                "p_value": p,
             }
         )
     return out

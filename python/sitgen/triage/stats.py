@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 from scipy import stats
 
 ALPHA = 0.05
@@ -23,3 +24,10 @@ def mcnemar_exact(a_only: int, b_only: int) -> float:
     if a_only + b_only == 0:
         return 1.0
     return float(stats.binomtest(a_only, a_only + b_only, 0.5).pvalue)
+
+
+def fisher_greater(k1: int, n1: int, k2: int, n2: int) -> float:
+    """The one-sided Fisher exact p-value that ``k1`` of ``n1`` is a higher rate than ``k2``
+    of ``n2`` (scipy's ``fisher_exact``, alternative ``greater``)."""
+    table = np.array([[k1, n1 - k1], [k2, n2 - k2]])
+    return float(stats.fisher_exact(table, alternative="greater").pvalue)
