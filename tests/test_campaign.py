@@ -102,6 +102,7 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
                 "judgements",
                 "requirement_verdicts",
                 "requirement_robustness",
+                "descriptors",
             )
         )
     import pyarrow.parquet as pq

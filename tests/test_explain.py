@@ -115,3 +115,19 @@ def test_confirm_tests_each_rule_on_fresh_situations(tmp_path: Path) -> None:
         low, high = rule["interval"]
         assert c["confirmed"] == (low <= c["inside"]["rate"] <= high)
         assert c["separates"] == (c["p_value"] < 0.05)
+
+
+def test_export_writes_every_runs_descriptors(tmp_path: Path) -> None:
+    pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow is in the test extra")
+    db = tmp_path / "c.db"
+    spec = str(ROOT / "examples" / "campaigns" / "paper120.toml")
+    assert run_cli("campaign", spec, "--n", "6", "--db", str(db), "--reruns", "0").returncode == 0
+    out = tmp_path / "tables"
+    assert run_cli("export", str(db), "-o", str(out), "--format", "parquet").returncode == 0
+    table = pq.read_table(out / "descriptors.parquet").to_pylist()
+    assert [r["run_id"] for r in table] == list(range(6))
+    with sqlite3.connect(db) as c:
+        first = c.execute("SELECT situation FROM situations WHERE id = 0").fetchone()[0]
+    if first is not None:
+        again = describe(sitgen.Situation(first, check_start=False))
+        assert table[0]["route_length_m"] == pytest.approx(again["route_length_m"])

@@ -194,7 +194,7 @@ def export(
     for analysis (pandas, polars, DuckDB), or one stored run as a rosbag2 (MCAP) for ROS tools
     (docs/ros2.md)."""
     if _is_store(source):
-        from sitgen.triage.rank import export_signals, export_tables
+        from sitgen.triage.rank import export_descriptors, export_signals, export_tables
 
         require_store(source)
         if format == "situation":
@@ -213,6 +213,9 @@ def export(
             signals = export_signals(source, output, format)
             if signals is not None:
                 typer.echo(f"wrote {signals} (every judged run made again for its signals)")
+            descriptors = export_descriptors(source, output, format)
+            if descriptors is not None:
+                typer.echo(f"wrote {descriptors} (every run's situation described)")
         return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")

@@ -28,6 +28,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from sitgen import _core
+from sitgen.store import Store
+from sitgen.triage.recall import regenerate, stored_run
 from sitgen.world.situation import Situation
 
 AGENT_SPEED_M_S = 0.4
@@ -147,3 +150,23 @@ def describe(situation: Situation) -> dict[str, Any]:
         "nearest_peer_start_m": nearest,
         "terrain": str(spec.get("preset") or spec.get("source", {}).get("kind") or "given"),
     }
+
+
+def described(store: Store) -> dict[int, dict[str, Any]]:
+    """Every stored run's situation's descriptors, by run id (the situation as stored, or
+    generated again from its spec and seed; runs whose situation never generated are left
+    out)."""
+    out = {}
+    for (run_id,) in store.db.execute("SELECT id FROM runs ORDER BY id").fetchall():
+        row = stored_run(store, run_id)
+        if row["content_hash"] is None:
+            continue
+        if row["situation"] is not None:
+            situation = Situation(row["situation"], check_start=False)
+        else:
+            try:
+                situation = regenerate(row)
+            except _core.GenerationFailed:
+                continue
+        out[run_id] = describe(situation)
+    return out

@@ -19,10 +19,8 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.store import Store, StoreError
-from sitgen.triage.descriptors import NUMERIC, describe
-from sitgen.triage.recall import regenerate, stored_run
+from sitgen.triage.descriptors import NUMERIC, described
 from sitgen.triage.stats import exact_interval
-from sitgen.world.situation import Situation
 
 DEPTH = 3
 """Splits a rule may have."""
@@ -51,23 +49,6 @@ class Rule:
             f"fail, {100 * self.rate:.0f} % ({100 * low:.0f}–{100 * high:.0f} %); elsewhere "
             f"{100 * self.elsewhere:.0f} %"
         )
-
-
-def _situations(store: Store) -> dict[int, Situation]:
-    """Every run's situation (stored, or generated again from its spec and seed)."""
-    out = {}
-    for (run_id,) in store.db.execute("SELECT id FROM runs ORDER BY id").fetchall():
-        row = stored_run(store, run_id)
-        if row["content_hash"] is None:
-            continue
-        if row["situation"] is not None:
-            out[run_id] = Situation(row["situation"], check_start=False)
-        else:
-            try:
-                out[run_id] = regenerate(row)
-            except _core.GenerationFailed:
-                continue
-    return out
 
 
 def target_of(store: Store, failure_class: str | None, outcome: str | None,
@@ -105,15 +86,15 @@ def explain(
         from sklearn.tree import DecisionTreeClassifier
     except ImportError:
         raise _core.SpecError("explain needs scikit-learn; pip install 'sitgen[explain]'") from None
-    situations = _situations(store)
+    by_run = described(store)
     fails = target_of(store, failure_class, outcome, requirement)
-    ids = sorted(situations)
-    described = [describe(situations[i]) for i in ids]
-    terrains = sorted({d["terrain"] for d in described})
+    ids = sorted(by_run)
+    rows = [by_run[i] for i in ids]
+    terrains = sorted({d["terrain"] for d in rows})
     names = [*NUMERIC, *(f"terrain is {t}" for t in terrains)]
     x = np.array(
         [[float(d[n]) for n in NUMERIC] + [float(d["terrain"] == t) for t in terrains]
-         for d in described]
+         for d in rows]
     )  # fmt: skip
     y = np.array([fails(i) for i in ids], dtype=int)
     if len(ids) < 2 * FOLDS or y.sum() < FOLDS or (len(y) - y.sum()) < FOLDS:

@@ -11,6 +11,7 @@ from typing import Any, TextIO
 from sitgen import _core
 from sitgen.run import run
 from sitgen.store import Store, events_digest
+from sitgen.triage.descriptors import NUMERIC, described
 from sitgen.triage.failures import check_class, distinct_failures
 from sitgen.triage.recall import regenerate, resimulate_checked, stored_run
 from sitgen.triage.robustness import verdict
@@ -129,6 +130,36 @@ def export_tables(db: str | Path, directory: Path, format: str) -> list[Path]:
     return written
 
 
+def export_descriptors(db: str | Path, directory: Path, format: str) -> Path | None:
+    """Every run's situation descriptors (docs/explain.md), a row a run (``run_id`` then each
+    descriptor), as ``descriptors.parquet`` or ``.csv`` in ``directory``; None for an empty
+    store."""
+    with Store(db) as store:
+        by_run = described(store)
+    if not by_run:
+        return None
+    names = [*NUMERIC, "terrain"]
+    columns: dict[str, list[Any]] = {"run_id": list(by_run)}
+    for name in names:
+        columns[name] = [d[name] for d in by_run.values()]
+    path = directory / f"descriptors.{format}"
+    _write_columns(columns, path, format)
+    return path
+
+
+def _write_columns(columns: dict[str, list[Any]], path: Path, format: str) -> None:
+    if format == "csv":
+        with path.open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(columns)
+            writer.writerows(zip(*columns.values(), strict=True))
+    else:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        pq.write_table(pa.table(columns), path)
+
+
 def export_signals(db: str | Path, directory: Path, format: str) -> Path | None:
     """Every run judged by requirements, its requirement signals one row per sample
     (``run_id``, ``step``, ``time_s``, then each signal of docs/requirements.md), written as
@@ -152,16 +183,7 @@ def export_signals(db: str | Path, directory: Path, format: str) -> Path | None:
             for name in names:
                 columns[name] += record.signals[name].tolist()
     path = directory / f"signals.{format}"
-    if format == "csv":
-        with path.open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(columns)
-            writer.writerows(zip(*columns.values(), strict=True))
-    else:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
-        pq.write_table(pa.table(columns), path)
+    _write_columns(columns, path, format)
     return path
 
 
