@@ -570,3 +570,25 @@ def test_a_signal_without_a_subject_reads_infinity_and_its_verdict_says_so() -> 
     assert not rec.requirements[0]["violated"]
     assert rec.to_dict()["requirements"][0]["robustness"] == "inf"  # JSON has no infinity
     assert (rec.signals["peer_distance"] == float("inf")).all()
+
+
+@pytest.mark.parametrize("cls", ["Costs3ms", "StartsAThread", "StartsAChild"])
+def test_a_users_class_is_judged_by_requirements_as_the_built_ins_are(
+    cls: str, tmp_path: Path
+) -> None:
+    """A class run in the campaign's worker processes (costing milliseconds, starting a thread
+    or a child) has its verdicts stored and its violation copied, like a built-in's."""
+    db = tmp_path / "u.db"
+    done = run_cli(
+        "campaign", str(ROOT / "examples" / "campaigns" / "paper120.toml"), "--n", "3",
+        "--db", str(db), "--reruns", "2", "--time-limit", "8",
+        "--controller", f"python:tests.controllers.careless:{cls}",
+        "--require", "never_moves: always (abs(speed) <= 0.01)",
+        cwd=ROOT,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    with sqlite3.connect(db) as c:
+        verdicts = c.execute("SELECT violated FROM requirement_verdicts").fetchall()
+        copies = c.execute("SELECT reruns FROM requirement_robustness").fetchall()
+    assert len(verdicts) == 3 and all(v for (v,) in verdicts)
+    assert copies == [(2,)]

@@ -27,6 +27,7 @@ from sitgen.controllers.host import die_with_parent
 from sitgen.controllers.marks import MARK, marked_env
 from sitgen.execution.jobs import Job
 from sitgen.run import run
+from sitgen.world.requirements import verdicts_json
 
 
 def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
@@ -53,6 +54,8 @@ def run_user_job(job: Job, in_process: bool = True) -> dict[str, Any]:
         "time_s": rec.time_s,
         "failure": rec.failure,
         "coverage": rec.coverage,
+        # As the core writes a record: only where the run spec has requirements.
+        **({"requirements": verdicts_json(rec.requirements)} if rec.requirements else {}),
     }
     # Deflate's fastest level, as the core packs built-in runs (sitgen_core::run::pack_trajectory).
     packed = zlib.compress(rec.trajectory.astype("<f4").tobytes(), 1)
