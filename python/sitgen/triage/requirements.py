@@ -39,7 +39,8 @@ def requirement_failures(store: Store) -> list[DistinctFailure]:
     scores = dict(store.db.execute("SELECT id, score FROM runs").fetchall())
     costs = store.costs()
     found = []
-    for name, rows in violations(store).items():
+    found_rows = violations(store)
+    for name, rows in found_rows.items():
         worst = rows[0]
         m = measured.get((worst["run_id"], name))
         cpu = [costs[r["run_id"]][1] for r in rows if r["run_id"] in costs]
@@ -62,14 +63,11 @@ def requirement_failures(store: Store) -> list[DistinctFailure]:
                 median_cpu_s=statistics.median(cpu) if cpu else None,
             )
         )
-    weight = {v["name"]: v["weight"] for v in store.requirement_verdicts()}
-    found.sort(key=lambda f: (-weight.get(f.key[len(PREFIX) :], 1.0), _worst(store, f)))
+    # Heaviest first, then worst robustness (each requirement's violations come worst first).
+    worst = {name: float(rows[0]["robustness"] or 0.0) for name, rows in found_rows.items()}
+    weight = {name: float(rows[0]["weight"]) for name, rows in found_rows.items()}
+    found.sort(key=lambda f: (-weight[f.key[len(PREFIX) :]], worst[f.key[len(PREFIX) :]]))
     return found
-
-
-def _worst(store: Store, f: DistinctFailure) -> float:
-    rows = store.requirement_verdicts(f.key[len(PREFIX) :], violated_only=True)
-    return float(rows[0]["robustness"]) if rows and rows[0]["robustness"] is not None else 0.0
 
 
 def _as_class(copy: str, name: str) -> str | None:

@@ -53,6 +53,23 @@ pub const NAMES: [&str; 8] = [
     "peer_seen",
 ];
 
+/// Each signal's index in [`NAMES`].
+pub const SPEED: usize = 0;
+/// `turn_rate`.
+pub const TURN_RATE: usize = 1;
+/// `peer_distance`.
+pub const PEER_DISTANCE: usize = 2;
+/// `peer_clearance`.
+pub const PEER_CLEARANCE: usize = 3;
+/// `obstacle_clearance`.
+pub const OBSTACLE_CLEARANCE: usize = 4;
+/// `goal_distance`.
+pub const GOAL_DISTANCE: usize = 5;
+/// `closing_speed`.
+pub const CLOSING_SPEED: usize = 6;
+/// `peer_seen`.
+pub const PEER_SEEN: usize = 7;
+
 /// Largest value `obstacle_clearance` reads, metres: an exact clearance costs a search of the
 /// cells within it every sample (about 3 % of a run at 2 m, 6 % at 5 m).
 pub const OBSTACLE_CLEARANCE_CAP_M: f64 = 2.0;
@@ -111,15 +128,24 @@ fn centre_distance(a: &Pose, b: &Pose) -> f64 {
     (a.x_m - b.x_m).hypot(a.y_m - b.y_m)
 }
 
-/// The signals `wanted` (by index) over every sample; the others are left empty.
+/// The signals `wanted` (by index) over every sample; the others are left empty. The nearest
+/// peer, which four signals read, is found once a sample.
 pub fn compute(rec: &Recorded<'_>, wanted: &[bool; 8], dt_s: f64) -> Vec<Vec<f64>> {
     let n = rec.samples();
+    let about_peers = [PEER_DISTANCE, PEER_CLEARANCE, CLOSING_SPEED, PEER_SEEN];
+    let nearest: Vec<Option<(usize, f64)>> = if about_peers.iter().any(|&i| wanted[i]) {
+        (0..n).map(|k| rec.nearest(k)).collect()
+    } else {
+        Vec::new()
+    };
     let mut out = vec![Vec::new(); NAMES.len()];
     for (i, signal) in out.iter_mut().enumerate() {
         if i == OBSTACLE_CLEARANCE && wanted[i] {
             *signal = obstacle_clearance(rec);
         } else if wanted[i] {
-            *signal = (0..n).map(|k| sample(rec, i, k, dt_s)).collect();
+            *signal = (0..n)
+                .map(|k| sample(rec, i, k, dt_s, nearest.get(k).copied().flatten()))
+                .collect();
         }
     }
     out
@@ -153,34 +179,32 @@ fn obstacle_clearance(rec: &Recorded<'_>) -> Vec<f64> {
         .collect()
 }
 
-const OBSTACLE_CLEARANCE: usize = 4;
-
-/// Signal `i` at sample `k`.
-fn sample(rec: &Recorded<'_>, i: usize, k: usize, dt_s: f64) -> f64 {
+/// Signal `i` at sample `k`, whose nearest peer is `nearest`.
+fn sample(rec: &Recorded<'_>, i: usize, k: usize, dt_s: f64, nearest: Option<(usize, f64)>) -> f64 {
     let agent = rec.pose(k, rec.agent);
     let before = (k > 0).then(|| rec.pose(k - 1, rec.agent));
-    match NAMES[i] {
-        "speed" => before.map_or(0.0, |b| {
+    match i {
+        SPEED => before.map_or(0.0, |b| {
             let (dx, dy) = (agent.x_m - b.x_m, agent.y_m - b.y_m);
             let mid = b.heading_rad + wrap_angle(agent.heading_rad - b.heading_rad) / 2.0;
             let along = dx * mid.cos() + dy * mid.sin();
             dx.hypot(dy).copysign(if along < 0.0 { -1.0 } else { 1.0 }) / dt_s
         }),
-        "turn_rate" => before.map_or(0.0, |b| {
+        TURN_RATE => before.map_or(0.0, |b| {
             wrap_angle(agent.heading_rad - b.heading_rad) / dt_s
         }),
-        "peer_distance" => rec.nearest(k).map_or(f64::INFINITY, |(_, d)| d),
-        "peer_clearance" => rec.nearest(k).map_or(f64::INFINITY, |(j, _)| {
+        PEER_DISTANCE => nearest.map_or(f64::INFINITY, |(_, d)| d),
+        PEER_CLEARANCE => nearest.map_or(f64::INFINITY, |(j, _)| {
             let mine = footprint(&rec.bodies[rec.agent], &agent);
             mine.distance(&footprint(&rec.bodies[j], &rec.pose(k, j)))
         }),
-        "obstacle_clearance" => unreachable!("obstacle_clearance is computed in turn"),
-        "goal_distance" => (agent.x_m - rec.goal.0).hypot(agent.y_m - rec.goal.1),
-        "closing_speed" => match (before, rec.nearest(k)) {
+        OBSTACLE_CLEARANCE => unreachable!("obstacle_clearance is computed in turn"),
+        GOAL_DISTANCE => (agent.x_m - rec.goal.0).hypot(agent.y_m - rec.goal.1),
+        CLOSING_SPEED => match (before, nearest) {
             (Some(b), Some((j, now))) => (centre_distance(&b, &rec.pose(k - 1, j)) - now) / dt_s,
             _ => 0.0,
         },
-        "peer_seen" => match rec.nearest(k) {
+        PEER_SEEN => match nearest {
             Some((j, _)) if rec.seen.get(k).is_some_and(|s| s.contains(&(j as u32))) => 1.0,
             _ => 0.0,
         },

@@ -94,3 +94,21 @@ fn unless_reads_as_rtamt_rewrites_it() {
         b.verdict(&s, 4, 0.1).robustness
     );
 }
+
+#[test]
+fn each_signals_index_is_its_place_among_the_names() {
+    use crate::monitor::signals::*;
+    let named = [
+        ("speed", SPEED),
+        ("turn_rate", TURN_RATE),
+        ("peer_distance", PEER_DISTANCE),
+        ("peer_clearance", PEER_CLEARANCE),
+        ("obstacle_clearance", OBSTACLE_CLEARANCE),
+        ("goal_distance", GOAL_DISTANCE),
+        ("closing_speed", CLOSING_SPEED),
+        ("peer_seen", PEER_SEEN),
+    ];
+    for (name, i) in named {
+        assert_eq!(index(name), Some(i), "{name}");
+    }
+}

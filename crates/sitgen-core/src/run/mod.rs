@@ -49,9 +49,6 @@ pub use spec::{controller_spec, is_external, RunSpec};
 /// cannot ask for a run that never ends.
 pub const MAX_STEPS: f64 = 1e7;
 
-/// The index of `peer_seen` among the requirement signals.
-const PEER_SEEN: usize = 7;
-
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
@@ -511,7 +508,7 @@ impl Run {
     fn watch_step(&mut self, seen: &[u32]) -> bool {
         self.agent_scan = None;
         self.record_poses();
-        if self.requirements.reads[PEER_SEEN] {
+        if self.requirements.reads[signals::PEER_SEEN] {
             self.requirements.seen.push(seen.to_vec());
         }
         let monitor = self
