@@ -11,8 +11,9 @@
 //! [`mission`] (placement and routes), [`situation`] (the situation file), [`sim`] (the
 //! simulator), [`control`] (controllers), [`monitor`] (events), [`scoring`] (penalties),
 //! [`failure`] (failure classes), [`requirement`] (the user's requirements in STL), [`coverage`] (situation coverage), [`run`] (one situation
-//! driven to its end) and [`crosscheck`] (the same situation run by Stage, compared).
+//! driven to its end), [`avoidability`] (whether a collision could have been escaped) and [`crosscheck`] (the same situation run by Stage, compared).
 
+pub mod avoidability;
 pub mod control;
 pub mod coverage;
 pub mod crosscheck;

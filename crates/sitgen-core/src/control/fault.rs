@@ -494,6 +494,7 @@ pub fn wrap(controller: Box<dyn Controller>, fault: Option<Fault>) -> Box<dyn Co
 }
 
 /// A controller given a faulty view of the world.
+#[derive(Clone)]
 pub struct Seeded {
     inner: Box<dyn Controller>,
     fault: Fault,

@@ -34,7 +34,7 @@ use crate::situation::Robot;
 pub type Command = (f64, f64);
 
 /// What every controller implements.
-pub trait Controller: Send {
+pub trait Controller: Send + BoxedClone {
     /// Start a run as `robot` (its route, body and behaviour at the end of the route).
     fn reset(&mut self, robot: &Robot);
     /// The command for this step.
@@ -48,6 +48,26 @@ pub trait Controller: Send {
     /// agent always carries it).
     fn senses(&self) -> bool {
         true
+    }
+}
+
+/// A controller copied with its state, mid-run: a run branches from a step with every
+/// built-in controller where it stands ([`crate::avoidability`]). Every `Clone` controller has
+/// it.
+pub trait BoxedClone {
+    /// A copy of this controller, state and all.
+    fn boxed_clone(&self) -> Box<dyn Controller>;
+}
+
+impl<T: Controller + Clone + 'static> BoxedClone for T {
+    fn boxed_clone(&self) -> Box<dyn Controller> {
+        Box::new(self.clone())
+    }
+}
+
+impl Clone for Box<dyn Controller> {
+    fn clone(&self) -> Self {
+        self.boxed_clone()
     }
 }
 

@@ -33,6 +33,7 @@ use crate::scoring::{self, Score, ScoringSpec};
 use crate::sim::{Observation, World};
 use crate::situation::Situation;
 
+mod branch;
 pub mod episodes;
 mod jobs;
 pub mod perturb;
@@ -41,6 +42,7 @@ pub mod protocol;
 pub mod serve;
 mod spec;
 
+pub use branch::Branch;
 pub use jobs::{pack_trajectory, par_map, run_batch, run_job, Job, JobResult, JobSituation};
 pub use perturb::Perturbation;
 pub use spec::{controller_spec, is_external, RunSpec};
@@ -327,11 +329,8 @@ impl Run {
     /// What robot `id`'s controller is given of its observation `obs`: with the exact
     /// perception, every other robot's true state as its tracks in place of those its laser
     /// sees (the monitor still knows which the laser saw).
-    fn perceived(&self, id: u32, mut obs: Observation) -> Observation {
-        if self.exact[id as usize] {
-            obs.tracks = self.world.true_tracks(id);
-        }
-        obs
+    fn perceived(&self, id: u32, obs: Observation) -> Observation {
+        perceived(&self.world, self.exact[id as usize], id, obs)
     }
 
     /// How many waypoints of its route the agent has reached, as the monitor sees it (the
@@ -648,6 +647,15 @@ impl Run {
                 .extend([r.pose.x_m, r.pose.y_m, r.pose.heading_rad]);
         }
     }
+}
+
+/// What robot `id`'s controller is given of its observation `obs` in `world`: with the exact
+/// perception (`exact`), every other robot's true state as its tracks.
+fn perceived(world: &World, exact: bool, id: u32, mut obs: Observation) -> Observation {
+    if exact {
+        obs.tracks = world.true_tracks(id);
+    }
+    obs
 }
 
 /// Run `situation` with built-in controllers to its end.

@@ -23,7 +23,7 @@
 pub mod collision;
 pub mod laser;
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -195,13 +195,15 @@ pub struct Observation {
 #[derive(Debug, Clone)]
 pub struct World {
     spec: SimSpec,
-    map: Map,
+    /// The terrain never changes during a run: a copy of the world (a branch,
+    /// [`crate::run::Branch`]) shares it.
+    map: Arc<Map>,
     /// Distance, metres, from each cell centre to the nearest occupied cell centre: a footprint
     /// whose enclosing circle is nearer than this (less half a cell diagonal) to nothing cannot
     /// touch the grid, which settles most moves without testing cells.
-    clearance_m: Vec<f32>,
+    clearance_m: Arc<Vec<f32>>,
     /// The grid as laser rays see it, with how far they may leap from each cell.
-    rays: RayGrid,
+    rays: Arc<RayGrid>,
     robots: Vec<RobotState>,
     /// Which robots carry the laser: the agent always, a peer when its controller senses.
     lasers: Vec<bool>,
@@ -399,9 +401,9 @@ impl World {
             .collect();
         Self {
             spec,
-            map,
-            clearance_m,
-            rays,
+            map: Arc::new(map),
+            clearance_m: Arc::new(clearance_m),
+            rays: Arc::new(rays),
             robots,
             lasers,
             bearings,

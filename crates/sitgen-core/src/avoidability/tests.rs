@@ -1,0 +1,175 @@
+//! Hand-built collisions with a known answer: one with an escape (whose witness, replayed in
+//! the run itself, is watched collision-free by the monitor), one a peer strikes from the
+//! agent's blind side, one in a dead end.
+
+use super::*;
+use crate::mission::ControllerSpec;
+use crate::monitor::EventKind;
+use crate::run::RunRecord;
+use crate::test_data::{block, robot, situation};
+
+fn spec(time_limit_s: f64) -> RunSpec {
+    RunSpec {
+        time_limit_s,
+        ..RunSpec::default()
+    }
+}
+
+/// The run, and the agent's first collision with a robot in it.
+fn collided(s: &Situation, spec: &RunSpec) -> (RunRecord, Collision) {
+    let rec = crate::run::run(s, spec, 7).unwrap();
+    let c = first_robot_collision(&rec.events, 0, spec.sim.dt_s).expect("a collision");
+    (rec, c)
+}
+
+fn still(mut r: crate::situation::Robot) -> crate::situation::Robot {
+    r.controller.params.insert("start_s".into(), 3000.0);
+    r
+}
+
+/// The agent drives east at a peer driving west along the same line: both `straight`, so
+/// they meet head-on; the agent's laser sees the peer from the start.
+fn head_on() -> Situation {
+    situation(
+        300,
+        &[],
+        vec![
+            robot(0, (5.0, 15.0, 0.0), &[[25.0, 15.0]], "straight"),
+            robot(1, (15.0, 15.0, std::f64::consts::PI), &[[2.0, 15.0]], "straight"),
+        ],
+    )
+}
+
+/// The run of `s` with the agent's controller until `w.from_s`, the witness's commands after.
+fn replayed(s: &Situation, spec: &RunSpec, w: &Witness) -> RunRecord {
+    let mut run = Run::new(s, spec, 7).unwrap();
+    let dt = spec.sim.dt_s;
+    let from = (w.from_s / dt).round() as u64;
+    while run.world().steps() < from {
+        run.step(None);
+    }
+    run.hand_over_agent();
+    let mut path = vec![];
+    let pose = |run: &Run| {
+        let p = &run.world().robots()[0].pose;
+        [p.x_m, p.y_m, p.heading_rad]
+    };
+    path.push(pose(&run));
+    'replay: for seg in &w.segments {
+        for _ in 0..(seg.duration_s / dt).round() as u64 {
+            // A run ends where the agent completes its route: the witness's path stops there.
+            if run.step(Some((seg.v_m_s, seg.w_rad_s))) && run.outcome() == Some(&crate::run::Outcome::Completed) {
+                break 'replay;
+            }
+            path.push(pose(&run));
+        }
+    }
+    assert!(path.len() > w.path.len() / 2, "{} of {} steps", path.len(), w.path.len());
+    let first = path.iter().zip(&w.path).position(|(a, b)| a != b);
+    assert_eq!(first, None, "the replay drives the witness's path: {:?}", first.map(|i| (path[i], w.path[i], &w.segments)));
+    run.finish()
+}
+
+#[test]
+fn a_head_on_collision_seen_from_the_start_is_avoidable_and_its_witness_replays_clear() {
+    let (s, spec) = (head_on(), spec(40.0));
+    let (rec, c) = collided(&s, &spec);
+    assert_eq!(c.robot, 1);
+    assert_eq!(c.sighted_step, Some(0), "the peer is in view from the first scan");
+    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    assert_eq!(j.verdict, Verdict::Avoidable);
+    assert!(!j.at_rest, "the agent drove into it");
+    let w = j.witness.expect("a witness");
+    assert_eq!(w.from_s, 0.0);
+    assert!(w.until_s >= j.collision_s + AFTER_S - 1e-9);
+    let total: f64 = w.segments.iter().map(|s| s.duration_s).sum();
+    assert!((total - (w.until_s - w.from_s)).abs() < 1e-9);
+    // Stopping is no escape from a peer that drives on: the witness moves.
+    assert!(w.segments.iter().any(|s| s.v_m_s != 0.0 || s.w_rad_s != 0.0));
+    let again = replayed(&s, &spec, &w);
+    let hit = again
+        .events
+        .iter()
+        .find(|e| e.kind == EventKind::Collision && e.concerns(0));
+    assert!(
+        hit.is_none_or(|e| e.start_s > w.until_s + 1e-9),
+        "the witness replays collision-free to its horizon: {hit:?} (the run's was at {} s)",
+        rec.events[0].start_s
+    );
+}
+
+#[test]
+fn a_peer_striking_a_still_agent_from_behind_is_unavoidable_with_this_sensor() {
+    // The agent stands at x = 10 facing +x; a peer drives into its rear from 4 m behind,
+    // never in its 180° laser's view. Had it known, it could have stepped aside.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            still(robot(0, (10.0, 10.0, 0.0), &[[10.0, 1.0]], "straight")),
+            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
+        ],
+    );
+    let spec = spec(20.0);
+    let (_, c) = collided(&s, &spec);
+    assert_eq!(c.sighted_step, None, "never seen before contact");
+    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    assert_eq!(j.verdict, Verdict::UnavoidableWithThisSensor);
+    assert!(j.at_rest, "struck standing still: passive safety held");
+    let w = j.witness.expect("an escape from the start");
+    assert_eq!(w.from_s, 0.0);
+    assert_eq!(j.sighted_s, None);
+    let again = replayed(&s, &spec, &w);
+    assert!(!again
+        .events
+        .iter()
+        .any(|e| e.kind == EventKind::Collision && e.concerns(0)));
+}
+
+#[test]
+fn an_agent_trapped_in_a_dead_end_by_a_peer_driving_in_is_unavoidable() {
+    // A corridor 1 m wide (y 9.5 to 10.5) closed at x = 10; the agent stands at its end and
+    // a peer drives in from x = 6 toward a waypoint past the end wall.
+    let size = 200;
+    let mut walls = block(size, (0.0, 10.5), (8.0, 9.5));
+    walls.extend(block(size, (0.0, 10.5), (10.5, 12.0)));
+    walls.extend(block(size, (10.0, 10.5), (9.5, 10.5)));
+    let s = situation(
+        size,
+        &walls,
+        vec![
+            still(robot(0, (9.3, 10.0, 0.0), &[[15.0, 10.0]], "straight")),
+            robot(1, (6.0, 10.0, 0.0), &[[12.0, 10.0]], "straight"),
+        ],
+    );
+    let spec = spec(20.0);
+    let (_, c) = collided(&s, &spec);
+    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    assert_eq!(j.verdict, Verdict::Unavoidable, "{j:?}");
+    assert_eq!(j.witness, None);
+    assert_eq!(j.tried, manoeuvres(0.5, 90f64.to_radians(), 0.1, 1).len());
+}
+
+#[test]
+fn manoeuvres_are_stop_first_and_whole_control_periods() {
+    let m = manoeuvres(0.5, 1.0, 0.1, 3);
+    assert_eq!(m[0], vec![(0, 0.0, 0.0)]);
+    assert_eq!(m.len(), 1 + 24 + 96 + 24);
+    for seg in m.iter().flatten() {
+        assert_eq!(seg.0 % 3, 0, "{seg:?}");
+    }
+}
+
+#[test]
+fn an_external_agent_is_refused_by_name() {
+    let s = head_on();
+    let mut spec = spec(40.0);
+    spec.controller = Some(ControllerSpec::named("cmd:still"));
+    let c = Collision {
+        step: 10,
+        robot: 1,
+        sighted_step: None,
+    };
+    let e = judge(&s, &spec, 7, &c, AFTER_S).unwrap_err();
+    assert!(e.to_string().contains("run.controller.name"), "{e}");
+}
