@@ -1,6 +1,7 @@
 //! Python bindings of sitgen-core: thin wrappers, no logic. File names mirror the core's
 //! modules; long calls release the GIL.
 
+mod avoidability;
 mod campaign;
 mod coverage;
 mod cpu_deadline;
@@ -54,6 +55,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     coverage::register(m)?;
     fault::register(m)?;
     shrink::register(m)?;
+    avoidability::register(m)?;
     crosscheck::register(m)?;
     watchdog::register(m)?;
     cpu_deadline::register(m)?;

@@ -7,8 +7,9 @@
 //! that, until the robot it hit is no longer closing in on it (so that stopping in a peer's
 //! path is no escape: the peer comes on), at most to the time limit. The search starts from
 //! two moments:
-//! 1. **the first sighting**: the first scan of the agent's laser that saw the robot it hit,
-//!    where the agent could first have known of it;
+//! 1. **the sighting**: the first scan of the spell in which the agent's laser saw the robot
+//!    it hit up to contact (a robot lost for less than [`SIGHTING_GAP_S`] is the same spell),
+//!    where the agent could first have known of this approach;
 //! 2. **the start**: as if the agent had known every peer's path from the start (a perfect
 //!    sensor).
 //!
@@ -24,9 +25,10 @@
 //!   obstacles might have saved it;
 //! - [`Verdict::Unavoidable`]: none even from the start.
 //!
-//! `at_rest` says whether the agent stood still when struck: Fraichard's *passive motion
-//! safety* (if a collision happens, the robot is at rest) held, and the collision is the other
-//! robot's doing.
+//! `at_rest` says whether the agent stood still when struck (no point of its footprint moving
+//! faster than 5 cm/s): Fraichard's *passive motion safety* (if a collision happens, the robot
+//! is at rest) held, and the collision is the other robot's doing — though, when an escape
+//! exists from the sighting, standing in the robot's path was the controller's choice.
 //!
 //! **Why.** A peer that avoids nothing can drive into an agent from its blind side, and no
 //! controller could have helped it; ranking such collisions beside the controller's own
@@ -49,8 +51,8 @@
 use serde::Serialize;
 
 use crate::error::SpecError;
-use crate::monitor::{Event, EventKind, Party};
 use crate::run::{Branch, Run, RunSpec};
+use crate::sim::Contact;
 use crate::situation::Situation;
 
 #[cfg(test)]
@@ -60,9 +62,11 @@ mod tests;
 /// a Pioneer's 0.5 m/s to pass its own length several times over.
 pub const AFTER_S: f64 = 5.0;
 
-/// Speeds below this, m/s (and turn rates below this, rad/s), are standing still: a robot
-/// the simulator has at (0, 0) reads exactly 0.
-const AT_REST: f64 = 1e-6;
+/// A robot is at rest when no point of its footprint moves faster than this, m/s: the
+/// monitor's own threshold for a robot closing in ([`crate::monitor::attribution::MOVING_M_S`],
+/// a twentieth of a Pioneer's top speed), so that a robot creeping round on the spot at a few
+/// thousandths of a radian a second counts as standing, as the failure classes have it.
+const AT_REST_M_S: f64 = crate::monitor::attribution::MOVING_M_S;
 
 /// Whether the collision could have been escaped, and from when.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -111,17 +115,6 @@ pub struct Witness {
     pub path: Vec<[f64; 3]>,
 }
 
-/// The collision judged.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Collision {
-    /// The step at which contact began (the event's start).
-    pub step: u64,
-    /// The robot hit.
-    pub robot: u32,
-    /// The step of the agent's first scan that saw it, if any did before contact.
-    pub sighted_step: Option<u64>,
-}
-
 /// What [`judge`] found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Judgement {
@@ -129,9 +122,15 @@ pub struct Judgement {
     pub robot: u32,
     /// When contact began, seconds.
     pub collision_s: f64,
-    /// When the agent's laser first saw it, seconds (`None`: not before contact).
+    /// When the spell in which the agent's laser saw it up to contact began, seconds
+    /// (`None`: not seen in the [`SIGHTING_GAP_S`] before contact).
     pub sighted_s: Option<f64>,
-    /// Whether the agent stood still when struck (passive motion safety held).
+    /// The agent's speed in the step of contact, m/s.
+    pub speed_m_s: f64,
+    /// Its turn rate then, rad/s.
+    pub turn_rate_rad_s: f64,
+    /// Whether the agent stood still when struck: no point of its footprint moving faster
+    /// than 5 cm/s (passive motion safety held).
     pub at_rest: bool,
     /// The verdict.
     pub verdict: Verdict,
@@ -236,7 +235,10 @@ fn escapes(mut branch: Branch, horizon: &Horizon, m: &Manoeuvre) -> Option<Vec<[
         [p.x_m, p.y_m, p.heading_rad]
     };
     let gap = |b: &Branch| {
-        let (a, o) = (&b.world().robots()[agent].pose, &b.world().robots()[hit].pose);
+        let (a, o) = (
+            &b.world().robots()[agent].pose,
+            &b.world().robots()[hit].pose,
+        );
         (a.x_m - o.x_m).hypot(a.y_m - o.y_m)
     };
     let mut path = vec![pose(&branch)];
@@ -262,46 +264,31 @@ fn escapes(mut branch: Branch, horizon: &Horizon, m: &Manoeuvre) -> Option<Vec<[
     Some(path)
 }
 
-/// The agent's first collision with a robot in `events` (a run's log), as [`judge`] takes it:
-/// its step, the robot, and the step of the agent's first scan that saw it (from the event's
-/// `seen_before_s`).
-pub fn first_robot_collision(events: &[Event], agent: u32, dt_s: f64) -> Option<Collision> {
-    let steps = |s: f64| (s / dt_s).round() as u64;
-    events
-        .iter()
-        .filter(|e| e.kind == EventKind::Collision && e.concerns(agent))
-        .find_map(|e| {
-            let robot = match e.other {
-                Some(Party::Robot(id)) if e.robot == agent => id,
-                Some(Party::Robot(_)) => e.robot,
-                _ => return None,
-            };
-            let step = steps(e.start_s);
-            let sighted_step = e
-                .details
-                .get("seen_before_s")
-                .and_then(serde_json::Value::as_f64)
-                .map(|before| step.saturating_sub(steps(before)));
-            Some(Collision {
-                step,
-                robot,
-                sighted_step,
-            })
-        })
+/// How long the agent's laser may lose a robot without its sighting ending, seconds: a robot
+/// glimpsed, hidden for a moment behind a corner and seen again is one approach.
+pub const SIGHTING_GAP_S: f64 = 1.0;
+
+/// A spell of the agent's laser seeing one robot: when it began, when it last saw it, and the
+/// run branched where the spell began.
+struct Spell {
+    began: u64,
+    last: u64,
+    branch: Branch,
 }
 
-/// Judge `collision` of the run of `situation` under `spec` with noise from `seed` (the run
-/// made again, deterministic): search for an escape from the first sighting, and from the
-/// start, each until `after_s` past the collision and the robot hit no longer closing in (or
-/// the time limit). The agent's and every
-/// peer's controller must be built in; an external one is an error naming it.
+/// Judge the agent's first collision with a robot in the run of `situation` under `spec` with
+/// noise from `seed` (the run made again, deterministic; `None` if the run has none): search
+/// for an escape from the first scan of the spell in which the agent's laser saw that robot
+/// before contact (spells broken by [`SIGHTING_GAP_S`] unseen), and from the start, each
+/// until `after_s` past the collision and the robot hit no longer closing in (or the time
+/// limit). The agent's and every peer's controller must be built in; an external one is an
+/// error naming it.
 pub fn judge(
     situation: &Situation,
     spec: &RunSpec,
     seed: u64,
-    collision: &Collision,
     after_s: f64,
-) -> Result<Judgement, SpecError> {
+) -> Result<Option<Judgement>, SpecError> {
     SpecError::check_positive("after_s", after_s, 3600.0)?;
     let mut run = Run::new(situation, spec, seed)?;
     if run.agent_is_external() {
@@ -311,53 +298,93 @@ pub fn judge(
              layer",
         ));
     }
-    let branch = |run: &Run| run.branch().map_err(|e| SpecError::new("situation.robots", e));
-    let dt = spec.sim.dt_s;
-    let limit = (spec.time_limit_s / dt - 1e-9).ceil() as u64;
-    let horizon = Horizon {
-        robot: collision.robot,
-        min_step: (collision.step + (after_s / dt).round() as u64).min(limit),
-        limit_step: limit,
+    let branch = |run: &Run| {
+        run.branch()
+            .map_err(|e| SpecError::new("situation.robots", e))
     };
-    let agent = run.agent() as usize;
-    let period = run.agent_period();
-    let w_max = spec.sim.max_turn_rate_deg_s.to_radians();
-    let tried = manoeuvres(spec.sim.max_speed_m_s, w_max, dt, period);
+    let dt = spec.sim.dt_s;
+    let gap = (SIGHTING_GAP_S / dt).round() as u64;
     let from_start = branch(&run)?;
-    let mut from_sighting = None;
-    while run.world().steps() < collision.step && !run.ended() {
-        if Some(run.world().steps()) == collision.sighted_step {
-            from_sighting = Some(branch(&run)?);
+    let agent = run.agent();
+    let mut spells: Vec<Option<Spell>> = (0..situation.robots.len()).map(|_| None).collect();
+    let hit = loop {
+        if run.ended() {
+            return Ok(None);
         }
-        run.step(None);
-    }
-    let (vx, w) = run.world().robots()[agent].velocity;
-    let at_rest = vx.abs() < AT_REST && w.abs() < AT_REST;
-    let mut n = 0;
-    let mut sighting_escape = None;
-    if let Some(b) = &from_sighting {
-        let (found, k) = search(b, &horizon, &tried);
-        n += k;
-        sighting_escape = found;
-    }
-    let (verdict, witness) = match sighting_escape {
-        Some(w) => (Verdict::Avoidable, Some(w)),
-        None => {
-            let (found, k) = search(&from_start, &horizon, &tried);
-            n += k;
-            match found {
-                Some(w) => (Verdict::UnavoidableWithThisSensor, Some(w)),
-                None => (Verdict::Unavoidable, None),
+        let step = run.world().steps();
+        for id in run.agent_sees() {
+            match &mut spells[id as usize] {
+                Some(s) if s.last + gap >= step => s.last = step,
+                spell => {
+                    *spell = Some(Spell {
+                        began: step,
+                        last: step,
+                        branch: branch(&run)?,
+                    })
+                }
             }
         }
+        run.step(None);
+        if let Some(robot) = touched_robot(run.world(), agent) {
+            break robot;
+        }
     };
-    Ok(Judgement {
-        robot: collision.robot,
-        collision_s: collision.step as f64 * dt,
-        sighted_s: collision.sighted_step.map(|s| s as f64 * dt),
-        at_rest,
+    let collision = run.world().steps();
+    let me = &run.world().robots()[agent as usize];
+    let (v, w) = me.velocity;
+    let reach = (me.body.origin_x_m.abs() + me.body.length_m / 2.0).hypot(me.body.width_m / 2.0);
+    let sighting = spells[hit as usize]
+        .take()
+        .filter(|s| s.last + gap >= collision.saturating_sub(1));
+    let limit = (spec.time_limit_s / dt - 1e-9).ceil() as u64;
+    let horizon = Horizon {
+        robot: hit,
+        min_step: (collision + (after_s / dt).round() as u64).min(limit),
+        limit_step: limit,
+    };
+    let w_max = spec.sim.max_turn_rate_deg_s.to_radians();
+    let tried = manoeuvres(spec.sim.max_speed_m_s, w_max, dt, run.agent_period());
+    let mut n = 0;
+    let mut found = None;
+    if let Some(s) = &sighting {
+        let (escape, k) = search(&s.branch, &horizon, &tried);
+        n += k;
+        found = escape.map(|e| (Verdict::Avoidable, e));
+    }
+    if found.is_none() {
+        let (escape, k) = search(&from_start, &horizon, &tried);
+        n += k;
+        found = escape.map(|e| (Verdict::UnavoidableWithThisSensor, e));
+    }
+    let (verdict, witness) = match found {
+        Some((verdict, e)) => (verdict, Some(e)),
+        None => (Verdict::Unavoidable, None),
+    };
+    Ok(Some(Judgement {
+        robot: hit,
+        collision_s: collision as f64 * dt,
+        sighted_s: sighting.map(|s| s.began as f64 * dt),
+        speed_m_s: v,
+        turn_rate_rad_s: w,
+        at_rest: v.abs() + w.abs() * reach < AT_REST_M_S,
         verdict,
         witness,
         tried: n,
-    })
+    }))
+}
+
+/// The robot the agent touched in the step the world just took, if any: a move of the
+/// agent's refused by it, or its move refused by the agent (the lowest id if several).
+fn touched_robot(world: &crate::sim::World, agent: u32) -> Option<u32> {
+    let robots = world.robots();
+    let me = &robots[agent as usize];
+    let moved = |r: &crate::sim::RobotState| r.stalled && r.velocity != (0.0, 0.0);
+    robots
+        .iter()
+        .filter(|r| r.id != agent)
+        .find(|r| {
+            (moved(r) && r.contacts.contains(&Contact::Robot(agent)))
+                || (moved(me) && me.contacts.contains(&Contact::Robot(r.id)))
+        })
+        .map(|r| r.id)
 }

@@ -15,11 +15,23 @@ fn spec(time_limit_s: f64) -> RunSpec {
     }
 }
 
-/// The run, and the agent's first collision with a robot in it.
-fn collided(s: &Situation, spec: &RunSpec) -> (RunRecord, Collision) {
+/// The run, and the judgement of its collision (checked to be the monitor's first).
+fn judged(s: &Situation, spec: &RunSpec) -> (RunRecord, Judgement) {
     let rec = crate::run::run(s, spec, 7).unwrap();
-    let c = first_robot_collision(&rec.events, 0, spec.sim.dt_s).expect("a collision");
-    (rec, c)
+    let j = judge(s, spec, 7, AFTER_S).unwrap().expect("a collision");
+    let first = rec
+        .events
+        .iter()
+        .find(|e| e.kind == EventKind::Collision && e.concerns(0))
+        .expect("the monitor saw it");
+    assert!(
+        (first.start_s - j.collision_s).abs() < 1e-9,
+        "{} vs {}",
+        first.start_s,
+        j.collision_s
+    );
+    assert_eq!(first.other, Some(crate::monitor::Party::Robot(j.robot)));
+    (rec, j)
 }
 
 fn still(mut r: crate::situation::Robot) -> crate::situation::Robot {
@@ -35,7 +47,12 @@ fn head_on() -> Situation {
         &[],
         vec![
             robot(0, (5.0, 15.0, 0.0), &[[25.0, 15.0]], "straight"),
-            robot(1, (15.0, 15.0, std::f64::consts::PI), &[[2.0, 15.0]], "straight"),
+            robot(
+                1,
+                (15.0, 15.0, std::f64::consts::PI),
+                &[[2.0, 15.0]],
+                "straight",
+            ),
         ],
     )
 }
@@ -58,25 +75,40 @@ fn replayed(s: &Situation, spec: &RunSpec, w: &Witness) -> RunRecord {
     'replay: for seg in &w.segments {
         for _ in 0..(seg.duration_s / dt).round() as u64 {
             // A run ends where the agent completes its route: the witness's path stops there.
-            if run.step(Some((seg.v_m_s, seg.w_rad_s))) && run.outcome() == Some(&crate::run::Outcome::Completed) {
+            if run.step(Some((seg.v_m_s, seg.w_rad_s)))
+                && run.outcome() == Some(&crate::run::Outcome::Completed)
+            {
                 break 'replay;
             }
             path.push(pose(&run));
         }
     }
-    assert!(path.len() > w.path.len() / 2, "{} of {} steps", path.len(), w.path.len());
+    assert!(
+        path.len() > w.path.len() / 2,
+        "{} of {} steps",
+        path.len(),
+        w.path.len()
+    );
     let first = path.iter().zip(&w.path).position(|(a, b)| a != b);
-    assert_eq!(first, None, "the replay drives the witness's path: {:?}", first.map(|i| (path[i], w.path[i], &w.segments)));
+    assert_eq!(
+        first,
+        None,
+        "the replay drives the witness's path: {:?}",
+        first.map(|i| (path[i], w.path[i], &w.segments))
+    );
     run.finish()
 }
 
 #[test]
 fn a_head_on_collision_seen_from_the_start_is_avoidable_and_its_witness_replays_clear() {
     let (s, spec) = (head_on(), spec(40.0));
-    let (rec, c) = collided(&s, &spec);
-    assert_eq!(c.robot, 1);
-    assert_eq!(c.sighted_step, Some(0), "the peer is in view from the first scan");
-    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    let (rec, j) = judged(&s, &spec);
+    assert_eq!(j.robot, 1);
+    assert_eq!(
+        j.sighted_s,
+        Some(0.0),
+        "the peer is in view from the first scan"
+    );
     assert_eq!(j.verdict, Verdict::Avoidable);
     assert!(!j.at_rest, "the agent drove into it");
     let w = j.witness.expect("a witness");
@@ -85,7 +117,10 @@ fn a_head_on_collision_seen_from_the_start_is_avoidable_and_its_witness_replays_
     let total: f64 = w.segments.iter().map(|s| s.duration_s).sum();
     assert!((total - (w.until_s - w.from_s)).abs() < 1e-9);
     // Stopping is no escape from a peer that drives on: the witness moves.
-    assert!(w.segments.iter().any(|s| s.v_m_s != 0.0 || s.w_rad_s != 0.0));
+    assert!(w
+        .segments
+        .iter()
+        .any(|s| s.v_m_s != 0.0 || s.w_rad_s != 0.0));
     let again = replayed(&s, &spec, &w);
     let hit = again
         .events
@@ -111,14 +146,12 @@ fn a_peer_striking_a_still_agent_from_behind_is_unavoidable_with_this_sensor() {
         ],
     );
     let spec = spec(20.0);
-    let (_, c) = collided(&s, &spec);
-    assert_eq!(c.sighted_step, None, "never seen before contact");
-    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    let (_, j) = judged(&s, &spec);
+    assert_eq!(j.sighted_s, None, "never seen before contact");
     assert_eq!(j.verdict, Verdict::UnavoidableWithThisSensor);
     assert!(j.at_rest, "struck standing still: passive safety held");
     let w = j.witness.expect("an escape from the start");
     assert_eq!(w.from_s, 0.0);
-    assert_eq!(j.sighted_s, None);
     let again = replayed(&s, &spec, &w);
     assert!(!again
         .events
@@ -143,11 +176,23 @@ fn an_agent_trapped_in_a_dead_end_by_a_peer_driving_in_is_unavoidable() {
         ],
     );
     let spec = spec(20.0);
-    let (_, c) = collided(&s, &spec);
-    let j = judge(&s, &spec, 7, &c, AFTER_S).unwrap();
+    let (_, j) = judged(&s, &spec);
     assert_eq!(j.verdict, Verdict::Unavoidable, "{j:?}");
     assert_eq!(j.witness, None);
     assert_eq!(j.tried, manoeuvres(0.5, 90f64.to_radians(), 0.1, 1).len());
+}
+
+#[test]
+fn a_run_without_a_collision_has_no_judgement() {
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (5.0, 5.0, 0.0), &[[15.0, 5.0]], "straight"),
+            robot(1, (5.0, 15.0, 0.0), &[[15.0, 15.0]], "straight"),
+        ],
+    );
+    assert_eq!(judge(&s, &spec(40.0), 7, AFTER_S).unwrap(), None);
 }
 
 #[test]
@@ -165,11 +210,6 @@ fn an_external_agent_is_refused_by_name() {
     let s = head_on();
     let mut spec = spec(40.0);
     spec.controller = Some(ControllerSpec::named("cmd:still"));
-    let c = Collision {
-        step: 10,
-        robot: 1,
-        sighted_step: None,
-    };
-    let e = judge(&s, &spec, 7, &c, AFTER_S).unwrap_err();
+    let e = judge(&s, &spec, 7, AFTER_S).unwrap_err();
     assert!(e.to_string().contains("run.controller.name"), "{e}");
 }

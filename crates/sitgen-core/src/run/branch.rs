@@ -55,6 +55,19 @@ impl Run {
         self.controllers[self.agent as usize] = None;
     }
 
+    /// The robots the agent's laser sees now (its scan for the coming step, kept for it, as
+    /// [`Run::agent_observation`] keeps it), in id order: what the monitor is told it saw.
+    pub fn agent_sees(&mut self) -> Vec<u32> {
+        let world = &self.world;
+        let agent = self.agent;
+        self.agent_scan
+            .get_or_insert_with(|| world.observe(agent).expect("the agent is in the world"))
+            .tracks
+            .iter()
+            .map(|t| t.id)
+            .collect()
+    }
+
     /// Steps between the agent's decisions (its controller's `control_period_s`).
     pub fn agent_period(&self) -> u64 {
         self.periods[self.agent as usize]
