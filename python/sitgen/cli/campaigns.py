@@ -253,6 +253,7 @@ def campaign(
         )
     if not result.interrupted:
         _measure_robustness(db, reruns, workers)
+        _judge_avoidability(db, workers)
     partial = (result.total, total_n) if result.interrupted or result.total < total_n else None
     try:
         _echo_stored(db, result.ran, result.wall_s, result.total, total_n, result.interrupted, top)
@@ -348,6 +349,7 @@ def _echo_stored(
     """What a campaign or search did and what its store holds: the paper's figures, the top
     runs and the distinct failures; exits 130 if it was stopped early."""
     from sitgen.store import Store
+    from sitgen.triage.avoidability import in_words
     from sitgen.triage.failures import summary
 
     rate = ran / wall_s if wall_s > 0 else 0.0
@@ -371,9 +373,10 @@ def _echo_stored(
         typer.echo(f"  run {r['run']:>5}  score {r['score']:>10.1f}  {r['main_events']}")
     typer.echo(f"{len(s['distinct'])} distinct failures (sitgen failures {db}):")
     for f in s["distinct"][:top]:
+        collision = in_words(f["avoidability"], f["avoidable"], f["judged"])
         typer.echo(
             f"  {f['runs']:>5} runs  best {f['best_score']:>10.1f}  run {f['representative']:>5}  "
-            f"{f['robustness']:<17}  {f['description']}"
+            f"{f['robustness']:<17}  {f['description']}" + (f"; {collision}" if collision else "")
         )
     if interrupted:
         raise typer.Exit(130)
@@ -411,6 +414,25 @@ def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
     if ran:
         typer.echo(
             f"robustness: {ran} perturbed copies of distinct failures' runs in "
+            f"{time.perf_counter() - started:.1f} s"
+        )
+
+
+def _judge_avoidability(db: Path, workers: int | None) -> None:
+    """Judge whether the collisions of the store's peer-contact distinct failures' top runs
+    could have been escaped (docs/avoidability.md), and say what it cost."""
+    from sitgen.store import Store
+    from sitgen.triage.avoidability import measure_avoidability
+    from sitgen.triage.failures import distinct_failures
+
+    started = time.perf_counter()
+    with Store(db) as store:
+        judged = measure_avoidability(
+            store, distinct_failures(store), workers or os.cpu_count() or 1
+        )
+    if judged:
+        typer.echo(
+            f"avoidability: {judged} collisions with robots judged in "
             f"{time.perf_counter() - started:.1f} s"
         )
 
@@ -483,6 +505,7 @@ def demo(
         raise typer.Exit(130)
     typer.echo(f"{result.total} runs stored ({result.ran} run now in {result.wall_s:.1f} s)")
     _measure_robustness(db, 8, None)
+    _judge_avoidability(db, None)
     report_dir = output / "report"
     write_report(db, report_dir, 50)
     failures(db, "table")

@@ -283,11 +283,14 @@ def failures(
     format: Annotated[str, typer.Option("--format", "-f", help="table, json or csv.")] = "table",
     weights: WeightsOption = None,
 ) -> None:
-    """One row per distinct failure of a campaign, the most dangerous (best score) first: its
-    class, sentence, runs, share of runs, best score, representative run, median duration,
-    median processor seconds a run cost, and robustness; then one per violated requirement
-    (class requirement:NAME, its worst-robustness run as representative)."""
+    """One row per distinct failure of a campaign, the most dangerous (best score) first,
+    collisions no controller with this sensor could have escaped after the rest: its class,
+    sentence, runs, share of runs, best score, representative run, median duration, median
+    processor seconds a run cost, robustness and, for a collision with a robot, whether it
+    was avoidable; then one per violated requirement (class requirement:NAME, its
+    worst-robustness run as representative)."""
     from sitgen.store import Store
+    from sitgen.triage.avoidability import in_words
     from sitgen.triage.failures import distinct_failures, write_failures
     from sitgen.triage.requirements import requirement_failures
 
@@ -307,17 +310,17 @@ def failures(
     table = Table(title=f"{db}: {len(found)} distinct failures")
     columns = (
         "class", "failure", "runs", "share", "best score", "run", "median s", "cpu s/run",
-        "robustness",
+        "robustness", "collision",
     )  # fmt: skip
     for column in columns:
-        table.add_column(
-            column, justify="left" if column in ("class", "failure", "robustness") else "right"
-        )
+        left = column in ("class", "failure", "robustness", "collision")
+        table.add_column(column, justify="left" if left else "right")
     for f in found:
         table.add_row(
             f.key, f.description, str(f.runs), f"{100 * f.share:.1f}%", f"{f.best_score:.1f}",
             str(f.representative), f"{f.median_duration_s:.1f}",
             "" if f.median_cpu_s is None else f"{f.median_cpu_s:.2g}", f.robustness,
+            in_words(f.avoidability, f.avoidable, f.judged),
         )  # fmt: skip
     Console(width=200).print(table)
 

@@ -496,3 +496,67 @@ def compare_command(
             f"{p['p_value']:.3g}", p["verdict"],
         )  # fmt: skip
     Console(width=200).print(pairs)
+
+
+@app.command()
+def avoidability(
+    db: Annotated[Path, typer.Argument(help="Campaign or search store (SQLite).")],
+    run_ids: Annotated[
+        list[int] | None,
+        typer.Argument(
+            help="Runs to judge (default: every run whose failure is a contact with a robot)."
+        ),
+    ] = None,
+    after_s: Annotated[
+        float,
+        typer.Option("--after-s", help="Seconds past the collision an escape must stay clear."),
+    ] = 5.0,
+    again: Annotated[bool, typer.Option("--again", help="Judge runs judged before again.")] = False,
+    workers: WorkersOption = None,
+    format: Annotated[str, typer.Option("--format", "-f", help="table or json.")] = "table",
+) -> None:
+    """Could the agent have escaped its collision with a robot? For each run's first contact
+    with one, search the agent's admissible manoeuvres (within its speed, turn-rate and
+    acceleration limits) for one that touches nothing, from the moment its laser first saw
+    that robot and from the start: avoidable, unavoidable with this sensor, or unavoidable,
+    with the escape found and whether the agent stood at rest when struck
+    (docs/avoidability.md). Stored; `failures` and `report` rank by it."""
+    from sitgen.store import Store
+    from sitgen.triage.avoidability import PEER_CONTACTS, describe, judge
+
+    if format not in ("table", "json"):
+        raise UsageError(f"--format: `{format}` is not one of table, json")
+    if not 0 < after_s <= 3600:
+        raise UsageError(f"--after-s: {after_s} is not in (0, 3600] seconds")
+    require_store(db)
+    with Store(db) as store:
+        if run_ids:
+            missing = sorted(set(run_ids) - store.has_runs(run_ids))
+            if missing:
+                raise UsageError(f"run {missing[0]}: no such run in {db}")
+            wanted = list(run_ids)
+        else:
+            marks = ", ".join("?" * len(PEER_CONTACTS))
+            wanted = [
+                i
+                for (i,) in store.db.execute(
+                    f"SELECT id FROM runs WHERE failure_class IN ({marks}) ORDER BY id",
+                    PEER_CONTACTS,
+                )
+            ]
+        judge(store, wanted, workers or os.cpu_count() or 1, after_s, again)
+        judged = store.avoidability(wanted)
+    rows = [judged[i] for i in wanted if i in judged]
+    if format == "json":
+        json.dump(rows, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return
+    counts = {v: sum(r["verdict"] == v for r in rows) for v in ("avoidable",)}
+    table = Table(
+        title=f"{db}: {len(rows)} collisions with robots judged, {counts['avoidable']} avoidable"
+    )
+    for column in ("run", "verdict"):
+        table.add_column(column, justify="right" if column == "run" else "left")
+    for r in rows:
+        table.add_row(str(r["run_id"]), describe(r))
+    Console(width=200).print(table)

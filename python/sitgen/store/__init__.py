@@ -42,6 +42,7 @@ from sitgen.store.records import (
     unpack_json,
 )
 from sitgen.store.schema import (
+    AVOIDABILITY_SCHEMA,
     COST_SCHEMA,
     DIFF_SCHEMA,
     FAULT_SCHEMA,
@@ -134,6 +135,7 @@ class Store(Writing, Verdicts):
                     + DIFF_SCHEMA
                     + COST_SCHEMA
                     + REQUIREMENT_SCHEMA
+                    + AVOIDABILITY_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -511,6 +513,7 @@ class Store(Writing, Verdicts):
 
 
 __all__ = [
+    "AVOIDABILITY_SCHEMA",
     "COST_SCHEMA",
     "DIFF_SCHEMA",
     "FAULT_SCHEMA",

@@ -8,7 +8,7 @@ import sqlite3
 
 from sitgen import _core
 
-SCHEMA_VERSION = 11
+SCHEMA_VERSION = 12
 
 
 SCHEMA = """
@@ -227,6 +227,30 @@ the interval that decided it; and how often a violating run's violation recurred
 perturbed copies."""
 
 
+AVOIDABILITY_SCHEMA = """
+CREATE TABLE IF NOT EXISTS avoidability (
+    run_id INTEGER PRIMARY KEY REFERENCES runs (id),
+    robot INTEGER,
+    collision_s REAL,
+    sighted_s REAL,
+    speed_m_s REAL,
+    turn_rate_rad_s REAL,
+    at_rest INTEGER,
+    verdict TEXT,
+    witness TEXT,
+    tried INTEGER,
+    after_s REAL NOT NULL,
+    error TEXT,
+    sitgen_version TEXT NOT NULL
+);
+"""
+"""Whether each judged run's first collision with a robot could have been escaped
+(docs/avoidability.md): the robot, when contact and the sighting began, the agent's velocity
+then and whether it stood at rest, the verdict (``avoidable``, ``unavoidable_with_this_sensor``,
+``unavoidable``) and its witness manoeuvre (JSON; NULL where there is none), or ``error`` where
+the run could not be judged (its verdict NULL)."""
+
+
 DIFF_SCHEMA = """
 CREATE TABLE IF NOT EXISTS diff (
     id INTEGER PRIMARY KEY CHECK (id = 1),
@@ -337,6 +361,10 @@ def upgrade(db: sqlite3.Connection, version: int) -> None:
         # Version 11 adds each run's requirement verdicts; runs stored before had no
         # requirements.
         db.executescript(REQUIREMENT_SCHEMA)
+    if version < 12:
+        # Version 12 adds whether a collision with a robot could have been escaped; runs
+        # stored before are judged when asked (sitgen avoidability).
+        db.executescript(AVOIDABILITY_SCHEMA)
     db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 

@@ -259,3 +259,38 @@ class Verdicts:
             for run_id, name, rho in rows:
                 out.setdefault(run_id, {})[name] = rho
         return out
+
+    def record_avoidability(self, rows: Iterable[dict[str, Any]]) -> None:
+        """Store (or replace) judged runs' avoidability: each row's ``run_id``, ``after_s``,
+        ``sitgen_version`` and either the judgement's fields (``witness`` a JSON-able value or
+        None) or ``error``, in one transaction."""
+        columns = (
+            "robot", "collision_s", "sighted_s", "speed_m_s", "turn_rate_rad_s", "at_rest",
+            "verdict", "witness", "tried", "error",
+        )  # fmt: skip
+        with self.db:
+            for r in rows:
+                values = {c: r.get(c) for c in columns}
+                if values["witness"] is not None:
+                    values["witness"] = json.dumps(values["witness"])
+                self.db.execute(
+                    "INSERT OR REPLACE INTO avoidability (run_id, after_s, sitgen_version, "
+                    f"{', '.join(columns)}) VALUES ({', '.join('?' * (len(columns) + 3))})",
+                    (r["run_id"], r["after_s"], r["sitgen_version"], *values.values()),
+                )
+
+    def avoidability(self, run_ids: Iterable[int] | None = None) -> dict[int, dict[str, Any]]:
+        """The stored avoidability of ``run_ids`` (every judged run if None), by run id, the
+        witness read back from JSON; a run never judged is absent."""
+        cursor = self.db.execute("SELECT * FROM avoidability ORDER BY run_id")
+        names = [d[0] for d in cursor.description]
+        rows = [dict(zip(names, r, strict=True)) for r in cursor]
+        wanted = None if run_ids is None else set(run_ids)
+        out = {}
+        for r in rows:
+            if wanted is not None and r["run_id"] not in wanted:
+                continue
+            r["witness"] = None if r["witness"] is None else json.loads(r["witness"])
+            r["at_rest"] = None if r["at_rest"] is None else bool(r["at_rest"])
+            out[r["run_id"]] = r
+        return out

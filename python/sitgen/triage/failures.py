@@ -23,6 +23,7 @@ import numpy as np
 
 from sitgen import _core
 from sitgen.store import Store, main_events
+from sitgen.triage.avoidability import tier
 from sitgen.triage.robustness import (
     CANDIDATES,
     RERUNS,
@@ -94,6 +95,13 @@ class DistinctFailure:
     median_cpu_s: float | None = None
     """Median over its runs of the processor seconds each cost (None: no run's cost was
     stored)."""
+    avoidability: str | None = None
+    """Whether the representative's collision with a robot could have been escaped
+    (``avoidable``, ``unavoidable_with_this_sensor``, ``unavoidable``; None: not judged)."""
+    avoidable: int | None = None
+    """Of its judged runs, how many collisions were avoidable (None: none judged)."""
+    judged: int | None = None
+    """How many of its runs were judged."""
 
     @property
     def robust(self) -> bool | None:
@@ -120,7 +128,9 @@ class DistinctFailure:
 
 
 def distinct_failures(store: Store) -> list[DistinctFailure]:
-    """The campaign's distinct failures, best score first (then key)."""
+    """The campaign's distinct failures, best score first (then key), those whose
+    representative's collision was judged unavoidable with this sensor, then unavoidable,
+    after the rest (:func:`sitgen.triage.avoidability.tier`)."""
     total = store.db.execute("SELECT count(*) FROM runs").fetchone()[0]
     by_class: dict[str, list[dict[str, Any]]] = {}
     rows = store.db.execute(
@@ -136,6 +146,7 @@ def distinct_failures(store: Store) -> list[DistinctFailure]:
     sentences = dict(classes())
     measured = store.robustness()
     costs = store.costs()
+    judged = {i: r["verdict"] for i, r in store.avoidability().items() if r["verdict"]}
     out = []
     for key, runs in by_class.items():
         for marks, part in split(runs):
@@ -145,8 +156,15 @@ def distinct_failures(store: Store) -> list[DistinctFailure]:
             group = _group(sub_key, key, description, part, total, measured)
             cpu = [costs[i][1] for i in group.run_ids if i in costs]
             group.median_cpu_s = statistics.median(cpu) if cpu else None
+            verdicts = [judged[i] for i in group.run_ids if i in judged]
+            if verdicts:
+                group.avoidable = verdicts.count("avoidable")
+                group.judged = len(verdicts)
+            group.avoidability = judged.get(group.representative)
             out.append(group)
-    out.sort(key=lambda d: (-d.best_score, d.key))
+    # Collisions no controller with this sensor could have escaped rank after the
+    # controller's own mistakes (docs/avoidability.md).
+    out.sort(key=lambda d: (tier(d.avoidability), -d.best_score, d.key))
     return out
 
 
@@ -403,6 +421,9 @@ FAILURE_COLUMNS = (
     "recurs",
     "reruns",
     "median_cpu_s",
+    "avoidability",
+    "avoidable",
+    "judged",
 )
 
 
