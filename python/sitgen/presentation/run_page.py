@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from sitgen.presentation.avoidability_plot import avoidability_section
 from sitgen.presentation.page import _page, time_axis
 from sitgen.presentation.requirement_plot import requirements_section
 from sitgen.run import run
@@ -264,6 +265,8 @@ def run_page(
     body.append(_failure_section(failure, events, distinct, run_id))
     if failure is not None and not blind:
         body.append(_run_robustness(store.robustness([run_id]).get(run_id)))
+    judged = store.avoidability([run_id]).get(run_id)
+    body.append(avoidability_section(judged, situation, trajectory, dt_s))
     if not blind:
         body.append(_why_this_rank(breakdown, row["score"]))
     body.append(requirements_section(store, row))
