@@ -137,3 +137,33 @@ def test_bad_input_is_one_line_naming_the_option(
     done = run_cli("avoidability", str(campaign), *args)
     assert done.returncode != 0
     assert words in done.stderr, done.stderr
+
+
+def test_a_users_class_is_judged_from_its_recorded_path(tmp_path: Path) -> None:
+    db = tmp_path / "u.db"
+    braking = "python:" + str(ROOT / "examples" / "controllers" / "braking.py") + ":Braking"
+    done = run_cli(
+        "campaign", SPEC, "--n", "40", "--db", str(db), "--reruns", "0", "--controller", braking
+    )
+    assert done.returncode == 0, done.stderr
+    done = run_cli("avoidability", str(db), "--format", "json")
+    assert done.returncode == 0, done.stderr
+    rows = json.loads(done.stdout)
+    assert rows, "the braking follower is struck by peers"
+    with Store(db) as store:
+        failures = {
+            i: json.loads(f)
+            for i, f in store.db.execute("SELECT id, failure FROM runs WHERE failure IS NOT NULL")
+        }
+        for r in rows:
+            assert r["error"] is None, r["error"]
+            # The contact judged is the one that decided the failure.
+            assert r["collision_s"] == pytest.approx(failures[r["run_id"]]["features"]["start_s"])
+            if failures[r["run_id"]]["class"].endswith("_unseen"):
+                assert r["verdict"] != "avoidable", "not seen within a second of contact"
+            w = r["witness"]
+            if w:
+                whole = whole_run(store, stored_run(store, r["run_id"]))
+                assert whole is not None and whole.trajectory is not None
+                poses = np.asarray(whole.trajectory).reshape(-1, len(whole.situation.robots), 3)
+                assert np.allclose(w["path"][0], poses[round(w["from_s"] / 0.1), 0], atol=1e-4)

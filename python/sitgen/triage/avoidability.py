@@ -1,5 +1,6 @@
 """Whether a collision with a robot could have been escaped (docs/avoidability.md): each
-judged run's first contact between the agent and a robot, the agent's admissible manoeuvres
+judged run's contact between the agent and a robot that decided its failure (else its first),
+the agent's admissible manoeuvres
 searched for an escape from the moment it first saw that robot and from the start, in the
 core (``sitgen_core::avoidability``). A campaign judges its peer-contact failures' top runs;
 ``sitgen avoidability DB`` judges any.
@@ -14,8 +15,9 @@ from collections.abc import Iterable, Sequence
 from typing import Any
 
 from sitgen import _core
-from sitgen.store import Store
-from sitgen.triage.recall import regenerate, stored_run
+from sitgen.controllers.user import is_user_controller
+from sitgen.store import Store, StoreError
+from sitgen.triage.recall import regenerate, stored_run, whole_run
 
 AFTER_S = 5.0
 """How long past the collision an escape must stay clear, seconds (the core's default)."""
@@ -62,9 +64,17 @@ def judge(store: Store, run_ids: Iterable[int], workers: int = 1, after_s: float
         i for i in dict.fromkeys(run_ids)
         if again or i not in done or done[i]["after_s"] != after_s
     ]  # fmt: skip
-    jobs, failed = [], []
+    jobs, recorded, failed = [], [], []
     for run_id in wanted:
         row = stored_run(store, run_id)
+        spec = json.dumps(row["run_spec"])
+        if is_user_controller(row["controller"]):
+            # Its controller runs outside the core: its recorded path stands in for it.
+            try:
+                recorded.append((run_id, _recorded_job(store, row, spec)))
+            except (StoreError, ValueError) as e:
+                failed.append(_row(run_id, after_s, error=str(e)))
+            continue
         situation = row["situation"] if row.get("kept") and row.get("situation") else None
         if situation is None:
             try:
@@ -74,10 +84,12 @@ def judge(store: Store, run_ids: Iterable[int], workers: int = 1, after_s: float
                 continue
         elif not isinstance(situation, str):
             situation = json.dumps(situation)
-        jobs.append((run_id, (situation, json.dumps(row["run_spec"]), row["run_seed"])))
-    results = _core.judge_avoidability([j for _, j in jobs], after_s, max(1, workers))
+        jobs.append((run_id, (situation, spec, row["run_seed"], _deciding_s(row))))
+    threads = max(1, workers)
+    results = _core.judge_avoidability([j for _, j in jobs], after_s, threads)
+    results += _core.judge_avoidability_recorded([j for _, j in recorded], after_s, threads)
     rows = list(failed)
-    for (run_id, _), text in zip(jobs, results, strict=True):
+    for (run_id, _), text in zip([*jobs, *recorded], results, strict=True):
         out = json.loads(text)
         if "judgement" in out:
             rows.append(_row(run_id, after_s, **out["judgement"]))
@@ -85,6 +97,43 @@ def judge(store: Store, run_ids: Iterable[int], workers: int = 1, after_s: float
             rows.append(_row(run_id, after_s, error=out["error"]))
     store.record_avoidability(rows)
     return rows
+
+
+def _deciding_s(row: dict[str, Any]) -> float | None:
+    """When the contact that decided a run's failure began, if its class is a contact with a
+    robot (None: judge its first contact with a robot)."""
+    failure = row.get("failure") or {}
+    if failure.get("class") not in PEER_CONTACTS:
+        return None
+    start = failure.get("features", {}).get("start_s")
+    return None if start is None else float(start)
+
+
+def _recorded_job(
+    store: Store, row: dict[str, Any], spec: str
+) -> tuple[str, str, int, list[float], int, int]:
+    """A run of a controller outside the core, as the core judges it from its record: the
+    situation, run spec, seed, every pose, and its first collision with a robot (from its
+    event log; the run made again through its controller if it was kept as a summary).
+    Raises ValueError if it has none."""
+    whole = whole_run(store, row)
+    if whole is None or whole.trajectory is None:
+        raise ValueError("its situation was never generated")
+    agent = next(r.id for r in whole.situation.robots if r.role == "agent")
+    dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
+    events = [json.loads(line) for line in whole.events_jsonl.splitlines()]
+    # The contact that decided the failure, else the first with a robot.
+    deciding = [events[i] for i in (row.get("failure") or {}).get("events", []) if i < len(events)]
+    for e in [*deciding, *events]:
+        parties = {e["robot"], e["other"]}
+        if e["kind"] == "collision" and agent in parties and isinstance(e["other"], int):
+            robot = e["other"] if e["robot"] == agent else e["robot"]
+            poses = [float(x) for x in whole.trajectory.ravel()]
+            return (
+                whole.situation.to_json(), spec, row["run_seed"], poses,
+                round(e["start_s"] / dt_s), robot,
+            )  # fmt: skip
+    raise ValueError("no collision of the agent with a robot in its event log")
 
 
 def _row(run_id: int, after_s: float, **fields: Any) -> dict[str, Any]:

@@ -276,28 +276,88 @@ struct Spell {
     branch: Branch,
 }
 
-/// Judge the agent's first collision with a robot in the run of `situation` under `spec` with
-/// noise from `seed` (the run made again, deterministic; `None` if the run has none): search
+/// Judge the agent's collision with a robot that began at `collision_s` (its failure's
+/// deciding event; `None`: its first) in the run of `situation` under `spec` with noise from
+/// `seed` (the run made again, deterministic; `None` if the run has none): search
 /// for an escape from the first scan of the spell in which the agent's laser saw that robot
 /// before contact (spells broken by [`SIGHTING_GAP_S`] unseen), and from the start, each
 /// until `after_s` past the collision and the robot hit no longer closing in (or the time
-/// limit). The agent's and every peer's controller must be built in; an external one is an
-/// error naming it.
+/// limit). The agent's and every peer's controller must be built in; an external agent's is
+/// an error naming it ([`judge_recorded`] judges such a run from its recorded path).
 pub fn judge(
     situation: &Situation,
     spec: &RunSpec,
     seed: u64,
     after_s: f64,
+    collision_s: Option<f64>,
 ) -> Result<Option<Judgement>, SpecError> {
     SpecError::check_positive("after_s", after_s, 3600.0)?;
-    let mut run = Run::new(situation, spec, seed)?;
+    let run = Run::new(situation, spec, seed)?;
     if run.agent_is_external() {
         return Err(SpecError::new(
             "run.controller.name",
-            "the agent's controller is external: its run is made again through the Python \
-             layer",
+            "the agent's controller is external: judge its run from its recorded path",
         ));
     }
+    let until = collision_s.map(|t| (t / spec.sim.dt_s).round() as u64);
+    judge_run(run, spec, after_s, until, None)
+}
+
+/// What stands in for an agent whose controller is outside the core: the poses its run
+/// recorded (`[step][robot][3]`, flat) and its first collision with a robot as the monitor
+/// recorded it (the step contact began, the robot).
+#[derive(Debug, Clone, Copy)]
+pub struct Recorded<'a> {
+    /// Every robot's pose at the start and after every step.
+    pub trajectory: &'a [f64],
+    /// The step contact began.
+    pub collision_step: u64,
+    /// The robot hit.
+    pub robot: u32,
+}
+
+/// [`judge`] for a run whose agent's controller is outside the core (a `python:` class, a
+/// program, a ROS 2 node): the agent is driven along its recorded path (each decision the
+/// command that takes it from where it stands to where the record has it a control period
+/// later: the exact inverse of the simulator's motion), every peer by its own controller, and
+/// the collision is the recorded one. An error if the replayed agent strays from its record
+/// by more than a millimetre before contact (a record of another run, or of a peer that
+/// reacted differently).
+pub fn judge_recorded(
+    situation: &Situation,
+    spec: &RunSpec,
+    seed: u64,
+    after_s: f64,
+    recorded: &Recorded<'_>,
+) -> Result<Judgement, SpecError> {
+    SpecError::check_positive("after_s", after_s, 3600.0)?;
+    let mut run = Run::new(situation, spec, seed)?;
+    run.hand_over_agent();
+    let n = situation.robots.len();
+    let steps = recorded.trajectory.len() / (3 * n.max(1));
+    if recorded.collision_step as usize >= steps || recorded.robot as usize >= n {
+        return Err(SpecError::new(
+            "trajectory",
+            format!(
+                "{steps} recorded steps of {n} robots do not reach a collision with robot {} at \
+                 step {}",
+                recorded.robot, recorded.collision_step
+            ),
+        ));
+    }
+    judge_run(run, spec, after_s, None, Some(recorded))
+        .map(|j| j.expect("a recorded collision is judged"))
+}
+
+/// The search of [`judge`] on `run` at its start, for the contact that begins at step `until`
+/// (`None`: the first with a robot); `recorded` drives an external agent.
+fn judge_run(
+    mut run: Run,
+    spec: &RunSpec,
+    after_s: f64,
+    until: Option<u64>,
+    recorded: Option<&Recorded<'_>>,
+) -> Result<Option<Judgement>, SpecError> {
     let branch = |run: &Run| {
         run.branch()
             .map_err(|e| SpecError::new("situation.robots", e))
@@ -306,12 +366,30 @@ pub fn judge(
     let gap = (SIGHTING_GAP_S / dt).round() as u64;
     let from_start = branch(&run)?;
     let agent = run.agent();
-    let mut spells: Vec<Option<Spell>> = (0..situation.robots.len()).map(|_| None).collect();
+    let n = run.world().robots().len();
+    let period = run.agent_period();
+    let mut spells: Vec<Option<Spell>> = (0..n).map(|_| None).collect();
     let hit = loop {
         if run.ended() {
             return Ok(None);
         }
         let step = run.world().steps();
+        if let Some(r) = recorded {
+            if step == r.collision_step {
+                break r.robot;
+            }
+            if step > 0 && straying(run.world(), agent, r, step) > STRAY_M {
+                return Err(SpecError::new(
+                    "trajectory",
+                    format!(
+                        "the agent's recorded path does not replay: {:.4} m off its record at \
+                         {:.1} s",
+                        straying(run.world(), agent, r, step),
+                        step as f64 * dt
+                    ),
+                ));
+            }
+        }
         for id in run.agent_sees() {
             match &mut spells[id as usize] {
                 Some(s) if s.last + gap >= step => s.last = step,
@@ -324,18 +402,50 @@ pub fn judge(
                 }
             }
         }
-        run.step(None);
-        if let Some(robot) = touched_robot(run.world(), agent) {
-            break robot;
+        let command = recorded.map(|r| {
+            let ahead = (step + period).min(r.collision_step);
+            let at = &run.world().robots()[agent as usize].pose;
+            velocity_between(at, pose_at(r, n, agent, ahead), (ahead - step) as f64 * dt)
+        });
+        // Between the agent's decisions the run keeps its last command, as it did.
+        run.step(command);
+        // Of robots touched in one step, one the agent had not seen is judged: its contact is
+        // the more severe class, the one a failure is decided by.
+        let now = run.world().steps();
+        let touched = touched_robots(run.world(), agent);
+        let unseen = |id: &&u32| {
+            spells[**id as usize]
+                .as_ref()
+                .is_none_or(|s| s.last + gap < now)
+        };
+        let touched = touched.iter().find(unseen).or(touched.first()).copied();
+        match until {
+            _ if recorded.is_some() => {}
+            Some(k) if now == k => {
+                break touched.ok_or_else(|| {
+                    SpecError::new(
+                        "collision_s",
+                        format!(
+                            "the run made again has no contact of the agent with a robot at \
+                             {:.1} s (a run of another sitgen version?)",
+                            k as f64 * dt
+                        ),
+                    )
+                })?;
+            }
+            None if touched.is_some() => break touched.expect("matched"),
+            _ => {}
         }
     };
     let collision = run.world().steps();
     let me = &run.world().robots()[agent as usize];
     let (v, w) = me.velocity;
     let reach = (me.body.origin_x_m.abs() + me.body.length_m / 2.0).hypot(me.body.width_m / 2.0);
+    // Seen within the gap before contact, as the monitor's `visible` reads its window (the
+    // scan that drove the step of contact is one step before it).
     let sighting = spells[hit as usize]
         .take()
-        .filter(|s| s.last + gap >= collision.saturating_sub(1));
+        .filter(|s| s.last + gap >= collision);
     let limit = (spec.time_limit_s / dt - 1e-9).ceil() as u64;
     let horizon = Horizon {
         robot: hit,
@@ -343,17 +453,17 @@ pub fn judge(
         limit_step: limit,
     };
     let w_max = spec.sim.max_turn_rate_deg_s.to_radians();
-    let tried = manoeuvres(spec.sim.max_speed_m_s, w_max, dt, run.agent_period());
-    let mut n = 0;
+    let tried = manoeuvres(spec.sim.max_speed_m_s, w_max, dt, period);
+    let mut count = 0;
     let mut found = None;
     if let Some(s) = &sighting {
         let (escape, k) = search(&s.branch, &horizon, &tried);
-        n += k;
+        count += k;
         found = escape.map(|e| (Verdict::Avoidable, e));
     }
     if found.is_none() {
         let (escape, k) = search(&from_start, &horizon, &tried);
-        n += k;
+        count += k;
         found = escape.map(|e| (Verdict::UnavoidableWithThisSensor, e));
     }
     let (verdict, witness) = match found {
@@ -369,22 +479,64 @@ pub fn judge(
         at_rest: v.abs() + w.abs() * reach < AT_REST_M_S,
         verdict,
         witness,
-        tried: n,
+        tried: count,
     }))
 }
 
-/// The robot the agent touched in the step the world just took, if any: a move of the
-/// agent's refused by it, or its move refused by the agent (the lowest id if several).
-fn touched_robot(world: &crate::sim::World, agent: u32) -> Option<u32> {
+/// How far a replayed agent may stray from its record before contact, metres: a stored
+/// record keeps poses as float32 (a few micrometres at 100 m), so a millimetre is another run.
+const STRAY_M: f64 = 1e-3;
+
+/// Robot `id`'s recorded pose at `step`.
+fn pose_at(r: &Recorded<'_>, robots: usize, id: u32, step: u64) -> [f64; 3] {
+    let k = (step as usize * robots + id as usize) * 3;
+    [r.trajectory[k], r.trajectory[k + 1], r.trajectory[k + 2]]
+}
+
+/// How far the agent stands from its recorded pose at `step`, metres.
+fn straying(world: &crate::sim::World, agent: u32, r: &Recorded<'_>, step: u64) -> f64 {
+    let at = &world.robots()[agent as usize].pose;
+    let want = pose_at(r, world.robots().len(), agent, step);
+    (at.x_m - want[0]).hypot(at.y_m - want[1])
+}
+
+/// The constant (v, ω) that takes a robot from `from` to `to` in `t` seconds: the exact
+/// inverse of [`crate::sim::integrate`] (the chord of an arc of turn Δθ is 2 |v/ω| sin(|Δθ|/2),
+/// along the heading halfway through the turn).
+pub fn velocity_between(from: &crate::situation::Pose, to: [f64; 3], t: f64) -> (f64, f64) {
+    if t <= 0.0 {
+        return (0.0, 0.0);
+    }
+    let turn = crate::sim::wrap_angle(to[2] - from.heading_rad);
+    let (dx, dy) = (to[0] - from.x_m, to[1] - from.y_m);
+    let chord = dx.hypot(dy);
+    let mid = from.heading_rad + turn / 2.0;
+    let sign = if dx * mid.cos() + dy * mid.sin() < 0.0 {
+        -1.0
+    } else {
+        1.0
+    };
+    let v = if turn.abs() < 1e-12 {
+        chord / t
+    } else {
+        chord * turn.abs() / (2.0 * (turn.abs() / 2.0).sin() * t)
+    };
+    (sign * v, turn / t)
+}
+
+/// The robots the agent touched in the step the world just took, in id order: a move of the
+/// agent's refused by one, or its move refused by the agent.
+fn touched_robots(world: &crate::sim::World, agent: u32) -> Vec<u32> {
     let robots = world.robots();
     let me = &robots[agent as usize];
     let moved = |r: &crate::sim::RobotState| r.stalled && r.velocity != (0.0, 0.0);
     robots
         .iter()
         .filter(|r| r.id != agent)
-        .find(|r| {
+        .filter(|r| {
             (moved(r) && r.contacts.contains(&Contact::Robot(agent)))
                 || (moved(me) && me.contacts.contains(&Contact::Robot(r.id)))
         })
         .map(|r| r.id)
+        .collect()
 }

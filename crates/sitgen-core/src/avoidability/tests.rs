@@ -18,7 +18,9 @@ fn spec(time_limit_s: f64) -> RunSpec {
 /// The run, and the judgement of its collision (checked to be the monitor's first).
 fn judged(s: &Situation, spec: &RunSpec) -> (RunRecord, Judgement) {
     let rec = crate::run::run(s, spec, 7).unwrap();
-    let j = judge(s, spec, 7, AFTER_S).unwrap().expect("a collision");
+    let j = judge(s, spec, 7, AFTER_S, None)
+        .unwrap()
+        .expect("a collision");
     let first = rec
         .events
         .iter()
@@ -192,7 +194,104 @@ fn a_run_without_a_collision_has_no_judgement() {
             robot(1, (5.0, 15.0, 0.0), &[[15.0, 15.0]], "straight"),
         ],
     );
-    assert_eq!(judge(&s, &spec(40.0), 7, AFTER_S).unwrap(), None);
+    assert_eq!(judge(&s, &spec(40.0), 7, AFTER_S, None).unwrap(), None);
+}
+
+#[test]
+fn an_agent_judged_from_its_recorded_path_gets_the_verdict_its_controller_got() {
+    // The head-on and rear cases judged again as if their agent's controller were outside the
+    // core: driven along the recorded poses (as float32, as the store keeps them).
+    let rear = situation(
+        200,
+        &[],
+        vec![
+            still(robot(0, (10.0, 10.0, 0.0), &[[10.0, 1.0]], "straight")),
+            robot(1, (6.0, 10.0, 0.0), &[[14.0, 10.0]], "straight"),
+        ],
+    );
+    for (s, time_limit) in [(head_on(), 40.0), (rear, 20.0)] {
+        let spec = spec(time_limit);
+        let (rec, built_in) = judged(&s, &spec);
+        let stored: Vec<f64> = rec
+            .trajectory
+            .iter()
+            .map(|&x| f64::from(x as f32))
+            .collect();
+        let recorded = Recorded {
+            trajectory: &stored,
+            collision_step: (built_in.collision_s / 0.1).round() as u64,
+            robot: built_in.robot,
+        };
+        let mut external = spec.clone();
+        external.controller = Some(ControllerSpec::named("python:user:Planner"));
+        let j = judge_recorded(&s, &external, 7, AFTER_S, &recorded).unwrap();
+        assert_eq!(j.verdict, built_in.verdict);
+        assert_eq!(j.sighted_s, built_in.sighted_s);
+        assert_eq!(j.at_rest, built_in.at_rest);
+        let (a, b) = (j.witness.unwrap(), built_in.witness.unwrap());
+        assert_eq!(a.segments, b.segments);
+        assert!((a.path[0][0] - b.path[0][0]).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn a_record_of_another_run_is_refused() {
+    let s = head_on();
+    let spec = spec(40.0);
+    let (rec, j) = judged(&s, &spec);
+    let mut shifted = rec.trajectory.clone();
+    for step in 20..shifted.len() / 6 {
+        shifted[step * 6] += 0.01 * (step - 19) as f64;
+    }
+    let recorded = Recorded {
+        trajectory: &shifted,
+        collision_step: (j.collision_s / 0.1).round() as u64,
+        robot: 1,
+    };
+    let mut external = spec.clone();
+    external.controller = Some(ControllerSpec::named("python:user:Planner"));
+    let e = judge_recorded(&s, &external, 7, AFTER_S, &recorded).unwrap_err();
+    assert!(e.to_string().contains("does not replay"), "{e}");
+}
+
+#[test]
+fn velocity_between_inverts_the_simulators_motion() {
+    let from = crate::situation::Pose {
+        x_m: 1.0,
+        y_m: 2.0,
+        heading_rad: 0.3,
+    };
+    for (v, w) in [
+        (0.5, 0.0),
+        (-0.4, 0.0),
+        (0.5, 1.2),
+        (-0.3, -0.7),
+        (0.0, 1.0),
+        (0.8, -1.5),
+    ] {
+        let to = crate::sim::integrate(&from, v, w, 0.1);
+        let (v2, w2) = velocity_between(&from, [to.x_m, to.y_m, to.heading_rad], 0.1);
+        assert!(
+            (v - v2).abs() < 1e-9 && (w - w2).abs() < 1e-9,
+            "{v},{w} → {v2},{w2}"
+        );
+    }
+}
+
+#[test]
+fn the_collision_judged_is_the_one_asked_for() {
+    let (s, spec) = (head_on(), spec(40.0));
+    let first = judge(&s, &spec, 7, AFTER_S, None).unwrap().unwrap();
+    let again = judge(&s, &spec, 7, AFTER_S, Some(first.collision_s))
+        .unwrap()
+        .unwrap();
+    assert_eq!(first, again);
+    let e = judge(&s, &spec, 7, AFTER_S, Some(first.collision_s - 1.0)).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("no contact of the agent with a robot"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -210,6 +309,6 @@ fn an_external_agent_is_refused_by_name() {
     let s = head_on();
     let mut spec = spec(40.0);
     spec.controller = Some(ControllerSpec::named("cmd:still"));
-    let e = judge(&s, &spec, 7, AFTER_S).unwrap_err();
+    let e = judge(&s, &spec, 7, AFTER_S, None).unwrap_err();
     assert!(e.to_string().contains("run.controller.name"), "{e}");
 }
