@@ -128,7 +128,9 @@ def test_every_distinct_failure_shows_its_robustness_and_a_robust_representative
     table = run_cli("failures", str(campaign))
     assert "robustness" in table.stdout and ("robust 8/8" in table.stdout or "/8" in table.stdout)
     csv = run_cli("failures", str(campaign), "--format", "csv")
-    assert csv.stdout.splitlines()[0].endswith("robustness,robust,recurs,reruns,median_cpu_s")
+    assert csv.stdout.splitlines()[0].endswith(
+        "robustness,robust,recurs,reruns,median_cpu_s,avoidability,avoidable,judged"
+    )
 
 
 def test_robustness_of_chosen_runs_is_stored_and_the_same_whatever_the_workers(
