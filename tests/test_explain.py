@@ -49,6 +49,41 @@ def test_descriptors_recompute_from_the_situation_file_as_the_docs_define_them()
     assert 0 <= d["crossing_angle_deg"] <= 180
     assert d["crossing_peers"] <= d["peers"]
 
+    # nominal_closest_m: every robot walked along its route at its nominal speed, step by step.
+    def at(route: list[tuple[float, float]], s: float, at_end: str) -> tuple[float, float, float]:
+        if at_end == "loop":
+            route = [*route, route[0]]
+        total = sum(math.dist(a, b) for a, b in itertools.pairwise(route))
+        if at_end == "loop":
+            s %= total
+        elif at_end == "reverse":
+            s %= 2 * total
+            s = 2 * total - s if s > total else s
+        s = min(max(s, 0.0), total)
+        for a, b in itertools.pairwise(route):
+            leg = math.dist(a, b)
+            if s <= leg or b == route[-1]:
+                f = 0.0 if leg == 0 else min(s / leg, 1.0)
+                heading = math.atan2(b[1] - a[1], b[0] - a[0])
+                return a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), heading
+            s -= leg
+        raise AssertionError
+
+    best = (math.inf, 0.0)
+    steps = round(sum(math.dist(a, b) for a, b in legs) / 0.4 / 0.1)
+    for k in range(steps + 1):
+        ax, ay, heading = at(route, 0.4 * k * 0.1, "stop")
+        for p in peers:
+            speed = p["controller"].get("params", {}).get("speed_m_s", 0.5)
+            peer_route = [(p["start"]["x_m"], p["start"]["y_m"]), *map(tuple, p["waypoints"])]
+            px, py, _ = at(peer_route, speed * k * 0.1, p["at_end"])
+            gap = math.dist((ax, ay), (px, py))
+            if gap < best[0]:
+                bearing = math.atan2(py - ay, px - ax) - heading
+                best = (gap, abs(math.degrees(math.remainder(bearing, math.tau))))
+    assert d["nominal_closest_m"] == pytest.approx(best[0], abs=1e-9)
+    assert d["nominal_closest_bearing_deg"] == pytest.approx(best[1], abs=1e-6)
+
 
 def test_explain_gives_rules_with_supports_and_exact_intervals(tmp_path: Path) -> None:
     db = tmp_path / "c.db"

@@ -16,6 +16,16 @@ Each is defined in docs/explain.md precisely enough to recompute from a situatio
   driving their routes at nominal speeds (the agent at ``sim.max_speed_m_s``' half, 0.4 m/s;
   the peer at its controller's ``speed_m_s``, default 0.5 m/s), seconds; 1000 without one.
 - ``nearest_peer_start_m``: the nearest peer's start to the agent's route; 1000 without peers.
+- ``nominal_closest_m``: the closest any peer's centre comes to the agent's when every robot
+  drives its route at its nominal speed (as ``conflict_gap_s``) from time 0, sampled every
+  0.1 s until the agent's route ends; a peer at the end of its route stops there (``at_end``
+  ``stop``), turns back along it (``reverse``) or goes round it again, start included
+  (``loop``); 1000 without peers.
+- ``nominal_closest_bearing_deg``: where that peer lies then from the agent's heading (the
+  direction of its current leg), 0 (dead ahead) to 180 (behind); 0 without peers.
+- ``nominal_closest_clearance_m``: how near the agent's position then is to the nearest
+  occupied cell, centre to centre less half a cell (as ``route_clearance_m``); 1000 without
+  peers or obstacles.
 - ``terrain``: the terrain preset (one-hot in a model).
 """
 
@@ -50,7 +60,13 @@ NUMERIC = (
     "crossing_angle_deg",
     "conflict_gap_s",
     "nearest_peer_start_m",
+    "nominal_closest_m",
+    "nominal_closest_bearing_deg",
+    "nominal_closest_clearance_m",
 )
+
+SAMPLE_S = 0.1
+"""Time step of the nominal drive (``nominal_closest_m``)."""
 
 
 Point = tuple[float, float]
@@ -88,6 +104,52 @@ def _turns(route: list[Point]) -> int:
         if abs(math.remainder(h2 - h1, math.tau)) > math.radians(30):
             turns += 1
     return turns
+
+
+def _along(route: list[Point], s: np.ndarray, at_end: str) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and leg headings at arc lengths ``s`` along ``route`` (start first), past its
+    end as ``at_end`` says (``stop``, ``reverse``, ``loop``)."""
+    if at_end == "loop" and len(route) > 1:
+        route = [*route, route[0]]
+    points = np.asarray(route, dtype=float)
+    cumulative = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+    total = float(cumulative[-1])
+    if total <= 0:
+        return np.repeat(points[:1], len(s), axis=0), np.zeros(len(s))
+    if at_end == "loop":
+        s = np.mod(s, total)
+    elif at_end == "reverse":
+        s = np.mod(s, 2 * total)
+        s = np.where(s > total, 2 * total - s, s)
+    s = np.clip(s, 0.0, total)
+    xy = np.stack([np.interp(s, cumulative, points[:, 0]), np.interp(s, cumulative, points[:, 1])])
+    leg = np.clip(np.searchsorted(cumulative, s, side="right") - 1, 0, len(points) - 2)
+    d = points[leg + 1] - points[leg]
+    return xy.T, np.arctan2(d[:, 1], d[:, 0])
+
+
+def _nominal_closest(
+    situation: Situation, route: list[Point], length: float
+) -> tuple[float, float, Point]:
+    """``nominal_closest_m``, its bearing, and where the agent is then."""
+    peers = situation.robots[1:]
+    if not peers:
+        return NONE_M, 0.0, route[0]
+    t = np.arange(0.0, length / AGENT_SPEED_M_S + SAMPLE_S / 2, SAMPLE_S)
+    agent_xy, heading = _along(route, t * AGENT_SPEED_M_S, "stop")
+    best = (math.inf, 0.0, route[0])
+    for peer in peers:
+        speed = float(peer.controller.get("params", {}).get("speed_m_s", PEER_SPEED_M_S))
+        xy, _ = _along(_route(peer), t * speed, peer.at_end)
+        gap = np.hypot(*(xy - agent_xy).T)
+        k = int(np.argmin(gap))
+        if gap[k] < best[0]:
+            d = xy[k] - agent_xy[k]
+            bearing = abs(
+                math.degrees(math.remainder(math.atan2(d[1], d[0]) - heading[k], math.tau))
+            )
+            best = (float(gap[k]), bearing, (float(agent_xy[k][0]), float(agent_xy[k][1])))
+    return best
 
 
 def describe(situation: Situation) -> dict[str, Any]:
@@ -137,6 +199,11 @@ def describe(situation: Situation) -> dict[str, Any]:
         (min(_point_segment((p.start.x_m, p.start.y_m), a, b) for a, b in legs) for p in peers),
         default=NONE_M,
     ) if legs else NONE_M  # fmt: skip
+    closest, bearing, where = _nominal_closest(situation, route, sum(lengths))
+    clearance = NONE_M
+    col, row = int(where[0] / res), rows - 1 - int(where[1] / res)
+    if to_wall is not None and peers and 0 <= row < rows and 0 <= col < occupied.shape[1]:
+        clearance = float(to_wall[row, col]) - res / 2
     spec = situation.spec.get("terrain", {})
     return {
         "route_length_m": sum(lengths),
@@ -148,6 +215,9 @@ def describe(situation: Situation) -> dict[str, Any]:
         "crossing_angle_deg": crossings[0][1] if crossings else 0.0,
         "conflict_gap_s": crossings[0][2] if crossings else NONE_M,
         "nearest_peer_start_m": nearest,
+        "nominal_closest_m": closest,
+        "nominal_closest_bearing_deg": bearing,
+        "nominal_closest_clearance_m": clearance,
         "terrain": str(spec.get("preset") or spec.get("source", {}).get("kind") or "given"),
     }
 

@@ -121,13 +121,31 @@ def explain(
     }
 
 
+def _words(conditions: list[tuple[str, str, float]]) -> list[str]:
+    """A leaf's path as conditions in words, the bounds on one descriptor in one direction
+    kept once (the tightest: ``a > 0.1 and a > 0.4`` is ``a > 0.4``), in path order."""
+    tightest: dict[tuple[str, str], float] = {}
+    for name, op, cut in conditions:
+        if op:
+            pick = min if op == "≤" else max
+            tightest[name, op] = pick(tightest.get((name, op), cut), cut)
+    out, said = [], set()
+    for name, op, _ in conditions:
+        if not op:
+            out.append(name)
+        elif (name, op) not in said:
+            said.add((name, op))
+            out.append(f"{name} {op} {tightest[name, op]:.3g}")
+    return out
+
+
 def _rules(model: Any, names: list[str], x: Any, y: Any) -> list[Rule]:
     """Each leaf whose failure rate is above the rest's, as a rule; highest rate first."""
     tree = model.tree_
     leaves = model.apply(x)
     rules = []
 
-    def walk(node: int, conditions: list[str]) -> None:
+    def walk(node: int, conditions: list[tuple[str, str, float]]) -> None:
         if tree.children_left[node] == -1:
             inside = leaves == node
             k, n = int(y[inside].sum()), int(inside.sum())
@@ -135,15 +153,15 @@ def _rules(model: Any, names: list[str], x: Any, y: Any) -> list[Rule]:
             elsewhere = float(y[~inside].sum() / rest_n) if rest_n else 0.0
             if n and k / n > elsewhere:
                 ci = exact_interval(k, n)
-                rules.append(Rule(conditions, n, k, k / n, ci, elsewhere))
+                rules.append(Rule(_words(conditions), n, k, k / n, ci, elsewhere))
             return
         name, cut = names[tree.feature[node]], float(tree.threshold[node])
         if name.startswith("terrain is "):
-            walk(tree.children_left[node], [*conditions, name.replace(" is ", " is not ")])
-            walk(tree.children_right[node], [*conditions, name])
+            walk(tree.children_left[node], [*conditions, (name.replace(" is ", " is not "), "", 0)])
+            walk(tree.children_right[node], [*conditions, (name, "", 0)])
             return
-        walk(tree.children_left[node], [*conditions, f"{name} ≤ {cut:.3g}"])
-        walk(tree.children_right[node], [*conditions, f"{name} > {cut:.3g}"])
+        walk(tree.children_left[node], [*conditions, (name, "≤", cut)])
+        walk(tree.children_right[node], [*conditions, (name, ">", cut)])
 
     walk(0, [])
     return sorted(rules, key=lambda r: (-r.rate, -r.runs))
