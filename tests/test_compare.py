@@ -87,6 +87,14 @@ def test_identical_controllers_show_no_difference_on_the_same_situations(tmp_pat
     ).stdout)))  # fmt: skip
     assert [r["controller"] for r in table] == ["snd_follow", "snd_follow-2", "vo"]
     assert float(table[2]["failure_rate"]) == pytest.approx(vo["failure_rate"])
+    # Beside the stores: the figures as JSON and the comparison page.
+    assert json.loads((tmp_path / "comparison.json").read_text()) == result
+    page = (tmp_path / "comparison.html").read_text()
+    for label in ("snd_follow", "snd_follow-2", "vo"):
+        assert f"<tr data-controller='{label}'>" in page
+    # The identical pair's cells read 0 / 0 and are not marked as a difference.
+    assert page.count("<td class='same' title='no difference, p = 1'>0 / 0</td>") == 2
+    assert "sitgen compare" in page and "--controllers snd_follow,snd_follow,vo" in page
 
 
 def test_compare_needs_two_controllers(tmp_path: Path) -> None:

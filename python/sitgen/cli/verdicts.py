@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -397,7 +398,8 @@ def compare_command(
     controllers"): each runs the campaign's first N jobs into DIR/LABEL.db; per controller
     the failure rate with an exact 95 % interval, distinct failures (robust ones with
     --reruns), median time to goal and path efficiency; per pair the exact McNemar test;
-    the distinct failures only one controller shows."""
+    the distinct failures only one controller shows. Beside the stores: comparison.json and
+    comparison.html, the comparison page."""
     import copy
     import csv
 
@@ -406,6 +408,7 @@ def compare_command(
     from sitgen.execution.jobs import CampaignSpec, campaign_from_data
     from sitgen.generation.compare import comparison, labels_of
     from sitgen.generation.diff import parse_controller
+    from sitgen.presentation.comparison import comparison_page
 
     if format not in ("table", "json", "csv"):
         raise UsageError(f"--format: `{format}` is not one of table, json, csv")
@@ -455,6 +458,10 @@ def compare_command(
         _stored(f"compare {label}", n, "runs", work)
         _measure_robustness(db, reruns, workers)
     result = comparison(labels, tables, folder)
+    # Beside the stores: the figures for a paper's table, and the comparison page.
+    (folder / "comparison.json").write_text(json.dumps(result, indent=2) + "\n")
+    command = "sitgen " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    (folder / "comparison.html").write_text(comparison_page(result, command))
     if format == "json":
         typer.echo(json.dumps(result, indent=2))
         return
