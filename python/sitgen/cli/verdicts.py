@@ -403,7 +403,7 @@ def compare_command(
     import copy
     import csv
 
-    from sitgen.cli.campaigns import _check_reruns, _measure_robustness
+    from sitgen.cli.campaigns import _check_reruns, _judge_avoidability, _measure_robustness
     from sitgen.execution.campaign import CampaignResult, run_campaign
     from sitgen.execution.jobs import CampaignSpec, campaign_from_data
     from sitgen.generation.compare import comparison, labels_of
@@ -457,6 +457,7 @@ def compare_command(
 
         _stored(f"compare {label}", n, "runs", work)
         _measure_robustness(db, reruns, workers)
+        _judge_avoidability(db, workers)
     result = comparison(labels, tables, folder)
     # Beside the stores: the figures for a paper's table, and the comparison page.
     (folder / "comparison.json").write_text(json.dumps(result, indent=2) + "\n")
