@@ -51,12 +51,12 @@ def test_descriptors_recompute_from_the_situation_file_as_the_docs_define_them()
 
     # nominal_closest_m: every robot walked along its route at its nominal speed, step by step.
     def at(route: list[tuple[float, float]], s: float, at_end: str) -> tuple[float, float, float]:
-        if at_end == "loop":
-            route = [*route, route[0]]
         total = sum(math.dist(a, b) for a, b in itertools.pairwise(route))
-        if at_end == "loop":
-            s %= total
-        elif at_end == "reverse":
+        if at_end == "loop" and s > total and len(route) > 2:
+            # From the last waypoint to the first, and round again.
+            cycle = [route[-1], *route[1:]]
+            return at(cycle, (s - total) % sum(map(math.dist, cycle, cycle[1:])), "stop")
+        if at_end == "reverse":
             s %= 2 * total
             s = 2 * total - s if s > total else s
         s = min(max(s, 0.0), total)

@@ -95,14 +95,29 @@ fn run_jobs<'py>(
 }
 
 /// A finished job, serialised off the GIL: (situation, record, events, trajectory, robots,
-/// (wall seconds, processor seconds) it took).
-type Packed = Result<(String, String, String, Option<Vec<u8>>, usize, (f64, f64)), String>;
+/// (wall seconds, processor seconds) it took, the situation's descriptors).
+type Packed = Result<
+    (
+        String,
+        String,
+        String,
+        Option<Vec<u8>>,
+        usize,
+        (f64, f64),
+        String,
+    ),
+    String,
+>;
 
 fn pack_result(result: JobResult, (min_score, failures): PackRule, took: (f64, f64)) -> Packed {
     result.map(|(s, rec)| {
         let keep = rec.score.total >= min_score || (failures && rec.failure.is_some());
         let packed = keep.then(|| pack_trajectory(&rec.trajectory));
         let record = serde_json::to_string(&rec).expect("records serialize");
+        // Stored with the situation, so that explaining a campaign generates none again.
+        let descriptors =
+            serde_json::to_string(&sitgen_core::situation::descriptors::describe(&s, None))
+                .expect("descriptors serialize");
         (
             s.to_json(),
             record,
@@ -110,6 +125,7 @@ fn pack_result(result: JobResult, (min_score, failures): PackRule, took: (f64, f
             packed,
             rec.robots,
             took,
+            descriptors,
         )
     })
 }
@@ -137,7 +153,7 @@ fn timed(job: &Job, rule: PackRule) -> Packed {
 fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
     match result {
-        Ok((situation, record, events, trajectory, robots, (wall_s, cpu_s))) => {
+        Ok((situation, record, events, trajectory, robots, (wall_s, cpu_s), descriptors)) => {
             d.set_item("ok", true)?;
             d.set_item("wall_s", wall_s)?;
             d.set_item("cpu_s", cpu_s)?;
@@ -146,6 +162,7 @@ fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
             d.set_item("events_jsonl", events)?;
             d.set_item("trajectory", trajectory.map(|t| PyBytes::new(py, &t)))?;
             d.set_item("robots", robots)?;
+            d.set_item("descriptors", descriptors)?;
         }
         Err(e) => {
             d.set_item("ok", false)?;

@@ -84,7 +84,15 @@ fn situation_json_schema() -> String {
     situation::json_schema()
 }
 
+/// The situation's descriptors (docs/explain.md) as JSON.
+#[pyfunction]
+fn situation_descriptors(json: &str) -> PyResult<String> {
+    let s = read(json)?;
+    Ok(serde_json::to_string(&situation::descriptors::describe(&s, None)).expect("serializes"))
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(situation_descriptors, m)?)?;
     m.add_function(wrap_pyfunction!(generate_situation, m)?)?;
     m.add_function(wrap_pyfunction!(check_situation, m)?)?;
     m.add_function(wrap_pyfunction!(situation_content_hash, m)?)?;

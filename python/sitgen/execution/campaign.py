@@ -132,6 +132,7 @@ def run_row(job: Job, result: Mapping[str, Any]) -> RunRow:
         trajectory=result.get("trajectory"),
         robots=result.get("robots", 0),
         cost=(float(result["wall_s"]), float(result["cpu_s"])) if "cpu_s" in result else None,
+        descriptors=result.get("descriptors"),
     )
 
 

@@ -44,6 +44,7 @@ from sitgen.store.records import (
 from sitgen.store.schema import (
     AVOIDABILITY_SCHEMA,
     COST_SCHEMA,
+    DESCRIPTOR_SCHEMA,
     DIFF_SCHEMA,
     FAULT_SCHEMA,
     JUDGEMENT_SCHEMA,
@@ -136,6 +137,7 @@ class Store(Writing, Verdicts):
                     + COST_SCHEMA
                     + REQUIREMENT_SCHEMA
                     + AVOIDABILITY_SCHEMA
+                    + DESCRIPTOR_SCHEMA
                 )
                 self.db.execute(
                     "INSERT INTO meta (key, value) VALUES ('schema_version', ?)",
@@ -515,6 +517,7 @@ class Store(Writing, Verdicts):
 __all__ = [
     "AVOIDABILITY_SCHEMA",
     "COST_SCHEMA",
+    "DESCRIPTOR_SCHEMA",
     "DIFF_SCHEMA",
     "FAULT_SCHEMA",
     "JUDGEMENT_SCHEMA",

@@ -96,6 +96,8 @@ class RunRow:
     """A search's genome for it: each varied field's draw and the situation seed."""
     cost: tuple[float, float] | None = None
     """What it cost the machine that made it: (wall seconds, processor seconds)."""
+    descriptors: str | None = None
+    """Its situation's descriptors (JSON, docs/explain.md), as the core computed them."""
     keep: bool = True
     """Store the run whole (its situation, specs, event log and trajectory), or only its
     summary (a campaign's run: its specs follow from the campaign, and the rest comes back by

@@ -8,7 +8,7 @@ import sqlite3
 
 from sitgen import _core
 
-SCHEMA_VERSION = 12
+SCHEMA_VERSION = 13
 
 
 SCHEMA = """
@@ -251,6 +251,17 @@ then and whether it stood at rest, the verdict (``avoidable``, ``unavoidable_wit
 the run could not be judged (its verdict NULL)."""
 
 
+DESCRIPTOR_SCHEMA = """
+CREATE TABLE IF NOT EXISTS situation_descriptors (
+    situation_id INTEGER PRIMARY KEY REFERENCES situations (id),
+    descriptors TEXT NOT NULL
+);
+"""
+"""Each situation's descriptors (docs/explain.md) as JSON, computed by the core when a
+campaign generates it (or when `sitgen explain` first needs them), so that explaining a
+campaign generates no situation again."""
+
+
 DIFF_SCHEMA = """
 CREATE TABLE IF NOT EXISTS diff (
     id INTEGER PRIMARY KEY CHECK (id = 1),
@@ -365,6 +376,10 @@ def upgrade(db: sqlite3.Connection, version: int) -> None:
         # Version 12 adds whether a collision with a robot could have been escaped; runs
         # stored before are judged when asked (sitgen avoidability).
         db.executescript(AVOIDABILITY_SCHEMA)
+    if version < 13:
+        # Version 13 stores each situation's descriptors; those of situations stored before
+        # are computed when first asked for.
+        db.executescript(DESCRIPTOR_SCHEMA)
     db.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(SCHEMA_VERSION),))
 
 

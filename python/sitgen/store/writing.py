@@ -5,8 +5,10 @@ each file reads whole."""
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from collections.abc import Iterable
+from typing import Any
 
 from sitgen.store.records import RunRow
 from sitgen.store.schema import TRAJECTORY_ENCODING
@@ -49,6 +51,12 @@ class Writing:
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             row.run_values(),
         )
+        if row.descriptors is not None:
+            self.db.execute(
+                "INSERT OR REPLACE INTO situation_descriptors (situation_id, descriptors) "
+                "VALUES (?, ?)",
+                (row.id, row.descriptors),
+            )
         if row.cost is not None:
             self.db.execute(
                 "INSERT OR REPLACE INTO run_costs (run_id, wall_s, cpu_s) VALUES (?, ?, ?)",
@@ -79,3 +87,20 @@ class Writing:
                     row.trajectory,
                 ),
             )
+
+    def record_descriptors(self, rows: dict[int, dict[str, Any]]) -> None:
+        """Store situations' descriptors, by situation id, in one transaction."""
+        with self.db:
+            self.db.executemany(
+                "INSERT OR REPLACE INTO situation_descriptors (situation_id, descriptors) "
+                "VALUES (?, ?)",
+                [(i, json.dumps(d, sort_keys=True)) for i, d in rows.items()],
+            )
+
+    def stored_descriptors(self) -> dict[int, dict[str, Any]]:
+        """Every run's stored situation descriptors, by run id."""
+        rows = self.db.execute(
+            "SELECT r.id, d.descriptors FROM runs r "
+            "JOIN situation_descriptors d ON d.situation_id = r.situation_id"
+        )
+        return {i: json.loads(text) for i, text in rows}

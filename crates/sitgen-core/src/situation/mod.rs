@@ -13,6 +13,8 @@
 //! serialisation of [`Content`]), so two situations that would run the same have the same hash
 //! whatever their provenance.
 
+pub mod descriptors;
+
 use std::io::{Read, Write};
 
 use base64::Engine;
