@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-load bench-requirements bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
+.PHONY: bench-explain demo test wheel wheel-test lint rust-test py-test bench install install-test bench-fast-path bench-load bench-requirements bench-irsim bench-faults bench-shrink bench-search bench-coverage bench-profiles bench-vo bench-ros2-start bench-gym bench-stage bench-scale bench-weights profile stage
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -173,3 +173,6 @@ stage:
 # docs/stage.md (about 30 s after `make stage`).
 bench-stage: install-test
 	$(BIN)/python benches/stage_crosscheck.py
+
+bench-explain: install-test
+	$(BIN)/python benches/explain_cost.py

@@ -450,7 +450,7 @@ def explain_command(
             if confirm:
                 confirm_dir.mkdir(parents=True, exist_ok=True)
                 result["confirmed"] = confirm_rules(
-                    store, result["rules"][:3], confirm, confirm_dir,
+                    store, result["rules"], confirm, confirm_dir,
                     lambda fresh: target_of(fresh, failure_class, outcome, requirement), workers,
                 )  # fmt: skip
     except StoreError as e:
