@@ -418,9 +418,9 @@ def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
         )
 
 
-def _judge_avoidability(db: Path, workers: int | None) -> None:
+def _judge_avoidability(db: Path, workers: int | None, say: bool = True) -> None:
     """Judge whether the collisions of the store's peer-contact distinct failures' top runs
-    could have been escaped (docs/avoidability.md), and say what it cost."""
+    could have been escaped (docs/avoidability.md), and (if ``say``) say what it cost."""
     from sitgen.store import Store
     from sitgen.triage.avoidability import measure_avoidability
     from sitgen.triage.failures import distinct_failures
@@ -430,7 +430,7 @@ def _judge_avoidability(db: Path, workers: int | None) -> None:
         judged = measure_avoidability(
             store, distinct_failures(store), workers or os.cpu_count() or 1
         )
-    if judged:
+    if judged and say:
         typer.echo(
             f"avoidability: {judged} collisions with robots judged in "
             f"{time.perf_counter() - started:.1f} s"

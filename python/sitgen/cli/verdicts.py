@@ -457,7 +457,8 @@ def compare_command(
 
         _stored(f"compare {label}", n, "runs", work)
         _measure_robustness(db, reruns, workers)
-        _judge_avoidability(db, workers)
+        # Only the table's output may carry a line of its own: JSON and CSV are read whole.
+        _judge_avoidability(db, workers, say=format == "table")
     result = comparison(labels, tables, folder)
     # Beside the stores: the figures for a paper's table, and the comparison page.
     (folder / "comparison.json").write_text(json.dumps(result, indent=2) + "\n")
