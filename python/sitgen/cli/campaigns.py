@@ -397,9 +397,9 @@ def _check_reruns(reruns: int) -> None:
         check_reruns(reruns)
 
 
-def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
+def _measure_robustness(db: Path, reruns: int, workers: int | None, say: bool = True) -> None:
     """Measure the robustness of the store's distinct failures with ``reruns`` copies each
-    (none if 0) and say what it cost."""
+    (none if 0) and (if ``say``) say what it cost."""
     from sitgen.store import Store
     from sitgen.triage.failures import measure_robustness
     from sitgen.triage.requirements import measure_requirements
@@ -411,7 +411,7 @@ def _measure_robustness(db: Path, reruns: int, workers: int | None) -> None:
         ran = measure_robustness(store, reruns, workers or os.cpu_count() or 1)
         # A violated requirement's worst run, copied as a distinct failure's representative.
         ran += reruns * len(measure_requirements(store, reruns, workers or os.cpu_count() or 1))
-    if ran:
+    if ran and say:
         typer.echo(
             f"robustness: {ran} perturbed copies of distinct failures' runs in "
             f"{time.perf_counter() - started:.1f} s"

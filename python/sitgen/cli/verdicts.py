@@ -456,8 +456,8 @@ def compare_command(
             )  # fmt: skip
 
         _stored(f"compare {label}", n, "runs", work)
-        _measure_robustness(db, reruns, workers)
         # Only the table's output may carry a line of its own: JSON and CSV are read whole.
+        _measure_robustness(db, reruns, workers, say=format == "table")
         _judge_avoidability(db, workers, say=format == "table")
     result = comparison(labels, tables, folder)
     # Beside the stores: the figures for a paper's table, and the comparison page.
