@@ -102,7 +102,10 @@ def test_rerun_reproduces_a_stored_run_and_export_writes_every_table(tmp_path: P
                 "judgements",
                 "requirement_verdicts",
                 "requirement_robustness",
+                "avoidability",
                 "descriptors",
+                # Written where a run failed: these three runs do.
+                "run_descriptors",
             )
         )
     import pyarrow.parquet as pq

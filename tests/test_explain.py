@@ -15,7 +15,9 @@ import pytest
 
 import sitgen
 from sitgen.generation.region import check_where, holds
+from sitgen.store import Store
 from sitgen.triage.descriptors import describe
+from sitgen.triage.recall import resimulate, stored_run
 from sitgen.triage.stats import exact_interval
 from tests.conftest import ROOT, run_cli
 
@@ -166,3 +168,26 @@ def test_export_writes_every_runs_descriptors(tmp_path: Path) -> None:
     if first is not None:
         again = describe(sitgen.Situation(first, check_start=False))
         assert table[0]["route_length_m"] == pytest.approx(again["route_length_m"])
+    # Run descriptors: every failing run, made again, reduced from its signals as the docs say.
+    measured = pq.read_table(out / "run_descriptors.parquet").to_pylist()
+    with Store(db) as store:
+        failing = [
+            i for (i,) in store.db.execute(
+                "SELECT id FROM runs WHERE failure_class IS NOT NULL ORDER BY id"
+            )
+        ]  # fmt: skip
+        assert [r["run_id"] for r in measured] == failing
+        for r in measured[:2]:
+            _, record = resimulate(stored_run(store, r["run_id"]), signals=True)
+            gap = np.asarray(record.signals["peer_clearance"])
+            speed = np.abs(np.asarray(record.signals["speed"]))
+            k = int(np.argmin(gap))
+            assert r["closest_approach_m"] == pytest.approx(float(gap[k]))
+            assert r["closest_approach_s"] == pytest.approx(0.1 * k)
+            assert r["speed_at_closest_m_s"] == pytest.approx(float(speed[k]))
+            seen = np.flatnonzero(np.asarray(record.signals["peer_seen"]) > 0)
+            if len(seen):
+                assert r["first_sight_s"] == pytest.approx(0.1 * seen[0])
+                assert r["speed_at_first_sight_m_s"] == pytest.approx(float(speed[seen[0]]))
+            else:
+                assert r["first_sight_s"] == 1000.0

@@ -194,7 +194,12 @@ def export(
     for analysis (pandas, polars, DuckDB), or one stored run as a rosbag2 (MCAP) for ROS tools
     (docs/ros2.md)."""
     if _is_store(source):
-        from sitgen.triage.rank import export_descriptors, export_signals, export_tables
+        from sitgen.triage.rank import (
+            export_descriptors,
+            export_run_descriptors,
+            export_signals,
+            export_tables,
+        )
 
         require_store(source)
         if format == "situation":
@@ -216,6 +221,9 @@ def export(
             descriptors = export_descriptors(source, output, format)
             if descriptors is not None:
                 typer.echo(f"wrote {descriptors} (every run's situation described)")
+            measured = export_run_descriptors(source, output, format)
+            if measured is not None:
+                typer.echo(f"wrote {measured} (every failing run made again and measured)")
         return
     if format not in ("stage", "ros"):
         raise UsageError(f"--format: `{format}` is not one of stage, ros")

@@ -34,6 +34,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import numpy as np
+
 from sitgen import _core
 from sitgen.store import Store
 from sitgen.triage.recall import regenerate, stored_run
@@ -53,6 +55,39 @@ NUMERIC = (
     "nominal_closest_bearing_deg",
     "nominal_closest_clearance_m",
 )
+
+
+RUN_NUMERIC = (
+    "closest_approach_m",
+    "closest_approach_s",
+    "speed_at_closest_m_s",
+    "first_sight_s",
+    "speed_at_first_sight_m_s",
+)
+"""Run descriptors (docs/explain.md): measured from a run, not known before it."""
+
+NONE = 1000.0
+"""What a run descriptor reads without a subject (no peer, never seen)."""
+
+
+def run_descriptors(signals: dict[str, Any], dt_s: float) -> dict[str, float]:
+    """A run's descriptors from its requirement signals (docs/requirements.md), one value a
+    sample ``dt_s`` apart: the closest any peer's footprint came to the agent's
+    (``peer_clearance``), when, and the agent's speed then; when the agent's laser first saw
+    a peer (``peer_seen``), and its speed then."""
+    gap = np.asarray(signals["peer_clearance"], dtype=float)
+    speed = np.abs(np.asarray(signals["speed"], dtype=float))
+    seen = np.flatnonzero(np.asarray(signals["peer_seen"], dtype=float) > 0)
+    finite = np.isfinite(gap)
+    out = dict.fromkeys(RUN_NUMERIC, NONE)
+    if finite.any():
+        k = int(np.argmin(np.where(finite, gap, np.inf)))
+        out |= {"closest_approach_m": float(gap[k]), "closest_approach_s": k * dt_s,
+                "speed_at_closest_m_s": float(speed[k])}  # fmt: skip
+    if len(seen):
+        k = int(seen[0])
+        out |= {"first_sight_s": k * dt_s, "speed_at_first_sight_m_s": float(speed[k])}
+    return out
 
 
 def describe(situation: Situation) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from typing import Any, TextIO
 from sitgen import _core
 from sitgen.run import run
 from sitgen.store import Store, events_digest
-from sitgen.triage.descriptors import NUMERIC, described
+from sitgen.triage.descriptors import NUMERIC, RUN_NUMERIC, described, run_descriptors
 from sitgen.triage.failures import check_class, distinct_failures
 from sitgen.triage.recall import regenerate, resimulate_checked, stored_run
 from sitgen.triage.robustness import verdict
@@ -49,6 +49,7 @@ TABLES = (
     "judgements",
     "requirement_verdicts",
     "requirement_robustness",
+    "avoidability",
 )
 
 
@@ -143,6 +144,33 @@ def export_descriptors(db: str | Path, directory: Path, format: str) -> Path | N
     for name in names:
         columns[name] = [d[name] for d in by_run.values()]
     path = directory / f"descriptors.{format}"
+    _write_columns(columns, path, format)
+    return path
+
+
+def export_run_descriptors(db: str | Path, directory: Path, format: str) -> Path | None:
+    """Every failing run's run descriptors (docs/explain.md), a row a run (``run_id`` then each
+    descriptor), as ``run_descriptors.parquet`` or ``.csv`` in ``directory``: each run made
+    again for its signals (a run is deterministic) and checked to be the run stored. None
+    where no run failed."""
+    columns: dict[str, list[Any]] = {c: [] for c in ("run_id", *RUN_NUMERIC)}
+    with Store(db) as store:
+        failing = [
+            i for (i,) in store.db.execute(
+                "SELECT id FROM runs WHERE failure_class IS NOT NULL ORDER BY id"
+            )
+        ]  # fmt: skip
+        for run_id in failing:
+            row = stored_run(store, run_id)
+            _, record = resimulate_checked(store, row, signals=True)
+            dt_s = float(row["run_spec"].get("sim", {}).get("dt_s", 0.1))
+            measured = run_descriptors(record.signals, dt_s)
+            columns["run_id"].append(run_id)
+            for name in RUN_NUMERIC:
+                columns[name].append(measured[name])
+    if not columns["run_id"]:
+        return None
+    path = directory / f"run_descriptors.{format}"
     _write_columns(columns, path, format)
     return path
 
