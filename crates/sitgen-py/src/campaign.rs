@@ -109,15 +109,25 @@ type Packed = Result<
     String,
 >;
 
-fn pack_result(result: JobResult, (min_score, failures): PackRule, took: (f64, f64)) -> Packed {
+/// `describe`: whether the situation's descriptors are wanted (not for a perturbed copy, whose
+/// situation is its run's: they would cost every copy a distance transform for nothing).
+fn pack_result(
+    result: JobResult,
+    (min_score, failures): PackRule,
+    took: (f64, f64),
+    describe: bool,
+) -> Packed {
     result.map(|(s, rec)| {
         let keep = rec.score.total >= min_score || (failures && rec.failure.is_some());
         let packed = keep.then(|| pack_trajectory(&rec.trajectory));
         let record = serde_json::to_string(&rec).expect("records serialize");
         // Stored with the situation, so that explaining a campaign generates none again.
-        let descriptors =
+        let descriptors = if describe {
             serde_json::to_string(&sitgen_core::situation::descriptors::describe(&s, None))
-                .expect("descriptors serialize");
+                .expect("descriptors serialize")
+        } else {
+            String::new()
+        };
         (
             s.to_json(),
             record,
@@ -147,7 +157,7 @@ fn timed(job: &Job, rule: PackRule) -> Packed {
     let (started, cpu) = (std::time::Instant::now(), thread_cpu_s());
     let result = run_job(job);
     let took = (started.elapsed().as_secs_f64(), thread_cpu_s() - cpu);
-    pack_result(result, rule, took)
+    pack_result(result, rule, took, job.run.perturbation.is_none())
 }
 
 fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
@@ -162,7 +172,9 @@ fn result_dict(py: Python<'_>, result: Packed) -> PyResult<Bound<'_, PyDict>> {
             d.set_item("events_jsonl", events)?;
             d.set_item("trajectory", trajectory.map(|t| PyBytes::new(py, &t)))?;
             d.set_item("robots", robots)?;
-            d.set_item("descriptors", descriptors)?;
+            if !descriptors.is_empty() {
+                d.set_item("descriptors", descriptors)?;
+            }
         }
         Err(e) => {
             d.set_item("ok", false)?;
