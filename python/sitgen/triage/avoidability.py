@@ -128,7 +128,7 @@ def _recorded_job(
         parties = {e["robot"], e["other"]}
         if e["kind"] == "collision" and agent in parties and isinstance(e["other"], int):
             robot = e["other"] if e["robot"] == agent else e["robot"]
-            poses = [float(x) for x in whole.trajectory.ravel()]
+            poses: list[float] = whole.trajectory.ravel().astype(float).tolist()
             return (
                 whole.situation.to_json(), spec, row["run_seed"], poses,
                 round(e["start_s"] / dt_s), robot,

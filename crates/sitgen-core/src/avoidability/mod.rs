@@ -412,6 +412,10 @@ fn judge_run(
         // Of robots touched in one step, one the agent had not seen is judged: its contact is
         // the more severe class, the one a failure is decided by.
         let now = run.world().steps();
+        if recorded.is_some() {
+            // The record says where its contact begins (checked at the top of the loop).
+            continue;
+        }
         let touched = touched_robots(run.world(), agent);
         let unseen = |id: &&u32| {
             spells[**id as usize]
@@ -420,7 +424,6 @@ fn judge_run(
         };
         let touched = touched.iter().find(unseen).or(touched.first()).copied();
         match until {
-            _ if recorded.is_some() => {}
             Some(k) if now == k => {
                 break touched.ok_or_else(|| {
                     SpecError::new(

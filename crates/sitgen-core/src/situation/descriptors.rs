@@ -20,6 +20,7 @@
 use serde::Serialize;
 
 use super::Situation;
+use crate::geometry::segment::nearest_point;
 use crate::mission::AtEnd;
 
 /// The agent's nominal speed, m/s.
@@ -140,17 +141,6 @@ fn crossing(p: Point, q: Point, a: Point, b: Point) -> Option<(f64, f64)> {
     ((0.0..=1.0).contains(&t) && (0.0..=1.0).contains(&u)).then_some((t, u))
 }
 
-fn point_segment(p: Point, a: Point, b: Point) -> f64 {
-    let ab = (b.0 - a.0, b.1 - a.1);
-    let length2 = ab.0 * ab.0 + ab.1 * ab.1;
-    let t = if length2 == 0.0 {
-        0.0
-    } else {
-        (((p.0 - a.0) * ab.0 + (p.1 - a.1) * ab.1) / length2).clamp(0.0, 1.0)
-    };
-    dist(p, (a.0 + t * ab.0, a.1 + t * ab.1))
-}
-
 fn angle_deg(from: f64, to: f64) -> f64 {
     crate::sim::wrap_angle(to - from).abs().to_degrees()
 }
@@ -243,7 +233,10 @@ pub fn describe(situation: &Situation, to_occupied: Option<&[f64]>) -> Descripto
             .iter()
             .map(|p| {
                 legs.iter()
-                    .map(|&(a, b)| point_segment((p.start.x_m, p.start.y_m), a, b))
+                    .map(|&(a, b)| {
+                        let at = (p.start.x_m, p.start.y_m);
+                        dist(at, nearest_point(at, a, b))
+                    })
                     .fold(f64::INFINITY, f64::min)
             })
             .fold(NONE, f64::min)
