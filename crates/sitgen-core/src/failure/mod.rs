@@ -185,8 +185,9 @@ pub fn class_of(e: &Event, events: &[Event], agent: u32) -> Option<FailureClass>
 
 /// The most severe class among the events of a run still going, whose events are not yet
 /// marked scored (every event that concerns the agent will be): what a perturbed copy
-/// watching for a class reads each step. An event still lasting may grow more severe when it
-/// closes (an oscillation learns what it was beside), never less.
+/// watching for a class reads each step. An event still lasting reads as the class it would
+/// close with if the run stopped now (an oscillation's nearest party so far), which is what
+/// a copy stopped now is judged by.
 pub fn worst_so_far(events: &[Event], agent: u32) -> Option<FailureClass> {
     events
         .iter()

@@ -395,8 +395,8 @@ impl Frame<'_> {
 struct Log {
     events: Vec<Event>,
     dt_s: f64,
-    /// Events opened or closed so far: a reader of a log still growing re-reads it only when
-    /// this moved.
+    /// Events opened or closed, or a lasting event's class decided anew ([`Log::decide`]), so
+    /// far: a reader of a log still growing re-reads it only when this moved.
     changes: u64,
 }
 
@@ -431,6 +431,13 @@ impl Log {
 
     fn set(&mut self, index: usize, name: &str, value: serde_json::Value) {
         self.events[index].details.insert(name.into(), value);
+    }
+
+    /// [`Log::set`] for a detail that decides the event's failure class while it still
+    /// lasts: counted as a change, so a reader of the growing log reads it again.
+    fn decide(&mut self, index: usize, name: &str, value: serde_json::Value) {
+        self.set(index, name, value);
+        self.changes += 1;
     }
 }
 
@@ -606,9 +613,10 @@ impl Monitor {
         &self.log.events
     }
 
-    /// How many times an event has been opened or closed so far: the events' classes can
-    /// only have changed when this has (details that decide a class are written when an
-    /// event opens, or just before it closes).
+    /// How many times an event has been opened, closed or had its class decided anew so
+    /// far: the events' classes can only have changed when this has (details that decide a
+    /// class are written when an event opens, when they change while it lasts, or just
+    /// before it closes).
     pub fn log_changes(&self) -> u64 {
         self.log.changes
     }

@@ -75,8 +75,7 @@ impl Open {
     /// End the event at `end`, writing what it saw (once, not every step it lasted).
     fn close(self, end: u64, log: &mut Log) {
         let (party, metres) = match self.nearest {
-            Some((Party::Wall, m)) => (json!("wall"), json!(m)),
-            Some((Party::Robot(id), m)) => (json!(id), json!(m)),
+            Some((party, m)) => (json!(party), json!(m)),
             None => (Value::Null, Value::Null),
         };
         log.set(self.index, "reversals", json!(self.reversals));
@@ -216,6 +215,12 @@ impl Detector {
             if let Some(open) = &mut t.open {
                 if let Some(n) = nearest_party(frame, i) {
                     if open.nearest.is_none_or(|(_, m)| n.1 < m) {
+                        if open.nearest.is_none_or(|(p, _)| p != n.0) {
+                            // The party decides the event's class: a reader of the log while
+                            // the robot still oscillates (a copy watching for its class) reads
+                            // the class the event would close with now.
+                            log.decide(open.index, "nearest", json!(n.0));
+                        }
                         open.nearest = Some(n);
                     }
                 }

@@ -893,6 +893,57 @@ fn a_copy_watching_for_a_class_stops_past_its_horizon_only_once_it_has_shown_it(
 }
 
 #[test]
+fn a_copy_still_oscillating_past_its_horizon_has_shown_its_class_and_stops() {
+    // The agent dithers on the spot beside a still peer until its time limit: its oscillation
+    // never closes, and what it was beside (which decides its class) is known while it lasts.
+    // A copy watching for that class stops at its horizon, judged as its whole copy is.
+    let s = situation(
+        200,
+        &[],
+        vec![
+            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
+            robot(1, (10.0, 11.3, 0.0), &[[10.0, 11.3]], "straight"),
+        ],
+    );
+    let copy_watching = |horizon_s: Option<f64>, watch_for: Option<FailureClass>| {
+        let spec = RunSpec {
+            perturbation: Some(Perturbation {
+                horizon_s,
+                watch_for,
+                ..Perturbation::copy(2)
+            }),
+            ..spec(Some("cmd:dither"), 40.0)
+        };
+        let mut r = Run::new(&s, &spec, 0).unwrap();
+        let mut step = 0u64;
+        let dither = |step: u64| {
+            if (step / 10).is_multiple_of(2) {
+                0.3
+            } else {
+                -0.3
+            }
+        };
+        while !r.step(Some((0.0, dither(step)))) {
+            step += 1;
+        }
+        r.finish()
+    };
+    let whole = copy_watching(None, None);
+    let class = whole.failure.as_ref().map(|f| f.class);
+    assert_eq!(class, Some(FailureClass::OscillatedBesidePeer));
+    assert_eq!(whole.time_s, 40.0);
+    let osc = of_kind(&whole, EventKind::Oscillation);
+    assert_eq!(osc.len(), 1, "one oscillation, lasting to the end");
+    let watched = copy_watching(Some(14.0), class);
+    assert_eq!(watched.outcome, Outcome::Stopped);
+    assert!(close(watched.time_s, 14.0), "{}", watched.time_s);
+    assert_eq!(watched.failure.as_ref().map(|f| f.class), class);
+    // What it was beside is written once, as the whole copy's: the same details when closed.
+    let cut = of_kind(&watched, EventKind::Oscillation);
+    assert_eq!(cut[0].details["nearest"], osc[0].details["nearest"]);
+}
+
+#[test]
 fn the_exact_perception_tracks_every_robot_and_leaves_the_monitor_what_the_laser_saw() {
     // The peer is behind the agent, outside its 180° laser: sensed, the agent tracks nothing;
     // exact, it tracks the peer where it truly is, with its velocity once it moves.
