@@ -29,6 +29,7 @@ import functools
 import json
 import math
 from collections.abc import Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -205,20 +206,32 @@ def copy_class(result: dict[str, Any]) -> str | None:
     return ERROR if outcome.error else outcome.failure_class
 
 
+def shared_situation(row: dict[str, Any], reruns: int) -> dict[str, Any]:
+    """What the ``reruns`` copies of stored run ``row`` are given as their situation: with
+    more than one, the situation generated once and given whole (a copy's own generation —
+    terrain filters, regions, routes — cost more than a short copy's run); else, or where it
+    cannot be made again, its spec (each copy then errs and is left out)."""
+    with contextlib.suppress(_core.GenerationFailed, _core.SpecError):
+        if reruns > 1:
+            whole: dict[str, Any] = json.loads(regenerate(row).to_json())
+            return whole
+    spec: dict[str, Any] = row["situation_spec"]
+    return spec
+
+
 def copy_jobs(
-    row: dict[str, Any], reruns: int, first_index: int, horizon: bool = True
+    row: dict[str, Any],
+    reruns: int,
+    first_index: int,
+    horizon: bool = True,
+    situation: dict[str, Any] | None = None,
 ) -> list[Job]:
     """The ``reruns`` perturbed copies of stored failing run ``row`` (:meth:`Store.run_row`),
     each stopped at its horizon (``horizon=False``: run to its time limit, as copies were
-    before the horizon), as jobs numbered from ``first_index``."""
+    before the horizon), as jobs numbered from ``first_index``; ``situation``: its
+    :func:`shared_situation`, if made already."""
     watched = horizon_of(row["failure"]) if horizon else None
-    # Generated once and given whole to every copy: a copy's own generation (terrain
-    # filters, regions, routes) cost more than a short copy's run.
-    whole = row["situation_spec"]
-    # One that cannot be made again is left to each copy, which then errs and is left out.
-    with contextlib.suppress(_core.GenerationFailed, _core.SpecError):
-        if reruns > 1:
-            whole = json.loads(regenerate(row).to_json())
+    whole = shared_situation(row, reruns) if situation is None else situation
     return [
         Job(
             index=first_index + k - 1,
@@ -263,12 +276,19 @@ def measure(
     ``k`` is read from the copies in order, never from which finished first, so the row is the
     same whatever the worker count. Raises StoreError for a run that has no failure."""
     failure_classes: list[str] = []
-    per_row: list[list[Job]] = []
-    for i, row in enumerate(rows):
+    for row in rows:
         if row["failure"] is None:
             raise StoreError(f"run {row['id']}: it did not fail; robustness is a failure's")
         failure_classes.append(str(row["failure"]["class"]))
-        per_row.append(copy_jobs(row, reruns, i * reruns, horizon))
+    # The situations are made again on as many threads as there are workers (the core lets
+    # go of the interpreter while it generates): made one after another, the workers would
+    # stand idle the while.
+    with ThreadPoolExecutor(max(1, min(workers, len(rows)))) as pool:
+        situations = list(pool.map(lambda row: shared_situation(row, reruns), rows))
+    per_row = [
+        copy_jobs(row, reruns, i * reruns, horizon, situation)
+        for i, (row, situation) in enumerate(zip(rows, situations, strict=True))
+    ]
     got: list[list[str | None]] = [[] for _ in rows]
     waiting: dict[int, str | None] = {}
 
