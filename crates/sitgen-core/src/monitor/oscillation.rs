@@ -12,7 +12,9 @@
 //! grew past the threshold); a pause shorter than `merge_gap_s` continues it. Details: `reversals` (counted while it lasted), `window_s`,
 //! `extent_m` (the largest extent of a window while it lasted), `nearest` (`"wall"`, a robot
 //! id, or `null` when nothing was within 2 m) and `nearest_m` (the smallest footprint
-//! clearance to it while it lasted).
+//! clearance to it while it lasted). `nearest` decides the event's class, so it is written as
+//! it changes, while the event lasts: a perturbed copy watching for an oscillation class past
+//! its horizon reads the class it would stop with.
 //!
 //! **Why it matters.** Dithering between two ways round an obstacle is the known failure of
 //! gap-based avoidance (the paper's run 219: SND "oscillated between trying to pass to the left
