@@ -74,9 +74,8 @@ def test_a_node_written_the_usual_way_gives_the_same_campaign_every_time(
         f'n = {RUNS}\n[situation.terrain]\npreset = "open_field"\n'
         "[situation.mission]\npeers_min = 0\npeers_max = 2\n"
         f'[run]\ntime_limit_s = 5.0\n[run.controller]\nname = "{USUAL} {style}"\n'
-        # What is tested is the order a node gets its inputs in; an answer later than its
-        # timeout (1 s by default, which a machine loaded several times over can miss) holds
-        # the last command, the one way load may change a run, so it is made generous.
+        # What is tested is the order a node gets its inputs in; a generous answer timeout
+        # keeps the answers' deadline (tests/test_load.py's) out of it.
         "params = { answer_timeout_s = 10.0 }\n"
     )
     # The campaign on 1 worker repeats the one on 2: the same runs on both are the same runs

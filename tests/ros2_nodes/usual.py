@@ -27,7 +27,8 @@ from what the laser sees ahead, in one of these styles:
 
 Default QoS everywhere except the scan (sensor data, as Nav2 subscribes to it). Where
 ``USUAL_START_LOG`` names a file, the node appends to it the seconds from its process's start to
-its node made (``benches/ros2_start.py``).
+its node made (``benches/ros2_start.py``). ``USUAL_COST_MS`` makes each answer cost that many
+milliseconds of processor time first, as a planner's would (tests/test_load.py).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Trigger
 
 STYLE = sys.argv[1]
+COST_S = float(os.environ.get("USUAL_COST_MS", "0")) / 1000
 
 
 def stamp_s(msg: Any) -> float:
@@ -172,6 +174,10 @@ class Usual(Node):
     def act(self) -> None:
         if self.scan is None or self.odom is None or self.goal is None:
             return
+        if COST_S:
+            began = time.thread_time()
+            while time.thread_time() - began < COST_S:
+                pass
         command = steer(self.odom, self.goal, self.scan)
         if STYLE == "wall_clock":
             now = time.monotonic()

@@ -3,7 +3,8 @@ gone back to waiting after a message, and whether its process has exited.
 
 What it does: :func:`wait_idle` waits until every thread of some processes is asleep (none
 running, runnable or waiting on a device), within a bound, Fast DDS's own threads left out
-(:func:`protocol_thread`); :func:`task_state` reads one process's or thread's state letter;
+(:func:`protocol_thread`), and :func:`protocol_busy` whether those of a process still have work
+in hand; :func:`task_state` reads one process's or thread's state letter;
 :func:`cpu_seconds` the processor time some processes have used, :func:`schedstat_seconds`
 how long their threads ran and waited for a core.
 
@@ -111,6 +112,20 @@ def protocol_thread(stat: bytes) -> bool:
     will run the message's callback (Fast DDS notifies the reader's listener before it
     acknowledges), which is the one a wait is for."""
     return stat[stat.index(b"(") + 1 :].startswith(PROTOCOL_THREADS)
+
+
+def protocol_busy(pid: int) -> bool:
+    """Whether a Fast DDS thread of process ``pid`` is running or runnable (or waiting on a
+    device): a message it received may still be on its way to a reader."""
+    for _, tid in threads([pid]):
+        try:
+            with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        if protocol_thread(stat) and state_letter(stat) in (b"R", b"D"):
+            return True
+    return False
 
 
 def wait_idle(pids: Iterable[int], timeout_s: float) -> bool:

@@ -25,8 +25,9 @@ sitgen hands the node the odometry and the scan for simulated time *t*, each onc
 taken the one before, then the clock at the period's end (bridge.py), and waits until
 the node answers with a ``/cmd_vel`` message (for TwistStamped, one not stamped before *t*);
 only then does simulated time move on. A node that does not answer within
-``answer_timeout_s`` of wall time has its last command held for that period (the only way
-machine load can reach a result, so the timeout is generous); ``max_missed_answers`` periods
+``answer_timeout_s`` — of wall time, and past it of its own processor time while it is still
+at work on the period (answer_time.py: so that load cannot change which periods it answers) —
+has its last command held for that period; ``max_missed_answers`` periods
 in a row without an answer, a node that never publishes within the start timeout, or a node
 process that exits, ends the run as an error, like any controller.
 
@@ -45,9 +46,9 @@ too, gets the same reset, so a node that resets fully runs as a fresh one would;
 not is refused before any run (:func:`sitgen.conformance.resets`). A run that fails stops its node.
 
 Parameters (the spec's controller ``params``): passed to the node as ROS parameters, except
-``answer_timeout_s`` (wall seconds, default the step timeout, 1 s), ``start_timeout_s`` (wall
-seconds to start and answer the first observation, default 30) and ``max_missed_answers``
-(periods, default 10), which are sitgen's.
+``answer_timeout_s`` (seconds, default the step timeout, 1 s: answer_time.py),
+``start_timeout_s`` (wall seconds to start and answer the first observation, default 30) and
+``max_missed_answers`` (periods, default 10), which are sitgen's.
 
 Source: Nav2's loopback simulator (nav2_loopback_sim: topics, frames, stamped cmd_vel) and
 REP 105 (frames); docs/ros2.md.
@@ -77,6 +78,7 @@ from sitgen.controllers.external import (
 )
 from sitgen.controllers.marks import die_with_parent_prefix, kill_marked, marked_env, marked_pids
 from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, task_state, wait_idle
+from sitgen.controllers.ros2.answer_time import answered_in_time
 from sitgen.controllers.ros2.bridge import LIB, Bridge, ros2_available
 from sitgen.controllers.ros2.dds_domain import confine, require_free
 from sitgen.controllers.ros2.messages import FRAMES, TOPICS, answer_of, stamp
@@ -258,7 +260,13 @@ class Ros2Controller(UserController):
         bridge.hand_over_period(goal, self._info, obs, t, self._pids, SETTLE_S)
         if not self._answered_once:
             self._first_answer(bridge, obs, t)
-        elif self._await_answer(bridge, t, self._answer_timeout_s):
+        elif answered_in_time(
+            lambda s: self._await_answer(bridge, t, s),
+            self._pids,
+            self.name,
+            t,
+            self._answer_timeout_s,
+        ):
             self._missed = 0
         else:
             self._missed += 1
