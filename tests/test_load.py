@@ -129,3 +129,28 @@ def test_a_ros2_node_answers_the_same_periods_on_a_loaded_machine_as_alone() -> 
     with spinning(8 * (os.cpu_count() or 1)):
         loaded = driven()
     assert loaded == alone
+
+
+def test_a_program_stopped_past_its_backstop_is_the_machines_error_and_run_again(
+    tmp_path: Path,
+) -> None:
+    """A program stopped (SIGSTOP) for 3 s, past its 2 s backstop, neither computes nor waits:
+    its run is made again (the program then runs through), never stored as its failure."""
+    marker = tmp_path / "stopped-once"
+    program = ROOT / "tests/controllers/misbehaving.py"
+    situation = sitgen.generate_situation({"terrain": {"preset": "open_field"}}, seed=1)
+
+    def driven() -> sitgen.RunRecord:
+        spec = {
+            "time_limit_s": 4.0,
+            "controller": {"name": f"cmd:{sys.executable} {program} stopped {marker}",
+                           "step_timeout_s": 0.2},
+        }  # fmt: skip
+        return sitgen.run(situation, spec=spec)
+
+    stopped = driven()
+    assert marker.exists(), "the first try was stopped"
+    assert stopped.outcome != "error", stopped.reason
+    again = driven()  # the marker is there: not stopped
+    assert (stopped.outcome, stopped.events_jsonl) == (again.outcome, again.events_jsonl)
+    assert stopped.trajectory.tobytes() == again.trajectory.tobytes()

@@ -6,10 +6,13 @@ floods its output; `spawn` starts a child that sleeps, writes its pid to the fil
 second argument and then hangs; `stderrflood` writes 600 MiB to stderr on reset, then a last
 line, and exits; `longline` sends a 2 MiB line with no end and hangs; `ignoreend` drives
 well but ignores `end`; `noflush` stops flushing its replies (they wait in its output buffer);
-`spin` computes for ever; `good` drives straight at 0.3 m/s."""
+`spin` computes for ever; `stopped` is stopped (SIGSTOP) for 3 s at its fifth step unless the
+file named by the second argument exists (which it then makes), as a debugger or a shell's job
+control would stop it; `good` drives straight at 0.3 m/s."""
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -48,6 +51,11 @@ for step, line in enumerate(sys.stdin):
         buffered = buffered or open(1, "w", buffering=1 << 16, closefd=False)  # noqa: SIM115
         buffered.write('{"v": 0.3, "omega": 0.0}\n')
         continue
+    elif step == 5 and mode == "stopped" and not os.path.exists(sys.argv[2]):
+        open(sys.argv[2], "w").close()
+        subprocess.Popen(["sh", "-c", f"sleep 3; kill -CONT {os.getpid()}"])
+        os.kill(os.getpid(), signal.SIGSTOP)
+        reply = '{"v": 0.3, "omega": 0.0}'
     elif step >= 5 and mode == "garbage":
         reply = "hello"
     elif step >= 5 and mode == "noreply":

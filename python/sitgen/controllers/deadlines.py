@@ -96,3 +96,12 @@ def starved_reason(name: str, wall_s: float, when: str) -> MachineError:
         f"{MACHINE_PREFIX}starved controller {name} of processor time {when}: runnable but not "
         f"run for most of {wall_s:g} s (a loaded or paused machine); not the controller's failure"
     )
+
+
+def stopped_reason(name: str, stopped_s: float, when: str) -> MachineError:
+    """The machine's error for a controller stopped (SIGSTOP, a debugger) at its backstop,
+    ``stopped_s`` seconds so far."""
+    return MachineError(
+        f"{MACHINE_PREFIX}found controller {name} stopped {when}, for {stopped_s:.1f} s so far "
+        "(SIGSTOP or a debugger: neither computing nor waiting); not the controller's failure"
+    )

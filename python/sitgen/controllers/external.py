@@ -44,10 +44,17 @@ from sitgen.controllers.deadlines import (
     did_not_reply,
     starved,
     starved_reason,
+    stopped_reason,
 )
 from sitgen.controllers.host import MAX_LINE_BYTES
 from sitgen.controllers.marks import die_with_parent_prefix, kill_marked, marked_env, marked_pids
-from sitgen.controllers.proc_tasks import BUSY_SHARE, cpu_seconds, schedstat_seconds
+from sitgen.controllers.proc_tasks import (
+    BUSY_SHARE,
+    STOPPED,
+    cpu_seconds,
+    schedstat_seconds,
+    task_state,
+)
 from sitgen.world.sim import Observation
 
 CPU_COUNTED_AFTER_S = 0.005
@@ -376,6 +383,7 @@ class ProcessController(UserController):
         # at most that wait, which the deadline then grants it over.
         counted_from = start + min(CPU_COUNTED_AFTER_S, timeout_s / 10)
         window: tuple[float, float, float] | None = None
+        stopped_since: float | None = None
         while b"\n" not in self._buffer:
             if len(self._buffer) > MAX_REPLY_BYTES:
                 raise ControllerError(
@@ -392,8 +400,17 @@ class ProcessController(UserController):
                     )
                 if window is None:
                     window = (now, *schedstat_seconds(self._pids()))
+                # A program stopped (SIGSTOP, a debugger) neither computes nor waits: the time
+                # it is seen stopped is added to its backstop, as sitgen's own pauses are.
+                if task_state(f"/proc/{proc.pid}/stat") in STOPPED:
+                    stopped_since = now if stopped_since is None else stopped_since
+                elif stopped_since is not None:
+                    backstop += now - stopped_since
+                    stopped_since = None
                 look_at = now + CPU_LOOK_S
             if now >= backstop:
+                if stopped_since is not None:
+                    raise stopped_reason(self.name, now - stopped_since, when)
                 raise self._overdue(backstop_s(timeout_s), window, when)
             asked = min(look_at, backstop) if cpu_start is not None else counted_from
             ready = self._selector.select(max(0.0, asked - now))

@@ -40,6 +40,10 @@ def task_state(stat_path: str) -> bytes | None:
     return state_letter(stat)
 
 
+STOPPED = (b"T", b"t")
+"""The state letters of a process stopped by a signal (SIGSTOP, SIGTSTP) or by a debugger."""
+
+
 def after_command(stat: bytes) -> bytes:
     """A /proc stat file's text from its third field (the state) on: after the command name,
     which may hold anything, spaces and parentheses included."""
