@@ -167,3 +167,13 @@ def test_a_users_class_is_judged_from_its_recorded_path(tmp_path: Path) -> None:
                 assert whole is not None and whole.trajectory is not None
                 poses = np.asarray(whole.trajectory).reshape(-1, len(whole.situation.robots), 3)
                 assert np.allclose(w["path"][0], poses[round(w["from_s"] / 0.1), 0], atol=1e-4)
+    # Kept as summaries, the runs are made again through the class on the workers (a process
+    # pool), checked to be the stored runs, and judged the same.
+    summaries = tmp_path / "summaries.db"
+    done = run_cli("campaign", SPEC, "--n", "40", "--db", str(summaries), "--reruns", "0",
+                   "--controller", braking, "--keep-trajectories", "none",
+                   "--workers", "2")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    done = run_cli("avoidability", str(summaries), "--format", "json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == rows

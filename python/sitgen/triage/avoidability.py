@@ -17,7 +17,7 @@ from typing import Any
 from sitgen import _core
 from sitgen.controllers.user import is_user_controller
 from sitgen.store import Store, StoreError
-from sitgen.triage.recall import regenerate, stored_run, whole_run
+from sitgen.triage.recall import WholeRun, regenerate, stored_run, whole_runs
 
 AFTER_S = 5.0
 """How long past the collision an escape must stay clear, seconds (the core's default)."""
@@ -65,15 +65,20 @@ def judge(store: Store, run_ids: Iterable[int], workers: int = 1, after_s: float
         if again or i not in done or done[i]["after_s"] != after_s
     ]  # fmt: skip
     jobs, recorded, failed = [], [], []
-    for run_id in wanted:
-        row = stored_run(store, run_id)
-        spec = json.dumps(row["run_spec"])
+    rows = [stored_run(store, run_id) for run_id in wanted]
+    # A controller that runs outside the core: its recorded path stands in for it (runs kept
+    # as summaries made again through it, on the workers).
+    users = [row for row in rows if is_user_controller(row["controller"])]
+    for row, whole in zip(users, whole_runs(store, users, max(1, workers)), strict=True):
+        try:
+            if isinstance(whole, StoreError):
+                raise ValueError(str(whole))
+            recorded.append((row["id"], _recorded_job(row, json.dumps(row["run_spec"]), whole)))
+        except ValueError as e:
+            failed.append(_row(row["id"], after_s, error=str(e)))
+    for row in rows:
+        run_id, spec = row["id"], json.dumps(row["run_spec"])
         if is_user_controller(row["controller"]):
-            # Its controller runs outside the core: its recorded path stands in for it.
-            try:
-                recorded.append((run_id, _recorded_job(store, row, spec)))
-            except (StoreError, ValueError) as e:
-                failed.append(_row(run_id, after_s, error=str(e)))
             continue
         situation = row["situation"] if row.get("kept") and row.get("situation") else None
         if situation is None:
@@ -88,15 +93,15 @@ def judge(store: Store, run_ids: Iterable[int], workers: int = 1, after_s: float
     threads = max(1, workers)
     results = _core.judge_avoidability([j for _, j in jobs], after_s, threads)
     results += _core.judge_avoidability_recorded([j for _, j in recorded], after_s, threads)
-    rows = list(failed)
+    judged = list(failed)
     for (run_id, _), text in zip([*jobs, *recorded], results, strict=True):
         out = json.loads(text)
         if "judgement" in out:
-            rows.append(_row(run_id, after_s, **out["judgement"]))
+            judged.append(_row(run_id, after_s, **out["judgement"]))
         elif "error" in out:
-            rows.append(_row(run_id, after_s, error=out["error"]))
-    store.record_avoidability(rows)
-    return rows
+            judged.append(_row(run_id, after_s, error=out["error"]))
+    store.record_avoidability(judged)
+    return judged
 
 
 def _deciding_s(row: dict[str, Any]) -> float | None:
@@ -110,13 +115,11 @@ def _deciding_s(row: dict[str, Any]) -> float | None:
 
 
 def _recorded_job(
-    store: Store, row: dict[str, Any], spec: str
+    row: dict[str, Any], spec: str, whole: WholeRun | None
 ) -> tuple[str, str, int, list[float], int, int]:
-    """A run of a controller outside the core, as the core judges it from its record: the
-    situation, run spec, seed, every pose, and its first collision with a robot (from its
-    event log; the run made again through its controller if it was kept as a summary).
-    Raises ValueError if it has none."""
-    whole = whole_run(store, row)
+    """A run of a controller outside the core (stored ``row``, had ``whole``), as the core
+    judges it from its record: the situation, run spec, seed, every pose, and its first
+    collision with a robot (from its event log). Raises ValueError if it has none."""
     if whole is None or whole.trajectory is None:
         raise ValueError("its situation was never generated")
     agent = next(r.id for r in whole.situation.robots if r.role == "agent")
