@@ -457,32 +457,41 @@ fn a_contact_broken_for_a_moment_and_resumed_is_one_collision() {
     assert!(collisions(0.0).len() > 10);
 }
 
-#[test]
-fn turning_to_and_fro_on_the_spot_beside_a_peer_is_an_oscillation_beside_it() {
-    // The agent turns left for 1 s, right for 1 s, again and again, without driving; a still
-    // peer stands about 0.8 m from its flank, outside unsafe proximity even as the agent's
-    // corners sweep. Reversals every second, from 1.1 s.
-    let s = situation(
+/// The agent at x = 10 facing +x; a still peer stands about 0.8 m from its flank, outside
+/// unsafe proximity even as the agent's corners sweep when it turns on the spot.
+fn still_peer_at_flank() -> Situation {
+    situation(
         200,
         &[],
         vec![
             robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
             robot(1, (10.0, 11.3, 0.0), &[[10.0, 11.3]], "straight"),
         ],
-    );
-    let mut r = Run::new(&s, &spec(Some("cmd:dither"), 12.0), 0).unwrap();
+    )
+}
+
+/// Run `r` to its end with the agent turning left for 1 s, right for 1 s, again and again,
+/// without driving.
+fn dithered(mut r: Run) -> RunRecord {
     let mut step = 0u64;
-    while !r.step(Some((
-        0.0,
+    let turn = |step: u64| {
         if (step / 10).is_multiple_of(2) {
             0.3
         } else {
             -0.3
-        },
-    ))) {
+        }
+    };
+    while !r.step(Some((0.0, turn(step)))) {
         step += 1;
     }
-    let rec = r.finish();
+    r.finish()
+}
+
+#[test]
+fn turning_to_and_fro_on_the_spot_beside_a_peer_is_an_oscillation_beside_it() {
+    // Reversals every second, from 1.1 s.
+    let rec =
+        dithered(Run::new(&still_peer_at_flank(), &spec(Some("cmd:dither"), 12.0), 0).unwrap());
     let osc = of_kind(&rec, EventKind::Oscillation);
     assert_eq!(osc.len(), 1, "{:#?}", rec.events);
     let o = osc[0];
@@ -897,14 +906,7 @@ fn a_copy_still_oscillating_past_its_horizon_has_shown_its_class_and_stops() {
     // The agent dithers on the spot beside a still peer until its time limit: its oscillation
     // never closes, and what it was beside (which decides its class) is known while it lasts.
     // A copy watching for that class stops at its horizon, judged as its whole copy is.
-    let s = situation(
-        200,
-        &[],
-        vec![
-            robot(0, (10.0, 10.0, 0.0), &[[15.0, 10.0]], "snd_follow"),
-            robot(1, (10.0, 11.3, 0.0), &[[10.0, 11.3]], "straight"),
-        ],
-    );
+    let s = still_peer_at_flank();
     let copy_watching = |horizon_s: Option<f64>, watch_for: Option<FailureClass>| {
         let spec = RunSpec {
             perturbation: Some(Perturbation {
@@ -914,19 +916,7 @@ fn a_copy_still_oscillating_past_its_horizon_has_shown_its_class_and_stops() {
             }),
             ..spec(Some("cmd:dither"), 40.0)
         };
-        let mut r = Run::new(&s, &spec, 0).unwrap();
-        let mut step = 0u64;
-        let dither = |step: u64| {
-            if (step / 10).is_multiple_of(2) {
-                0.3
-            } else {
-                -0.3
-            }
-        };
-        while !r.step(Some((0.0, dither(step)))) {
-            step += 1;
-        }
-        r.finish()
+        dithered(Run::new(&s, &spec, 0).unwrap())
     };
     let whole = copy_watching(None, None);
     let class = whole.failure.as_ref().map(|f| f.class);
