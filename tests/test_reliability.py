@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 import psutil
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import sitgen
@@ -852,6 +852,9 @@ def test_fuzzed_situation_specs_parse_or_name_a_field() -> None:
 
     @FUZZ
     @given(_mutated(base))
+    # Found by the fuzzing: a key holding a line break, at a non-finite number.
+    @example({"0\n": float("inf")})
+    @example({"terrain": {"a\nb": float("nan")}})
     def check(spec: Any) -> None:
         if isinstance(spec, dict):
             _one_line_spec_error_or_ok(lambda: sitgen.load_spec(spec))

@@ -47,12 +47,19 @@ def spec_json(data: Mapping[str, Any], root: str = "") -> str:
         raise _core.SpecError(f"{where}: {value!r} is not a finite number") from None
 
 
+def _named(key: Any) -> str:
+    """A key as a field path names it: as written, what is not printable escaped (``a\\nb``),
+    as the core names it, so that the error stays one line."""
+    text = str(key)
+    return text if text.isprintable() else text.encode("unicode_escape").decode("ascii")
+
+
 def _first_non_finite(data: Any, path: str = "") -> tuple[str, float] | None:
     """The dotted path and value of the first NaN or infinity in ``data``, or None."""
     if isinstance(data, float):
         return None if math.isfinite(data) else (path, data)
     if isinstance(data, Mapping):
-        items = [(f"{path}.{k}" if path else str(k), v) for k, v in data.items()]
+        items = [(f"{path}.{_named(k)}" if path else _named(k), v) for k, v in data.items()]
     elif isinstance(data, list | tuple):
         items = [(f"{path}[{i}]", v) for i, v in enumerate(data)]
     else:
