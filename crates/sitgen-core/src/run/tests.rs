@@ -810,14 +810,12 @@ fn a_perturbation_out_of_range_is_refused_with_its_field() {
 fn a_copy_stopped_at_its_horizon_is_its_whole_copy_cut_there_without_a_timeout() {
     let s = rear_approach();
     let copy_until = |horizon_s: Option<f64>| {
-        let spec = RunSpec {
-            perturbation: Some(Perturbation {
-                horizon_s,
-                ..Perturbation::copy(3)
-            }),
-            ..spec(Some("snd_follow"), 20.0)
-        };
-        run(&s, &spec, 5).unwrap()
+        run(
+            &s,
+            &watched_copy(3, horizon_s, None, spec(Some("snd_follow"), 20.0)),
+            5,
+        )
+        .unwrap()
     };
     let whole = copy_until(None);
     let cut = copy_until(Some(8.0));
@@ -853,18 +851,28 @@ fn a_copy_stopped_at_its_horizon_is_its_whole_copy_cut_there_without_a_timeout()
     );
 }
 
+/// Copy `k` of a run with spec `run`, watched to `horizon_s` and past it for `watch_for`.
+fn watched_copy(
+    k: u32,
+    horizon_s: Option<f64>,
+    watch_for: Option<FailureClass>,
+    run: RunSpec,
+) -> RunSpec {
+    RunSpec {
+        perturbation: Some(Perturbation {
+            horizon_s,
+            watch_for,
+            ..Perturbation::copy(k)
+        }),
+        ..run
+    }
+}
+
 #[test]
 fn a_copy_watching_for_a_class_stops_past_its_horizon_only_once_it_has_shown_it() {
     let s = rear_approach();
     let copy_watching = |horizon_s: Option<f64>, watch_for: Option<FailureClass>| {
-        let spec = RunSpec {
-            perturbation: Some(Perturbation {
-                horizon_s,
-                watch_for,
-                ..Perturbation::copy(3)
-            }),
-            ..spec(Some("cmd:still"), 20.0)
-        };
+        let spec = watched_copy(3, horizon_s, watch_for, spec(Some("cmd:still"), 20.0));
         let mut r = Run::new(&s, &spec, 5).unwrap();
         while !r.step(Some((0.0, 0.0))) {}
         r.finish()
@@ -908,14 +916,7 @@ fn a_copy_still_oscillating_past_its_horizon_has_shown_its_class_and_stops() {
     // A copy watching for that class stops at its horizon, judged as its whole copy is.
     let s = still_peer_at_flank();
     let copy_watching = |horizon_s: Option<f64>, watch_for: Option<FailureClass>| {
-        let spec = RunSpec {
-            perturbation: Some(Perturbation {
-                horizon_s,
-                watch_for,
-                ..Perturbation::copy(2)
-            }),
-            ..spec(Some("cmd:dither"), 40.0)
-        };
+        let spec = watched_copy(2, horizon_s, watch_for, spec(Some("cmd:dither"), 40.0));
         dithered(Run::new(&s, &spec, 0).unwrap())
     };
     let whole = copy_watching(None, None);
